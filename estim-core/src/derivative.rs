@@ -1,0 +1,422 @@
+//! Checks analytic derivatives against central finite differences.
+//!
+//! - The Jacobian is compared with (g(x + hⱼeⱼ) − g(x − hⱼeⱼ)) / (2hⱼ).
+//! - Each Hessian Hₖ is compared with central differences of the **analytic Jacobian**:
+//!   column j of Hₖ against (∇gₖ(x + hⱼeⱼ) − ∇gₖ(x − hⱼeⱼ)) / (2hⱼ). Together with the
+//!   Jacobian check this ties the Hessian to the values, with one differencing (error O(h²))
+//!   instead of two; a component declared affine (`None`) is compared with zero.
+//!
+//! The step is hⱼ = ε^⅓ · max(1, |xⱼ|) by default (the central-difference optimum for smooth
+//! functions: truncation O(h²) and round-off O(ε/h) balance at ε^⅔ ≈ 4·10⁻¹¹ relative for
+//! `f64`, ≈ 2·10⁻⁵ for `f32`).
+//!
+//! Use it from a test, including a downstream crate's proptest:
+//!
+//! ```
+//! use estim_core::{derivative, Differentiable, VectorFunction, nalgebra::{Matrix1x2, Vector1, Vector2}};
+//! struct Product;
+//! impl VectorFunction<f64, nalgebra::U2, nalgebra::U1> for Product {
+//!     fn eval(&self, x: &Vector2<f64>) -> Vector1<f64> { Vector1::new(x[0] * x[1]) }
+//! }
+//! impl Differentiable<f64, nalgebra::U2, nalgebra::U1> for Product {
+//!     fn jacobian(&self, x: &Vector2<f64>) -> Matrix1x2<f64> { Matrix1x2::new(x[1], x[0]) }
+//! }
+//! # use estim_core::nalgebra;
+//! let report = derivative::check_jacobian(&Product, &Vector2::new(2.0, 3.0))?;
+//! assert!(report.is_accurate(1e-8), "{report}");
+//! # Ok::<(), estim_core::Error>(())
+//! ```
+
+use core::fmt;
+
+use nalgebra::{DefaultAllocator, Dim, OVector};
+
+use crate::alloc::Alloc;
+use crate::error::{Error, Parameter, Quantity, Result, Stage};
+use crate::function::{Differentiable, TwiceDifferentiable};
+use crate::linalg::{ensure_finite, ensure_shape};
+use crate::model::{
+    MeasurementHessian, MeasurementJacobian, Observation, ProcessHessian, ProcessJacobian,
+    Transition,
+};
+use crate::scalar::{Real, real};
+
+/// Which derivative entry a comparison refers to (0-based indices).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Entry {
+    /// Jacobian entry ∂gᵣₒᵥᵥ/∂x_col.
+    Jacobian {
+        /// Output component.
+        row: usize,
+        /// State component.
+        col: usize,
+    },
+    /// Hessian entry ∂²g_component/∂x_row∂x_col.
+    Hessian {
+        /// Output component.
+        component: usize,
+        /// First state component.
+        row: usize,
+        /// Second state component.
+        col: usize,
+    },
+}
+
+/// One comparison of an analytic derivative entry with its finite-difference estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Comparison<T> {
+    /// Which entry.
+    pub entry: Entry,
+    /// The analytic value.
+    pub analytic: T,
+    /// The finite-difference value.
+    pub numeric: T,
+}
+
+impl<T: Real> Comparison<T> {
+    /// |analytic − numeric|.
+    pub fn abs_error(&self) -> T {
+        (self.analytic - self.numeric).abs()
+    }
+
+    /// |analytic − numeric| / max(|analytic|, |numeric|), and 0 when both are 0.
+    pub fn rel_error(&self) -> T {
+        let scale = self.analytic.abs().max(self.numeric.abs());
+        if scale > T::zero() {
+            self.abs_error() / scale
+        } else {
+            T::zero()
+        }
+    }
+
+    /// |analytic − numeric| / max(1, |numeric|): absolute for small entries, relative for
+    /// large ones. This is what [`DerivativeReport::is_accurate`] bounds.
+    pub fn mixed_error(&self) -> T {
+        self.abs_error() / T::one().max(self.numeric.abs())
+    }
+}
+
+/// The outcome of a derivative check: the worst entries by absolute, relative and mixed error.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DerivativeReport<T> {
+    /// How many entries were compared.
+    pub entries: usize,
+    /// The entry with the largest absolute error (`None` if nothing was compared).
+    pub worst_abs: Option<Comparison<T>>,
+    /// The entry with the largest relative error.
+    pub worst_rel: Option<Comparison<T>>,
+    /// The entry with the largest mixed error (see [`Comparison::mixed_error`]).
+    pub worst_mixed: Option<Comparison<T>>,
+}
+
+impl<T: Real> DerivativeReport<T> {
+    fn empty() -> Self {
+        Self {
+            entries: 0,
+            worst_abs: None,
+            worst_rel: None,
+            worst_mixed: None,
+        }
+    }
+
+    fn record(&mut self, c: Comparison<T>) {
+        self.entries += 1;
+        let worse = |old: &Option<Comparison<T>>, f: fn(&Comparison<T>) -> T| {
+            old.as_ref().is_none_or(|o| f(&c) > f(o))
+        };
+        if worse(&self.worst_abs, Comparison::abs_error) {
+            self.worst_abs = Some(c);
+        }
+        if worse(&self.worst_rel, Comparison::rel_error) {
+            self.worst_rel = Some(c);
+        }
+        if worse(&self.worst_mixed, Comparison::mixed_error) {
+            self.worst_mixed = Some(c);
+        }
+    }
+
+    /// Combines two reports (e.g. a Jacobian and a Hessian check).
+    pub fn merge(mut self, other: Self) -> Self {
+        for c in [other.worst_abs, other.worst_rel, other.worst_mixed].into_iter().flatten() {
+            let entries = self.entries;
+            self.record(c);
+            self.entries = entries;
+        }
+        self.entries += other.entries;
+        self
+    }
+
+    /// The largest absolute error.
+    pub fn max_abs_error(&self) -> T {
+        self.worst_abs.map_or(T::zero(), |c| c.abs_error())
+    }
+
+    /// The largest relative error.
+    pub fn max_rel_error(&self) -> T {
+        self.worst_rel.map_or(T::zero(), |c| c.rel_error())
+    }
+
+    /// The largest mixed error |a − n| / max(1, |n|).
+    pub fn max_mixed_error(&self) -> T {
+        self.worst_mixed.map_or(T::zero(), |c| c.mixed_error())
+    }
+
+    /// Whether every entry satisfies |analytic − numeric| ≤ `tol` · max(1, |numeric|).
+    ///
+    /// With the default step, correct `f64` derivatives of smooth, well-scaled functions pass
+    /// with `tol` ≈ 10⁻⁶ (the finite-difference error is ≈ 10⁻¹⁰ times the third derivative);
+    /// `f32` needs ≈ 10⁻².
+    pub fn is_accurate(&self, tol: T) -> bool {
+        self.max_mixed_error() <= tol
+    }
+}
+
+impl<T: Real + fmt::Display> fmt::Display for DerivativeReport<T> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} entries compared", self.entries)?;
+        for (name, c) in [
+            ("abs", &self.worst_abs),
+            ("rel", &self.worst_rel),
+            ("mixed", &self.worst_mixed),
+        ] {
+            if let Some(c) = c {
+                write!(
+                    f,
+                    "; worst {name}: {:?} analytic {} numeric {}",
+                    c.entry, c.analytic, c.numeric
+                )?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Finite-difference settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DerivativeCheck<T> {
+    relative_step: T,
+}
+
+impl<T: Real> Default for DerivativeCheck<T> {
+    /// hⱼ = ε^⅓ · max(1, |xⱼ|).
+    fn default() -> Self {
+        Self {
+            relative_step: T::default_epsilon().powf(real(1.0 / 3.0)),
+        }
+    }
+}
+
+impl<T: Real> DerivativeCheck<T> {
+    /// Steps hⱼ = `relative_step` · max(1, |xⱼ|); `relative_step` must be finite and > 0.
+    pub fn with_relative_step(relative_step: T) -> Result<Self> {
+        if relative_step.is_finite() && relative_step > T::zero() {
+            Ok(Self { relative_step })
+        } else {
+            Err(Error::InvalidParameter {
+                parameter: Parameter::StepSize,
+                value: nalgebra::try_convert::<T, f64>(relative_step).unwrap_or(f64::NAN),
+            })
+        }
+    }
+
+    fn step<N: Dim>(&self, x: &OVector<T, N>, j: usize) -> T
+    where
+        DefaultAllocator: Alloc<N>,
+    {
+        self.relative_step * T::one().max(x[j].abs())
+    }
+
+    /// Compares g's analytic Jacobian at `x` with central differences of its values.
+    ///
+    /// Errors: non-finite values or a runtime shape mismatch.
+    pub fn jacobian<N, M, G>(&self, g: &G, x: &OVector<T, N>) -> Result<DerivativeReport<T>>
+    where
+        N: Dim,
+        M: Dim,
+        G: Differentiable<T, N, M> + ?Sized,
+        DefaultAllocator: Alloc<N, M>,
+    {
+        let stage = Stage::DerivativeCheck;
+        ensure_finite(x, stage, Quantity::Mean)?;
+        let n = x.nrows();
+        let y = g.eval(x);
+        let m = y.nrows();
+        let jac = g.jacobian(x);
+        ensure_shape(&jac, m, n, stage, Quantity::Jacobian)?;
+        ensure_finite(&jac, stage, Quantity::Jacobian)?;
+        let mut report = DerivativeReport::empty();
+        let mut xp = x.clone();
+        for j in 0..n {
+            let h = self.step(x, j);
+            xp[j] = x[j] + h;
+            let yp = g.eval(&xp);
+            xp[j] = x[j] - h;
+            let ym = g.eval(&xp);
+            xp[j] = x[j];
+            ensure_shape(&yp, m, 1, stage, Quantity::FunctionValue)?;
+            ensure_shape(&ym, m, 1, stage, Quantity::FunctionValue)?;
+            // Through difference() so wrapped outputs (angles) difference correctly.
+            let dy = g.difference(&yp, &ym);
+            ensure_finite(&dy, stage, Quantity::FunctionValue)?;
+            for i in 0..m {
+                report.record(Comparison {
+                    entry: Entry::Jacobian { row: i, col: j },
+                    analytic: jac[(i, j)],
+                    numeric: dy[i] / (h + h),
+                });
+            }
+        }
+        Ok(report)
+    }
+
+    /// Compares g's analytic Hessians at `x` with central differences of its analytic
+    /// Jacobian. Run [`jacobian`](Self::jacobian) too (or use [`derivatives`](Self::derivatives)):
+    /// this check trusts the Jacobian.
+    pub fn hessian<N, M, G>(&self, g: &G, x: &OVector<T, N>) -> Result<DerivativeReport<T>>
+    where
+        N: Dim,
+        M: Dim,
+        G: TwiceDifferentiable<T, N, M> + ?Sized,
+        DefaultAllocator: Alloc<N, M>,
+    {
+        let stage = Stage::DerivativeCheck;
+        ensure_finite(x, stage, Quantity::Mean)?;
+        let n = x.nrows();
+        let m = g.eval(x).nrows();
+        let mut report = DerivativeReport::empty();
+        let mut xp = x.clone();
+        for k in 0..m {
+            let hk = g.hessian(x, k);
+            if let Some(hk) = &hk {
+                ensure_shape(hk, n, n, stage, Quantity::Hessian)?;
+                ensure_finite(hk, stage, Quantity::Hessian)?;
+            }
+            for j in 0..n {
+                let h = self.step(x, j);
+                xp[j] = x[j] + h;
+                let jp = g.jacobian(&xp);
+                xp[j] = x[j] - h;
+                let jm = g.jacobian(&xp);
+                xp[j] = x[j];
+                ensure_shape(&jp, m, n, stage, Quantity::Jacobian)?;
+                ensure_shape(&jm, m, n, stage, Quantity::Jacobian)?;
+                for i in 0..n {
+                    let numeric = (jp[(k, i)] - jm[(k, i)]) / (h + h);
+                    if !numeric.is_finite() {
+                        return Err(Error::NonFinite {
+                            stage,
+                            quantity: Quantity::Jacobian,
+                        });
+                    }
+                    report.record(Comparison {
+                        entry: Entry::Hessian {
+                            component: k,
+                            row: i,
+                            col: j,
+                        },
+                        analytic: hk.as_ref().map_or(T::zero(), |hk| hk[(i, j)]),
+                        numeric,
+                    });
+                }
+            }
+        }
+        Ok(report)
+    }
+
+    /// [`jacobian`](Self::jacobian) and [`hessian`](Self::hessian) merged.
+    pub fn derivatives<N, M, G>(&self, g: &G, x: &OVector<T, N>) -> Result<DerivativeReport<T>>
+    where
+        N: Dim,
+        M: Dim,
+        G: TwiceDifferentiable<T, N, M> + ?Sized,
+        DefaultAllocator: Alloc<N, M>,
+    {
+        Ok(self.jacobian(g, x)?.merge(self.hessian(g, x)?))
+    }
+}
+
+/// [`DerivativeCheck::jacobian`] with the default step.
+pub fn check_jacobian<T, N, M, G>(g: &G, x: &OVector<T, N>) -> Result<DerivativeReport<T>>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    G: Differentiable<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    DerivativeCheck::default().jacobian(g, x)
+}
+
+/// [`DerivativeCheck::derivatives`] (Jacobian and Hessians) with the default step.
+pub fn check_derivatives<T, N, M, G>(g: &G, x: &OVector<T, N>) -> Result<DerivativeReport<T>>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    G: TwiceDifferentiable<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    DerivativeCheck::default().derivatives(g, x)
+}
+
+/// Checks a process model's Jacobian ∂f/∂x at (x, u, Δt).
+pub fn check_process_jacobian<T, N, P>(
+    model: &P,
+    x: &OVector<T, N>,
+    u: &P::Input,
+    dt: T,
+) -> Result<DerivativeReport<T>>
+where
+    T: Real,
+    N: Dim,
+    P: ProcessJacobian<T, N>,
+    DefaultAllocator: Alloc<N>,
+{
+    check_jacobian(&Transition::new(model, u, dt), x)
+}
+
+/// Checks a process model's Jacobian and Hessians at (x, u, Δt).
+pub fn check_process_model<T, N, P>(
+    model: &P,
+    x: &OVector<T, N>,
+    u: &P::Input,
+    dt: T,
+) -> Result<DerivativeReport<T>>
+where
+    T: Real,
+    N: Dim,
+    P: ProcessHessian<T, N>,
+    DefaultAllocator: Alloc<N>,
+{
+    check_derivatives(&Transition::new(model, u, dt), x)
+}
+
+/// Checks a measurement model's Jacobian ∂h/∂x at x.
+pub fn check_measurement_jacobian<T, N, M, H>(
+    model: &H,
+    x: &OVector<T, N>,
+) -> Result<DerivativeReport<T>>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: MeasurementJacobian<T, N, M>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    check_jacobian(&Observation::new(model), x)
+}
+
+/// Checks a measurement model's Jacobian and Hessians at x.
+pub fn check_measurement_model<T, N, M, H>(
+    model: &H,
+    x: &OVector<T, N>,
+) -> Result<DerivativeReport<T>>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: MeasurementHessian<T, N, M>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    check_derivatives(&Observation::new(model), x)
+}

@@ -1,0 +1,49 @@
+//! Vector functions y = g(x), ℝⁿ → ℝᵐ, one capability per trait.
+//!
+//! - [`VectorFunction`]: values g(x) (enough for the unscented and sampled propagators).
+//! - [`Differentiable`]: adds the Jacobian J = ∂g/∂x (m × n) (linearised propagation).
+//! - [`TwiceDifferentiable`]: adds the Hessian Hₖ = ∂²gₖ/∂x² (n × n) of each output
+//!   component k (second-order propagation), where a component may be declared affine.
+//!
+//! A propagator states in its bounds which level it needs, so a function without Hessians
+//! fails at compile time when given to a second-order propagator.
+
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+
+use crate::alloc::Alloc;
+use crate::scalar::Real;
+
+/// y = g(x) from an `N`-dimensional to an `M`-dimensional space.
+pub trait VectorFunction<T: Real, N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// g(x).
+    fn eval(&self, x: &OVector<T, N>) -> OVector<T, M>;
+
+    /// The difference a ⊖ b of two outputs, used wherever outputs are subtracted (deviations
+    /// from a mean, innovations). Defaults to a − b; override it for outputs that wrap, such
+    /// as angles, e.g. to return the difference wrapped into (−π, π].
+    fn difference(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
+        a - b
+    }
+}
+
+/// A [`VectorFunction`] with an analytic Jacobian.
+pub trait Differentiable<T: Real, N: Dim, M: Dim>: VectorFunction<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// J(x) = ∂g/∂x, an m × n matrix: row k is the gradient of gₖ.
+    fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N>;
+}
+
+/// A [`Differentiable`] function with analytic Hessians.
+pub trait TwiceDifferentiable<T: Real, N: Dim, M: Dim>: Differentiable<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// Hₖ(x) = ∂²gₖ/∂x², the symmetric n × n Hessian of output component `k` (0-based), or
+    /// `None` when gₖ is affine in x (its Hessian is zero), so no work is spent on it.
+    fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>>;
+}

@@ -1,0 +1,46 @@
+//! # estim-core
+//!
+//! The foundation of [estim](https://docs.rs/estim): everything a filter needs to know about a
+//! model, and nothing about filters.
+//!
+//! - [`Real`]: the scalar (`f32` or `f64`).
+//! - [`Gaussian`]: a mean and a checked covariance.
+//! - [`function`]: vector functions y = g(x) with optional analytic Jacobian and Hessians,
+//!   one capability per trait ([`VectorFunction`] ← [`Differentiable`] ← [`TwiceDifferentiable`]).
+//! - [`model`]: process models x⁺ = f(x, u, Δt) and measurement models z = h(x) with their noise,
+//!   again one capability per trait, and the adapters that turn them into vector functions.
+//! - [`propagate`]: the moment propagators — given x ~ N(μ, C) and y = g(x), the mean and
+//!   covariance of y and the cross-covariance of x and y — linearised, second order (Papoulis),
+//!   Gaussian second order, unscented and sampled.
+//! - [`derivative`]: checks analytic Jacobians and Hessians against finite differences.
+//! - [`Error`]: the one error type.
+//!
+//! Sizes are generic: the same code serves `SVector<f64, 6>` (stack only, no heap allocation)
+//! and `DVector<f64>`. The allocator bounds nalgebra needs are gathered in [`Alloc`].
+#![deny(missing_docs)]
+
+pub mod alloc;
+pub mod derivative;
+pub mod error;
+pub mod function;
+pub mod gaussian;
+pub mod linalg;
+pub mod model;
+pub mod propagate;
+pub mod scalar;
+
+pub use alloc::Alloc;
+pub use error::{Error, Parameter, Quantity, Stage};
+pub use function::{Differentiable, TwiceDifferentiable, VectorFunction};
+pub use gaussian::Gaussian;
+pub use model::{
+    MeasurementHessian, MeasurementJacobian, MeasurementModel, Observation, ProcessHessian,
+    ProcessJacobian, ProcessModel, Transition,
+};
+pub use propagate::{
+    Linearized, MomentPropagator, Moments, Sampled, SecondOrder, SecondOrderGaussian, Unscented,
+};
+pub use scalar::Real;
+
+/// The nalgebra this crate is built on, re-exported so users get the same version.
+pub use nalgebra;

@@ -1,0 +1,2 @@
+//! estim facade
+pub use estim_core as core;
