@@ -137,7 +137,10 @@ impl<T: Real> DerivativeReport<T> {
 
     /// Combines two reports (e.g. a Jacobian and a Hessian check).
     pub fn merge(mut self, other: Self) -> Self {
-        for c in [other.worst_abs, other.worst_rel, other.worst_mixed].into_iter().flatten() {
+        for c in [other.worst_abs, other.worst_rel, other.worst_mixed]
+            .into_iter()
+            .flatten()
+        {
             let entries = self.entries;
             self.record(c);
             self.entries = entries;

@@ -91,7 +91,9 @@ pub enum Error {
         quantity: Quantity,
     },
     /// A matrix that must be symmetric is not, beyond the tolerance.
-    #[error("{quantity} is not symmetric ({stage}): entries ({row}, {col}) and ({col}, {row}) differ")]
+    #[error(
+        "{quantity} is not symmetric ({stage}): entries ({row}, {col}) and ({col}, {row}) differ"
+    )]
     NotSymmetric {
         /// Where.
         stage: Stage,

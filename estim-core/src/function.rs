@@ -47,3 +47,12 @@ where
     /// `None` when gₖ is affine in x (its Hessian is zero), so no work is spent on it.
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>>;
 }
+
+/// Marker: g is affine, g(x) = J x + c with a constant Jacobian J, so every propagator is exact
+/// for it and its Hessians are zero. Implement it only when that holds; it lets linear-only
+/// algorithms (the Kalman filter) refuse nonlinear functions at compile time.
+pub trait AffineFunction<T: Real, N: Dim, M: Dim>: TwiceDifferentiable<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+}

@@ -12,6 +12,7 @@
 //! - [`propagate`]: the moment propagators — given x ~ N(μ, C) and y = g(x), the mean and
 //!   covariance of y and the cross-covariance of x and y — linearised, second order (Papoulis),
 //!   Gaussian second order, unscented and sampled.
+//! - [`linear`]: linear-Gaussian models with constant matrices.
 //! - [`derivative`]: checks analytic Jacobians and Hessians against finite differences.
 //! - [`Error`]: the one error type.
 //!
@@ -25,20 +26,23 @@ pub mod error;
 pub mod function;
 pub mod gaussian;
 pub mod linalg;
+pub mod linear;
 pub mod model;
 pub mod propagate;
 pub mod scalar;
 
 pub use alloc::Alloc;
 pub use error::{Error, Parameter, Quantity, Stage};
-pub use function::{Differentiable, TwiceDifferentiable, VectorFunction};
+pub use function::{AffineFunction, Differentiable, TwiceDifferentiable, VectorFunction};
 pub use gaussian::Gaussian;
+pub use linear::{LinearMeasurement, LinearProcess};
 pub use model::{
-    MeasurementHessian, MeasurementJacobian, MeasurementModel, Observation, ProcessHessian,
-    ProcessJacobian, ProcessModel, Transition,
+    LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
+    MeasurementModel, Observation, ProcessHessian, ProcessJacobian, ProcessModel, Transition,
 };
 pub use propagate::{
-    Linearized, MomentPropagator, Moments, Sampled, SecondOrder, SecondOrderGaussian, Unscented,
+    Affine, Linearized, MomentPropagator, Moments, Sampled, SecondOrder, SecondOrderGaussian,
+    Unscented,
 };
 pub use scalar::Real;
 

@@ -179,5 +179,7 @@ pub fn ensure_psd<T: Real, D: Dim>(
 where
     DefaultAllocator: Allocator<D, D>,
 {
-    psd_factor(m, stage).map(|_| ()).map_err(|_| Error::NotPositiveSemiDefinite { stage, quantity })
+    psd_factor(m, stage)
+        .map(|_| ())
+        .map_err(|_| Error::NotPositiveSemiDefinite { stage, quantity })
 }

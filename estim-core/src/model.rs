@@ -19,7 +19,7 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
-use crate::function::{Differentiable, TwiceDifferentiable, VectorFunction};
+use crate::function::{AffineFunction, Differentiable, TwiceDifferentiable, VectorFunction};
 use crate::scalar::Real;
 
 /// A discrete-time process model x⁺ = f(x, u, Δt) + w, w ~ N(0, Q(x, u, Δt)).
@@ -61,6 +61,31 @@ where
     ) -> Option<OMatrix<T, N, N>>;
 }
 
+/// Marker: f is affine in x, f(x, u, Δt) = F(u, Δt) x + b(u, Δt), with F the
+/// [`transition_jacobian`](ProcessJacobian::transition_jacobian). Such a model gets zero
+/// Hessians for free (so it also works with second-order filters) and is accepted by the linear
+/// Kalman filter. Implement it only when it holds (the derivative checker can confirm).
+pub trait LinearProcessModel<T: Real, N: Dim>: ProcessJacobian<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+}
+
+impl<T: Real, N: Dim, P: LinearProcessModel<T, N>> ProcessHessian<T, N> for P
+where
+    DefaultAllocator: Alloc<N>,
+{
+    fn transition_hessian(
+        &self,
+        _: &OVector<T, N>,
+        _: &P::Input,
+        _: T,
+        _: usize,
+    ) -> Option<OMatrix<T, N, N>> {
+        None
+    }
+}
+
 /// A measurement model z = h(x) + v, v ~ N(0, R(x)), with `M` components.
 pub trait MeasurementModel<T: Real, N: Dim, M: Dim>
 where
@@ -95,6 +120,24 @@ where
 {
     /// ∂²hₖ/∂x² of measurement component `k`, or `None` when hₖ is affine in x.
     fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>>;
+}
+
+/// Marker: h is affine in x, h(x) = H x + c, with H the
+/// [`measurement_jacobian`](MeasurementJacobian::measurement_jacobian). Such a model gets zero
+/// Hessians for free and is accepted by the linear Kalman filter.
+pub trait LinearMeasurementModel<T: Real, N: Dim, M: Dim>: MeasurementJacobian<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+}
+
+impl<T: Real, N: Dim, M: Dim, H: LinearMeasurementModel<T, N, M>> MeasurementHessian<T, N, M> for H
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn measurement_hessian(&self, _: &OVector<T, N>, _: usize) -> Option<OMatrix<T, N, N>> {
+        None
+    }
 }
 
 /// The map x ↦ f(x, u, Δt) of a process model at a fixed input and step.
@@ -202,4 +245,23 @@ where
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.measurement_hessian(x, k)
     }
+}
+
+impl<P, U, T, N> AffineFunction<T, N, N> for Transition<'_, P, U, T>
+where
+    T: Real,
+    N: Dim,
+    P: LinearProcessModel<T, N, Input = U>,
+    DefaultAllocator: Alloc<N>,
+{
+}
+
+impl<H, T, N, M> AffineFunction<T, N, M> for Observation<'_, H>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: LinearMeasurementModel<T, N, M>,
+    DefaultAllocator: Alloc<N, M>,
+{
 }

@@ -5,6 +5,7 @@
 //!
 //! | propagator | needs | mean | covariance |
 //! |---|---|---|---|
+//! | [`Affine`] | J, g affine | g(μ) (exact) | J C Jᵀ (exact) |
 //! | [`Linearized`] | J | g(μ) | J C Jᵀ |
 //! | [`SecondOrder`] (Papoulis; Boje eq 7, 9) | J, Hₖ | g(μ) + ½ Σᵢⱼ (Hₖ ∘ C)ᵢⱼ | J C Jᵀ |
 //! | [`SecondOrderGaussian`] | J, Hₖ | as above | J C Jᵀ + ½ [tr(Hₖ C Hₗ C)]ₖₗ |
@@ -26,11 +27,13 @@ use crate::gaussian::Gaussian;
 use crate::linalg::{ensure_finite, symmetrize};
 use crate::scalar::Real;
 
+mod affine;
 mod linearized;
 mod sampled;
 mod second_order;
 mod unscented;
 
+pub use affine::Affine;
 pub use linearized::Linearized;
 pub use sampled::Sampled;
 pub use second_order::{SecondOrder, SecondOrderGaussian};

@@ -1,1 +1,54 @@
-//! estim-filters
+//! # estim-filters
+//!
+//! Interchangeable recursive estimators over the models of [`estim_core`]:
+//!
+//! | filter | propagation | needs from the process model | from the measurement model |
+//! |---|---|---|---|
+//! | [`KalmanFilter`] | exact (affine) | [`LinearProcessModel`](estim_core::LinearProcessModel) | [`LinearMeasurementModel`](estim_core::LinearMeasurementModel) |
+//! | [`Ekf`] | linearised | [`ProcessJacobian`](estim_core::ProcessJacobian) | [`MeasurementJacobian`](estim_core::MeasurementJacobian) |
+//! | [`SecondOrderEkf`] | second order (Papoulis) | [`ProcessHessian`](estim_core::ProcessHessian) | [`MeasurementHessian`](estim_core::MeasurementHessian) |
+//! | [`GaussianSecondOrderEkf`] | second order + Gaussian 4th-moment terms | Hessians | Hessians |
+//! | [`Ukf`] | unscented | [`ProcessModel`](estim_core::ProcessModel) | [`MeasurementModel`](estim_core::MeasurementModel) |
+//! | [`FadingMemoryRls`] | — (update only) | — | [`MeasurementJacobian`](estim_core::MeasurementJacobian) |
+//!
+//! The Kalman-family filters are one type, [`GaussianFilter`], parameterised by the
+//! [`MomentPropagator`](estim_core::MomentPropagator); they differ only in how the predicted
+//! moments are computed. The gain, the Cholesky solve, the covariance update, gating and the
+//! update report are written once ([`update`]). Changing filter is changing one constructor:
+//!
+//! ```
+//! use estim_core::{Gaussian, LinearMeasurement, LinearProcess, nalgebra::{Matrix1, Matrix2, Matrix1x2, Vector1, Vector2, Matrix2x1}};
+//! use estim_filters::{Ekf, Estimator, Predict, Ukf, Update};
+//!
+//! let process = LinearProcess { transition: Matrix2::new(1.0, 0.1, 0.0, 1.0), input: Matrix2x1::new(0.005, 0.1), noise: Matrix2::identity() * 1e-4 };
+//! let position = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.01) };
+//! let prior = Gaussian::new(Vector2::zeros(), Matrix2::identity())?;
+//!
+//! let mut filter = Ekf::new(prior.clone());          // or: Ukf::new(prior.clone());
+//! filter.predict(&process, &Vector1::new(1.0), 0.1)?;
+//! let report = filter.update(&position, &Vector1::new(0.02))?;
+//! assert!(report.nis >= 0.0);
+//! assert!(filter.covariance()[(0, 0)] < 1.0);
+//! # let mut ukf = Ukf::new(prior); ukf.predict(&process, &Vector1::new(1.0), 0.1)?; ukf.update(&position, &Vector1::new(0.02))?;
+//! # Ok::<(), estim_core::Error>(())
+//! ```
+//!
+//! Models are passed to each call, never stored, so one filter serves several sensors at
+//! several rates. [`Estimator`] is object safe: `Box<dyn Estimator<f64, U6>>` holds any of them.
+#![deny(missing_docs)]
+
+mod correlated;
+mod gaussian_filter;
+mod report;
+mod rls;
+mod traits;
+pub mod update;
+
+pub use correlated::Decorrelated;
+pub use gaussian_filter::{
+    Ekf, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, SecondOrderEkf, Ukf,
+};
+pub use report::{UpdateOutcome, UpdateReport};
+pub use rls::FadingMemoryRls;
+pub use traits::{Estimator, Predict, PredictCorrelated, Update};
+pub use update::CovarianceUpdate;

@@ -148,7 +148,12 @@ where
         let w = T::one() / (real::<T>(2.0) * c);
         let d_bar = sum_d * w;
         let mut covariance_y = sum_dd * w;
-        covariance_y.ger(self.beta - self.alpha * self.alpha, &d_bar, &d_bar, T::one());
+        covariance_y.ger(
+            self.beta - self.alpha * self.alpha,
+            &d_bar,
+            &d_bar,
+            T::one(),
+        );
         finish(Moments {
             mean: y0 + d_bar,
             covariance: covariance_y,

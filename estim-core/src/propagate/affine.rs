@@ -1,0 +1,35 @@
+//! Exact propagation through affine functions (the linear Kalman filter's).
+
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+
+use super::linearized::linear_moments;
+use super::{MomentPropagator, Moments, finish};
+use crate::alloc::Alloc;
+use crate::error::Result;
+use crate::function::AffineFunction;
+use crate::scalar::Real;
+
+/// ȳ = g(μ), cov(y) = J C Jᵀ, cov(x, y) = C Jᵀ for an affine g: the same arithmetic as
+/// [`Linearized`](super::Linearized), but only accepted for functions marked
+/// [`AffineFunction`], where it is exact. This is what makes the linear Kalman filter refuse
+/// a nonlinear model at compile time.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Affine;
+
+impl<T, N, M, G> MomentPropagator<T, N, M, G> for Affine
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    G: AffineFunction<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn propagate(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+    ) -> Result<Moments<T, N, M>> {
+        finish(linear_moments(mean, covariance, g)?)
+    }
+}

@@ -1,0 +1,43 @@
+//! What a measurement update reports.
+
+use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+use estim_core::{Real, nalgebra::allocator::Allocator};
+
+/// Whether an update changed the estimate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum UpdateOutcome {
+    /// The measurement was used.
+    Applied,
+    /// The NIS exceeded the filter's gate: the measurement was rejected, the estimate is
+    /// unchanged.
+    Gated,
+}
+
+/// The statistics of one measurement update.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UpdateReport<T: Real, M: Dim>
+where
+    DefaultAllocator: Allocator<M> + Allocator<M, M>,
+{
+    /// The innovation ν = z ⊖ ẑ.
+    pub innovation: OVector<T, M>,
+    /// Its predicted covariance S = cov(ẑ) + R.
+    pub innovation_covariance: OMatrix<T, M, M>,
+    /// The normalised innovation squared νᵀ S⁻¹ ν (χ² with m degrees of freedom when the
+    /// filter is consistent).
+    pub nis: T,
+    /// The log-likelihood of z: −½ (νᵀ S⁻¹ ν + ln det S + m ln 2π).
+    pub log_likelihood: T,
+    /// Whether the measurement was used.
+    pub outcome: UpdateOutcome,
+}
+
+impl<T: Real, M: Dim> UpdateReport<T, M>
+where
+    DefaultAllocator: Allocator<M> + Allocator<M, M>,
+{
+    /// `true` unless the update was gated.
+    pub fn applied(&self) -> bool {
+        self.outcome == UpdateOutcome::Applied
+    }
+}

@@ -1,0 +1,129 @@
+//! Fading-memory recursive least squares: Lee & Huang's own-ship trajectory estimator.
+
+use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+use estim_core::propagate::Linearized;
+use estim_core::{Alloc, Error, Gaussian, MeasurementJacobian, Parameter, Real, error::Result};
+
+use crate::gaussian_filter::{measurement_update, validate_gate};
+use crate::report::UpdateReport;
+use crate::traits::{Estimator, Update};
+use crate::update::CovarianceUpdate;
+
+/// Recursive least squares with exponential forgetting (the own-ship trajectory estimator,
+/// OTE, of Lee & Huang 2002, eq 46-48), for observations z = B θ + v, v ~ N(0, S):
+///
+/// ```text
+/// K  = γ⁻¹ P Bᵀ (B γ⁻¹ P Bᵀ + S)⁻¹
+/// θ⁺ = θ + K (z − B θ)
+/// P⁺ = (I − K B) γ⁻¹ P
+/// ```
+///
+/// with forgetting factor 0 < γ ≤ 1: data n steps old is weighted γⁿ. It is the Kalman update
+/// applied to the inflated covariance γ⁻¹P, and it shares that code: the regressor B is the
+/// measurement model's Jacobian (so a nonlinear h gives the linearised RLS), S is its noise,
+/// and the Joseph form is used by default. γ = 1 is ordinary recursive least squares and
+/// reproduces batch weighted least squares.
+///
+/// **Steady state for B = I.** With P = p S, the recursion is p⁺ = (1 − k) p/γ with
+/// k = (p/γ)/(p/γ + 1). A fixed point needs 1 − k = γ, so k = 1 − γ and, from
+/// k (p/γ + 1) = p/γ, p = 1 − γ: the gain tends to (1 − γ) I and P to (1 − γ) S.
+///
+/// Requirements on the model: [`MeasurementJacobian`]. It implements [`Update`] and
+/// [`Estimator`] (no [`Predict`](crate::Predict): the parameters are constant but for the
+/// forgetting), so it swaps with the Kalman filters on parameter-estimation problems.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FadingMemoryRls<T: Real, N: Dim>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    state: OVector<T, N>,
+    covariance: OMatrix<T, N, N>,
+    forgetting: T,
+    covariance_update: CovarianceUpdate,
+    gate: Option<T>,
+}
+
+impl<T: Real, N: Dim> FadingMemoryRls<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// An estimator starting from `prior` (θ₀, P₀) with forgetting factor `forgetting` = γ,
+    /// which must satisfy 0 < γ ≤ 1.
+    pub fn new(prior: Gaussian<T, N>, forgetting: T) -> Result<Self> {
+        if !(forgetting > T::zero() && forgetting <= T::one()) {
+            return Err(Error::InvalidParameter {
+                parameter: Parameter::ForgettingFactor,
+                value: estim_core::nalgebra::try_convert::<T, f64>(forgetting).unwrap_or(f64::NAN),
+            });
+        }
+        let (state, covariance) = prior.into_parts();
+        Ok(Self {
+            state,
+            covariance,
+            forgetting,
+            covariance_update: CovarianceUpdate::default(),
+            gate: None,
+        })
+    }
+
+    /// Uses `form` for the covariance update (default: Joseph).
+    pub fn with_covariance_update(mut self, form: CovarianceUpdate) -> Self {
+        self.covariance_update = form;
+        self
+    }
+
+    /// Rejects updates whose NIS exceeds `threshold` (finite, > 0).
+    pub fn with_gate(mut self, threshold: T) -> Result<Self> {
+        self.gate = Some(validate_gate(threshold)?);
+        Ok(self)
+    }
+
+    /// The forgetting factor γ.
+    pub fn forgetting_factor(&self) -> T {
+        self.forgetting
+    }
+}
+
+impl<T: Real, N: Dim> Estimator<T, N> for FadingMemoryRls<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    fn state(&self) -> &OVector<T, N> {
+        &self.state
+    }
+
+    fn covariance(&self) -> &OMatrix<T, N, N> {
+        &self.covariance
+    }
+
+    fn reset(&mut self, prior: Gaussian<T, N>) {
+        (self.state, self.covariance) = prior.into_parts();
+    }
+}
+
+impl<T, N, M, H> Update<T, N, M, H> for FadingMemoryRls<T, N>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: MeasurementJacobian<T, N, M>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn update(&mut self, model: &H, z: &OVector<T, M>) -> Result<UpdateReport<T, M>> {
+        let inflated = &self.covariance / self.forgetting;
+        let (posterior, report) = measurement_update(
+            &Linearized,
+            &self.state,
+            &inflated,
+            model,
+            z,
+            self.covariance_update,
+            self.gate,
+        )?;
+        if let Some((x, p)) = posterior {
+            self.state = x;
+            self.covariance = p;
+        }
+        Ok(report)
+    }
+}

@@ -1,0 +1,92 @@
+//! The step traits every filter implements.
+
+use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+use estim_core::{Alloc, Gaussian, MeasurementModel, ProcessModel, Real, error::Result};
+
+use crate::report::UpdateReport;
+
+/// The read/reset side of any estimator of an `N`-dimensional state. Object safe, so a
+/// filter chosen at run time can live in a `Box<dyn Estimator<T, N>>`.
+pub trait Estimator<T: Real, N: Dim>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// The state estimate x̂.
+    fn state(&self) -> &OVector<T, N>;
+
+    /// The estimate's covariance P.
+    fn covariance(&self) -> &OMatrix<T, N, N>;
+
+    /// Restarts from `prior`, keeping the filter's configuration.
+    fn reset(&mut self, prior: Gaussian<T, N>);
+
+    /// The estimate as a Gaussian N(x̂, P) (a copy).
+    fn estimate(&self) -> Gaussian<T, N> {
+        Gaussian::new_unchecked(self.state().clone(), self.covariance().clone())
+    }
+}
+
+/// The time update over a process model `P`. Each filter bounds `P` by what it needs.
+pub trait Predict<T: Real, N: Dim, P: ProcessModel<T, N>>: Estimator<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// Propagates the estimate through x⁺ = f(x, u, Δt) + w.
+    ///
+    /// On error the filter is left exactly as it was.
+    fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()>;
+}
+
+/// The measurement update with a measurement model `H` of `M` components. Each filter bounds
+/// `H` by what it needs. The model is passed per call, so one filter takes any number of
+/// sensors at any rates.
+pub trait Update<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>>: Estimator<T, N>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// Corrects the estimate with measurement `z` = h(x) + v.
+    ///
+    /// Returns the update report (innovation, its covariance, NIS, log-likelihood); if a gate
+    /// is set and the NIS exceeds it, the report says [`Gated`](crate::UpdateOutcome::Gated)
+    /// and the estimate is unchanged. On error the filter is left exactly as it was.
+    fn update(&mut self, model: &H, z: &OVector<T, M>) -> Result<UpdateReport<T, M>>;
+}
+
+/// The time update when the process noise wₖ of this step is correlated with the noise vₖ of
+/// the measurement zₖ taken at the start of the step: E[wₖ vₖᵀ] = S (n × m).
+///
+/// Call it right after updating with zₖ (or instead of predicting, if zₖ was not used), as
+/// [`Predict::predict`] is called otherwise. The filter uses the decorrelated process
+/// (Simon, *Optimal State Estimation*, §7.1; Anderson & Moore §5.5)
+///
+/// ```text
+/// x⁺ = f(x) + D (zₖ ⊖ h(x)) + w*,   D = S R⁻¹,   Q* = Q − S R⁻¹ Sᵀ,
+/// ```
+///
+/// whose noise w* = w − D v is uncorrelated with vₖ. For linear models this gives exactly the
+/// one-step predictor of Boje eq 16, K = (A P Cᵀ + S)(R + C P Cᵀ)⁻¹.
+pub trait PredictCorrelated<T, N, M, P, H>: Estimator<T, N>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    P: ProcessModel<T, N>,
+    H: MeasurementModel<T, N, M>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// Predicts through `process` with noise correlated (cross-covariance `cross`) with the
+    /// noise of `measurement`'s reading `z`.
+    ///
+    /// Errors also when R is not positive definite or Q − S R⁻¹ Sᵀ is not positive
+    /// semi-definite (S inconsistent with Q and R). On error the filter is unchanged.
+    #[allow(clippy::too_many_arguments)]
+    fn predict_correlated(
+        &mut self,
+        process: &P,
+        input: &P::Input,
+        dt: T,
+        measurement: &H,
+        z: &OVector<T, M>,
+        cross: &OMatrix<T, N, M>,
+    ) -> Result<()>;
+}

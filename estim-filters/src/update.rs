@@ -1,0 +1,116 @@
+//! The measurement update, written once for every filter.
+//!
+//! Given the predicted measurement moments (ẑ, cov(ẑ), Pₓᵤ = cov(x, ẑ)) from any moment
+//! propagator, the noise R and the innovation ν = z ⊖ ẑ:
+//!
+//! ```text
+//! S  = cov(ẑ) + R                       (factorised by Cholesky, S = L Lᵀ; never inverted)
+//! K  = Pₓᵤ S⁻¹                          (solved: S Kᵀ = Pₓᵤᵀ)
+//! x⁺ = x + K ν
+//! P⁺ = P − K Pₓᵤᵀ − Pₓᵤ Kᵀ + K S Kᵀ     (Joseph)
+//! NIS = νᵀ S⁻¹ ν,   ln p(z) = −½ (NIS + 2 Σ ln Lᵢᵢ + m ln 2π)
+//! ```
+//!
+//! For a linear(ised) model, Pₓᵤ = P Hᵀ and S = H P Hᵀ + R, and the Joseph line expands to the
+//! familiar (I − K H) P (I − K H)ᵀ + K R Kᵀ. Like it, it is insensitive to first-order errors
+//! in K: with K = K* + δK it equals P − K* S K*ᵀ + δK S δKᵀ. But it needs no H, so it serves
+//! the unscented filter too.
+
+use estim_core::linalg::{ensure_finite, ensure_shape, symmetrize};
+use estim_core::nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, OVector};
+use estim_core::propagate::Moments;
+use estim_core::scalar::real;
+use estim_core::{Alloc, Error, Quantity, Real, Stage, error::Result};
+
+use crate::report::{UpdateOutcome, UpdateReport};
+
+/// How the covariance is updated after a measurement.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum CovarianceUpdate {
+    /// P⁺ = P − K Pₓᵤᵀ − Pₓᵤ Kᵀ + K S Kᵀ, symmetrised: the Joseph form, robust to round-off
+    /// in K (see the [module docs](self)).
+    #[default]
+    Joseph,
+    /// P⁺ = P − K Pₓᵤᵀ (= P − K S Kᵀ), as computed; may drift from symmetry over many steps.
+    Standard,
+    /// The standard form followed by P⁺ ← (P⁺ + P⁺ᵀ)/2.
+    Symmetrized,
+}
+
+/// The result of [`apply`]: the new estimate (`None` if gated) and the report.
+pub(crate) type Posterior<T, N, M> = (
+    Option<(OVector<T, N>, OMatrix<T, N, N>)>,
+    UpdateReport<T, M>,
+);
+
+/// The Kalman update shared by every filter: see the [module docs](self).
+///
+/// `innovation` is z ⊖ ẑ (the caller applies the model's residual). Nothing is written to the
+/// filter here: the caller commits the returned estimate, so a failure leaves it untouched.
+pub(crate) fn apply<T: Real, N: Dim, M: Dim>(
+    state: &OVector<T, N>,
+    covariance: &OMatrix<T, N, N>,
+    predicted: Moments<T, N, M>,
+    noise: OMatrix<T, M, M>,
+    innovation: OVector<T, M>,
+    form: CovarianceUpdate,
+    gate: Option<T>,
+) -> Result<Posterior<T, N, M>>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let stage = Stage::Update;
+    let m = predicted.mean.nrows();
+    ensure_shape(&noise, m, m, stage, Quantity::MeasurementNoise)?;
+    ensure_finite(&noise, stage, Quantity::MeasurementNoise)?;
+    ensure_shape(&innovation, m, 1, stage, Quantity::Measurement)?;
+    ensure_finite(&innovation, stage, Quantity::Measurement)?;
+
+    let mut s = predicted.covariance + noise;
+    symmetrize(&mut s);
+    let chol = Cholesky::new(s.clone()).ok_or(Error::NotPositiveDefinite {
+        stage,
+        quantity: Quantity::InnovationCovariance,
+    })?;
+    let nis = innovation.dot(&chol.solve(&innovation));
+    let log_det = chol
+        .l_dirty()
+        .diagonal()
+        .iter()
+        .fold(T::zero(), |acc, d| acc + d.ln());
+    let log_likelihood = -real::<T>(0.5)
+        * (nis + log_det + log_det + real::<T>(m as f64 * (2.0 * core::f64::consts::PI).ln()));
+    let mut report = UpdateReport {
+        innovation,
+        innovation_covariance: s,
+        nis,
+        log_likelihood,
+        outcome: UpdateOutcome::Applied,
+    };
+    if gate.is_some_and(|g| !(nis <= g)) {
+        report.outcome = UpdateOutcome::Gated;
+        return Ok((None, report));
+    }
+
+    let cross = predicted.cross_covariance;
+    let gain = chol.solve(&cross.transpose()).transpose();
+    let mut new_state = state.clone();
+    new_state.gemv(T::one(), &gain, &report.innovation, T::one());
+    let k_cross_t = &gain * cross.transpose();
+    let mut new_covariance = covariance - &k_cross_t;
+    match form {
+        CovarianceUpdate::Joseph => {
+            // P − K Pₓᵤᵀ − Pₓᵤ Kᵀ + K S Kᵀ
+            new_covariance -= k_cross_t.transpose();
+            let ks = &gain * &report.innovation_covariance;
+            new_covariance += ks * gain.transpose();
+            symmetrize(&mut new_covariance);
+        }
+        CovarianceUpdate::Standard => {}
+        CovarianceUpdate::Symmetrized => symmetrize(&mut new_covariance),
+    }
+    ensure_finite(&gain, stage, Quantity::Gain)?;
+    ensure_finite(&new_state, stage, Quantity::Mean)?;
+    ensure_finite(&new_covariance, stage, Quantity::Covariance)?;
+    Ok((Some((new_state, new_covariance)), report))
+}
