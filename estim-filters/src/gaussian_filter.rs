@@ -163,7 +163,7 @@ pub(crate) fn predicted<T, N, Pr, G>(
     covariance: &OMatrix<T, N, N>,
     g: &G,
     q: OMatrix<T, N, N>,
-) -> Result<(OVector<T, N>, OMatrix<T, N, N>)>
+) -> Result<update::Estimate<T, N>>
 where
     T: Real,
     N: Dim,

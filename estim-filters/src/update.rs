@@ -37,11 +37,11 @@ pub enum CovarianceUpdate {
     Symmetrized,
 }
 
+/// A state estimate and its covariance, computed but not yet committed to a filter.
+pub(crate) type Estimate<T, N> = (OVector<T, N>, OMatrix<T, N, N>);
+
 /// The result of [`apply`]: the new estimate (`None` if gated) and the report.
-pub(crate) type Posterior<T, N, M> = (
-    Option<(OVector<T, N>, OMatrix<T, N, N>)>,
-    UpdateReport<T, M>,
-);
+pub(crate) type Posterior<T, N, M> = (Option<Estimate<T, N>>, UpdateReport<T, M>);
 
 /// The Kalman update shared by every filter: see the [module docs](self).
 ///
