@@ -109,6 +109,9 @@ impl MeasurementHessian<f64, U4, U2> for Radar {
 trait RadarTracker: Predict<f64, U4, ConstantVelocity> + Update<f64, U4, U2, Radar> {}
 impl<F: Predict<f64, U4, ConstantVelocity> + Update<f64, U4, U2, Radar>> RadarTracker for F {}
 
+/// A constructor of a boxed filter from a prior.
+type MakeTracker = fn(Gaussian<f64, U4>) -> Box<dyn RadarTracker>;
+
 /// A data set: true states and measurements at each step.
 struct Run<const M: usize> {
     truth: Vec<Vector4<f64>>,
@@ -201,7 +204,7 @@ fn main() -> Result<(), Error> {
         "Radar (range, bearing) tracking, 50 runs x 100 steps: position RMS and mean NIS (expected 2)"
     );
     println!("{:<26} {:>10} {:>10}", "filter", "RMS [m]", "mean NIS");
-    let constructors: [(&str, fn(Gaussian<f64, U4>) -> Box<dyn RadarTracker>); 4] = [
+    let constructors: [(&str, MakeTracker); 4] = [
         ("Ekf", |p| Box::new(Ekf::new(p))),
         ("SecondOrderEkf", |p| Box::new(SecondOrderEkf::new(p))),
         ("Ukf", |p| Box::new(Ukf::new(p))),
