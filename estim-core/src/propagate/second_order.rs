@@ -32,8 +32,10 @@ pub struct SecondOrder;
 /// ```
 ///
 /// which adds the contribution of the fourth moments of a Gaussian x. Mean and covariance are
-/// both exact for quadratic g when x is Gaussian. Cost: O(m² n³) on top of the Jacobian
-/// product, and each Hessian is evaluated O(m) times. Requirements on g:
+/// both exact for quadratic g when x is Gaussian. Cost on top of the Jacobian product: two
+/// n × n products per nonlinear component and O(m² n²) inner products; to stay allocation-free
+/// for static sizes, Hessians are re-evaluated per pair (m + m(m−1)/2 evaluations) rather than
+/// stored. Requirements on g:
 /// [`TwiceDifferentiable`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SecondOrderGaussian;
@@ -113,19 +115,21 @@ where
         covariance: &OMatrix<T, N, N>,
         g: &G,
     ) -> Result<Moments<T, N, M>> {
-        let mut m = second_order_moments(mean, covariance, g)?;
+        let mut m = linear_moments(mean, covariance, g)?;
         let half = real::<T>(0.5);
+        // tr(Hₖ C Hₗ C) = ⟨C Hₖ C, Hₗ⟩ (Frobenius, Hₗ symmetric): one O(n³) product pair per k,
+        // O(n²) per pair. Hessians of earlier components are re-evaluated rather than stored,
+        // so static sizes stay off the heap: m + m(m−1)/2 Hessian evaluations in all.
         for k in 0..m.mean.nrows() {
             let Some(hk) = hessian(g, mean, k)? else {
                 continue;
             };
-            let ak = &hk * covariance;
-            // tr(Aₖ Aₖ) with Aₖ = Hₖ C.
-            m.covariance[(k, k)] += half * ak.tr_dot(&ak);
+            m.mean[k] += half * hk.dot(covariance);
+            let bk = covariance * &hk * covariance;
+            m.covariance[(k, k)] += half * bk.dot(&hk);
             for l in 0..k {
                 if let Some(hl) = hessian(g, mean, l)? {
-                    let al = &hl * covariance;
-                    let t = half * ak.tr_dot(&al);
+                    let t = half * bk.dot(&hl);
                     m.covariance[(k, l)] += t;
                     m.covariance[(l, k)] += t;
                 }
