@@ -43,7 +43,10 @@ fn exact(xm: f64, sx: f64, tm: f64, st: f64) -> [f64; 7] {
     let e1 = (-st * st / 2.0).exp();
     let e2 = (-2.0 * st * st).exp();
     let (ec, es) = (tm.cos() * e1, tm.sin() * e1);
-    let (ec2, es2) = (0.5 * (1.0 + e2 * (2.0 * tm).cos()), 0.5 * (1.0 - e2 * (2.0 * tm).cos()));
+    let (ec2, es2) = (
+        0.5 * (1.0 + e2 * (2.0 * tm).cos()),
+        0.5 * (1.0 - e2 * (2.0 * tm).cos()),
+    );
     let ex2 = xm * xm + sx * sx;
     [
         ec,
@@ -58,20 +61,44 @@ fn exact(xm: f64, sx: f64, tm: f64, st: f64) -> [f64; 7] {
 
 fn pick(m: &estim::core::Moments<f64, U2, estim::nalgebra::U4>) -> [f64; 7] {
     let c = &m.covariance;
-    [m.mean[0], m.mean[1], c[(0, 0)], c[(1, 1)], m.mean[2], c[(2, 2)], c[(3, 3)]]
+    [
+        m.mean[0],
+        m.mean[1],
+        c[(0, 0)],
+        c[(1, 1)],
+        m.mean[2],
+        c[(2, 2)],
+        c[(3, 3)],
+    ]
 }
 
 fn main() -> Result<(), Error> {
     let json = std::env::args().any(|a| a == "--json");
     let (xm, sx, tm, st) = (2.0, 0.3, 0.7, 0.1);
-    let prior = Gaussian::new(Vector2::new(xm, tm), Matrix2::new(sx * sx, 0.0, 0.0, st * st))?;
+    let prior = Gaussian::new(
+        Vector2::new(xm, tm),
+        Matrix2::new(sx * sx, 0.0, 0.0, st * st),
+    )?;
     let second = pick(&SecondOrder.propagate_gaussian(&prior, &BojeTrig)?);
     let sampled = pick(&Sampled::new(1_000_000, 2026)?.propagate_gaussian(&prior, &BojeTrig)?);
     let exact = exact(xm, sx, tm, st);
-    let names = ["e_cos", "e_sin", "var_cos", "var_sin", "e_x_cos", "var_x_cos", "var_x_sin"];
+    let names = [
+        "e_cos",
+        "e_sin",
+        "var_cos",
+        "var_sin",
+        "e_x_cos",
+        "var_x_cos",
+        "var_x_sin",
+    ];
 
-    println!("Boje eq 8, 10, 11 (Papoulis second order) for θ ~ N({tm}, {st}²), x ~ N({xm}, {sx}²)");
-    println!("{:<10} {:>14} {:>14} {:>14} {:>10}", "quantity", "second order", "exact", "sampled 1e6", "rel err");
+    println!(
+        "Boje eq 8, 10, 11 (Papoulis second order) for θ ~ N({tm}, {st}²), x ~ N({xm}, {sx}²)"
+    );
+    println!(
+        "{:<10} {:>14} {:>14} {:>14} {:>10}",
+        "quantity", "second order", "exact", "sampled 1e6", "rel err"
+    );
     for i in 0..names.len() {
         println!(
             "{:<10} {:>14.8} {:>14.8} {:>14.8} {:>10.2e}",
