@@ -260,6 +260,7 @@ impl<T: Real> DerivativeCheck<T> {
             ensure_shape(&ym, m, 1, stage, Quantity::FunctionValue)?;
             // Through difference() so wrapped outputs (angles) difference correctly.
             let dy = g.difference(&yp, &ym);
+            ensure_shape(&dy, m, 1, stage, Quantity::FunctionValue)?;
             ensure_finite(&dy, stage, Quantity::FunctionValue)?;
             for i in 0..m {
                 report.record(Comparison {

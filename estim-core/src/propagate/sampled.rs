@@ -89,6 +89,7 @@ where
             let y = g.eval(&x);
             ensure_shape(&y, m, 1, Stage::Propagation, Quantity::FunctionValue)?;
             let d = g.difference(&y, &y0);
+            ensure_shape(&d, m, 1, Stage::Propagation, Quantity::FunctionValue)?;
             sum_dx += &dx;
             sum_d += &d;
             sum_dd.ger(T::one(), &d, &d, T::one());

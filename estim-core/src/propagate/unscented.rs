@@ -140,6 +140,7 @@ where
                 let y = g.eval(&x);
                 ensure_shape(&y, m, 1, Stage::Propagation, Quantity::FunctionValue)?;
                 let d = g.difference(&y, &y0);
+                ensure_shape(&d, m, 1, Stage::Propagation, Quantity::FunctionValue)?;
                 sum_d += &d;
                 sum_dd.ger(T::one(), &d, &d, T::one());
                 sum_xd.ger(T::one(), &dx, &d, T::one());
