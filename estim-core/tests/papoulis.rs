@@ -28,7 +28,8 @@
 //! dominates its error when x̄ is small (demonstrated below). In eq 13, however, λ₃₃ and λ₄₄
 //! have σu and σv swapped: by eq 5, θ̈ = (a_v1 − a_v2)/(2R) and θ̇² = (a_u2 − a_u1)/(2R), so
 //! var θ̈ = (σv1² + σv2²)/(4R²) and var θ̇² = (σu1² + σu2²)/(4R²) (the paper prints the
-//! reverse); every other λ is as printed.
+//! reverse); every other λ is as printed. (Both agree with docs/paper-notes/boje.md, errata E1
+//! and E11; E11, "E{x₁x₂} ≈ x̄₁x̄₂ + cov" being exact, is checked in quadratic.rs.)
 
 mod common;
 
