@@ -32,13 +32,13 @@
 //! | 5 | ω = θ̇ | rad/s | | | | |
 //!
 //! Input noise W = (δa_x, δa_y, δω̇) (eq 17–19), per-sample covariance Σ_W; measurement noise
-//! ε ~ N(0, R_v), R_v scalar. The OTE state is r_e = (v_x, v_y) [m/s], its measurement the
-//! pseudo-measurement Z_p = g(D̂) [m/s].
+//! ε ~ N(0, R_v), R_v scalar. The OTE state is r_e = (v_x, v_y) \[m/s\], its measurement the
+//! pseudo-measurement Z_p = g(D̂) \[m/s\].
 //!
 //! ## Equations implemented
 //!
 //! Sensors (appendix B, corrected): sensor i at body position ρ lᵢ, direction βᵢ,
-//! l = [(0,−1), (1,0), (0,1), (−1,0)], β = [(1,0), (0,1), (−1,0), (0,−1)];
+//! l = \[(0,−1), (1,0), (0,1), (−1,0)\], β = \[(1,0), (0,1), (−1,0), (0,−1)\];
 //!
 //! ```text
 //! Aᵢ = (a + ω̇ ẑ × rᵢ − ω² rᵢ − g_vec) · R(θ) βᵢ = f_b · βᵢ + ρ ω̇,   f_b = R(θ)ᵀ (a − g_vec)
@@ -100,14 +100,14 @@
 //! | E2 | eq 38/39: v̂_x = ρ̇ sin x₅ − d x₆ cos x₅, v̂_y = ρ̇ cos x₅ + d x₆ sin x₅ | eq 27/28: ρ̇ cos x₅ − d x₆ sin x₅, ρ̇ sin x₅ + d x₆ cos x₅ | `eq27_28_reproduce_polar_velocity_eq38_39_do_not`, `printed_eq38_39_likelihood_diverges` |
 //! | E3 | eq 43 and eq 45 define Ẑ_p(k) and r̂_e(k/k) identically | Z_p = g(D̂_{k/k}), r̂_e = CKF velocity (taken literally the OTE is a no-op) | `literal_eq43_45_make_the_ote_a_no_op` |
 //! | E4 | eq 16 has no gravity, eq 60/62 say the signals contain it | gravity optional, horizontal default (table above) | `gravity_does_not_change_ckf_errors` |
-//! | E5 | eq 60: R(θ + (i−1)π/2)[ẍ; ÿ − g] + … then "· β"; centripetal ωᵢ₊₁ × (ωᵢ₊₂ × rᵢ) | the per-sensor rotation already projects on the sensing axis (no second · β); centripetal ω × (ω × rᵢ) ⟂ βᵢ; with y up the vector is a − g_vec = [ẍ; ÿ + g] | `eq60_per_sensor_rotation_reading_matches_forward_model` |
+//! | E5 | eq 60: R(θ + (i−1)π/2)\[ẍ; ÿ − g\] + … then "· β"; centripetal ωᵢ₊₁ × (ωᵢ₊₂ × rᵢ) | the per-sensor rotation already projects on the sensing axis (no second · β); centripetal ω × (ω × rᵢ) ⟂ βᵢ; with y up the vector is a − g_vec = \[ẍ; ÿ + g\] | `eq60_per_sensor_rotation_reading_matches_forward_model` |
 //! | E6 | R_v = 0.01 I₆ₓ₆/T | scalar R_v = 0.01/T (H is 1 × 6) | by construction ([`AttitudeMeasurement`] has a 1 × 1 R) |
 //! | E7 | eq 33: G_T = G T (Euler) | zero-order hold (T²/2 position terms); Euler kept as an option. Euler shifts position by −½ a T t | `zoh_model_reproduces_constant_acceleration_truth`, `euler_position_offset_is_half_a_t_t` |
 //! | E8 | Q_v = 0.01 I T with Γ_T = Γ T, but R_v = 0.01/T | literal: per-sample input noise covariance 0.01 T (σ_W = 0.01 m/s² at T = 0.01 s); the PSD reading (σ_W = 1 m/s²) would swamp the 10 mg bias | `process_noise_matches_unscented_propagation_of_input_noise` (Q = G_d Σ_W G_dᵀ) |
 //! | E9 | "P_p(k+1) is the error covariance of r̂_e(k+1/k+1)" | P_p is a fading-memory weight; smoothing white noise of covariance S_p gives S_p (1 − γ)/(1 + γ), not (1 − γ) S_p | `ote_covariance_is_not_the_error_covariance` |
 //! | E10 | eq 23 defines θ as the bearing of the position; eq 30/31, 38/39 substitute the body attitude x₅ and rate x₆ | with the bearing g(D) ≡ v (no information); with x₅, x₆ (as the paper) it imposes radial flight, violated by section IV's ICs; so the paper's "CKF+OTE converges within 5 s" does not reproduce | `likelihood_is_the_velocity_when_theta_is_the_bearing`, `ote_makes_position_worse_with_paper_initial_conditions`, `ote_removes_cross_track_drift_in_radial_scenario` |
 //! | E11 | appendix A eq 56: … − K γ − Γ W | + K γ with X̃ = X̂ − X (no effect on eq 57) | derivation only (appendix A is not implemented) |
-//! | E12 | W = [δa_x, δa_y, δa_z]ᵀ | third component δω̇ (eq 19) | notation |
+//! | E12 | W = \[δa_x, δa_y, δa_z\]ᵀ | third component δω̇ (eq 19) | notation |
 //! | E13 | eq 19/61: y_ω̇ = ΣA/4 | ΣA/(4ρ) (equal for ρ = 1 only) | `printed_angular_acceleration_needs_one_over_rho` |
 //! | E14 | section IV: "2 degrees of freedom" | the planar body has 3 (x, y, θ) | notation |
 //!

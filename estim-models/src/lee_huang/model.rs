@@ -53,7 +53,7 @@ pub enum Plane {
 }
 
 impl Plane {
-    /// The gravitational acceleration g_vec in the inertial frame [m/s²].
+    /// The gravitational acceleration g_vec in the inertial frame \[m/s²\].
     pub fn gravity(self) -> Vector2<f64> {
         match self {
             Plane::Horizontal => Vector2::zeros(),
@@ -147,7 +147,7 @@ fn transition(
 /// [`Ukf`](estim_filters::Ukf). Input: u = (y_ax, y_ay, y_ω̇).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct InsProcess {
-    /// Σ_W: per-sample covariance of the input errors (δa_x, δa_y, δω̇) [(m/s²)², (m/s²)², (rad/s²)²].
+    /// Σ_W: per-sample covariance of the input errors (δa_x, δa_y, δω̇) \[(m/s²)², (m/s²)², (rad/s²)²\].
     pub input_noise: Matrix3<f64>,
     /// Discretisation of the continuous model.
     pub discretization: Discretization,
@@ -218,7 +218,7 @@ impl ProcessHessian<f64, U6> for InsProcess {
 pub struct CkfInput {
     /// u = (y_ax, y_ay, y_ω̇).
     pub signals: Vector3<f64>,
-    /// θ̂ at which G and Γ are evaluated [rad].
+    /// θ̂ at which G and Γ are evaluated \[rad\].
     pub attitude: f64,
 }
 
@@ -275,7 +275,7 @@ pub fn wrap_angle(a: f64) -> f64 {
 /// The innovation is wrapped into (−π, π].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AttitudeMeasurement {
-    /// R_v [rad²] (scalar: H is 1 × 6, erratum E6).
+    /// R_v \[rad²\] (scalar: H is 1 × 6, erratum E6).
     pub variance: f64,
 }
 

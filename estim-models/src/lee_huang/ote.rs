@@ -34,9 +34,9 @@ use super::likelihood::LikelihoodForm;
 pub struct OteSettings {
     /// Forgetting factor γ, 0 < γ ≤ 1.
     pub forgetting: f64,
-    /// S_p: weight (nominal pseudo-measurement noise covariance) [(m/s)²].
+    /// S_p: weight (nominal pseudo-measurement noise covariance) \[(m/s)²\].
     pub weight: Matrix2<f64>,
-    /// P_p(0) [(m/s)²].
+    /// P_p(0) \[(m/s)²\].
     pub initial_covariance: Matrix2<f64>,
     /// Which formula builds the pseudo-measurement.
     pub likelihood: LikelihoodForm,

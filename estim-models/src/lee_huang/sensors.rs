@@ -25,7 +25,7 @@
 
 use nalgebra::{Matrix2, Vector2, Vector3, Vector4};
 
-/// Rotation from the body frame to the inertial frame, R(θ) = [[cos θ, −sin θ], [sin θ, cos θ]]
+/// Rotation from the body frame to the inertial frame, R(θ) = \[\[cos θ, −sin θ\], \[sin θ, cos θ\]\]
 /// (counter-clockwise, as in eq 16c/d).
 pub fn rotation(theta: f64) -> Matrix2<f64> {
     let (s, c) = theta.sin_cos();
@@ -35,13 +35,13 @@ pub fn rotation(theta: f64) -> Matrix2<f64> {
 /// The planar rigid-body motion at one instant, as the accelerometers see it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RigidBodyMotion {
-    /// Attitude θ of the body x axis from the inertial x axis [rad].
+    /// Attitude θ of the body x axis from the inertial x axis \[rad\].
     pub attitude: f64,
-    /// Angular rate ω = θ̇ [rad/s].
+    /// Angular rate ω = θ̇ \[rad/s\].
     pub rate: f64,
-    /// Angular acceleration ω̇ [rad/s²].
+    /// Angular acceleration ω̇ \[rad/s²\].
     pub angular_acceleration: f64,
-    /// Inertial acceleration of the centre of gravity a = (ẍ, ÿ) [m/s²].
+    /// Inertial acceleration of the centre of gravity a = (ẍ, ÿ) \[m/s²\].
     pub acceleration: Vector2<f64>,
 }
 
@@ -57,7 +57,7 @@ impl RigidBodyMotion {
 /// The four tangential accelerometers of appendix B on a circle of radius ρ.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FourAccelerometers {
-    /// Lever arm ρ [m] (> 0; the paper uses ρ = 1).
+    /// Lever arm ρ \[m\] (> 0; the paper uses ρ = 1).
     pub radius: f64,
 }
 
@@ -74,7 +74,7 @@ const LOCATIONS: [[f64; 2]; 4] = [[0.0, -1.0], [1.0, 0.0], [0.0, 1.0], [-1.0, 0.
 const DIRECTIONS: [[f64; 2]; 4] = [[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]];
 
 impl FourAccelerometers {
-    /// Body-frame sensor positions ρ lᵢ (eq 58) [m].
+    /// Body-frame sensor positions ρ lᵢ (eq 58) \[m\].
     pub fn locations(&self) -> [Vector2<f64>; 4] {
         LOCATIONS.map(|l| Vector2::new(l[0], l[1]) * self.radius)
     }
@@ -84,7 +84,7 @@ impl FourAccelerometers {
         DIRECTIONS.map(|b| Vector2::new(b[0], b[1]))
     }
 
-    /// The forward model: the four noise-free accelerometer outputs Aᵢ [m/s²] for the rigid-body
+    /// The forward model: the four noise-free accelerometer outputs Aᵢ \[m/s²\] for the rigid-body
     /// `motion` under gravity `gravity` (inertial g_vec; zero in the horizontal plane).
     ///
     /// Computed from the full rigid-body acceleration of each sensor point (eq 1 with the

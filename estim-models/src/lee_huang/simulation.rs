@@ -2,7 +2,7 @@
 //! and the attitude measurement.
 //!
 //! The truth is a rigid body with constant body-frame specific force f_b and constant angular
-//! rate ω (ω̇ = 0), integrated in closed form (φ = ω t, J = [[0, −1], [1, 0]]):
+//! rate ω (ω̇ = 0), integrated in closed form (φ = ω t, J = \[\[0, −1\], \[1, 0\]\]):
 //!
 //! ```text
 //! θ(t) = θ₀ + ω t
@@ -33,9 +33,9 @@ use super::sensors::{FourAccelerometers, RigidBodyMotion, rotation};
 /// A rigid-body trajectory with constant body-frame specific force and angular rate.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Scenario {
-    /// D(0) = (x, y, v_x, v_y, θ, ω) [m, m, m/s, m/s, rad, rad/s].
+    /// D(0) = (x, y, v_x, v_y, θ, ω) \[m, m, m/s, m/s, rad, rad/s\].
     pub initial_state: Vector6<f64>,
-    /// f_b: body-frame specific force at the centre of gravity [m/s²], constant.
+    /// f_b: body-frame specific force at the centre of gravity \[m/s²\], constant.
     pub specific_force: Vector2<f64>,
     /// Plane of motion (gravity).
     pub plane: Plane,
@@ -122,30 +122,30 @@ impl Scenario {
 /// Sensor settings of a simulation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SensorConfig {
-    /// Sample period T [s] (inputs and attitude measurement at every sample).
+    /// Sample period T \[s\] (inputs and attitude measurement at every sample).
     pub dt: f64,
     /// Number of steps (samples 0..=steps are produced).
     pub steps: usize,
     /// The accelerometer array.
     pub accelerometers: FourAccelerometers,
-    /// Bias of the derived inputs (b_x, b_y, b_ω̇) [m/s², m/s², rad/s²].
+    /// Bias of the derived inputs (b_x, b_y, b_ω̇) \[m/s², m/s², rad/s²\].
     pub input_bias: Vector3<f64>,
     /// σ_W of the white input errors (δa_x, δa_y, δω̇) per sample.
     pub input_noise_std: Vector3<f64>,
-    /// σ_ε of the attitude measurement [rad].
+    /// σ_ε of the attitude measurement \[rad\].
     pub attitude_std: f64,
 }
 
 /// One sample of sensor data.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SensorSample {
-    /// t_k [s].
+    /// t_k \[s\].
     pub time: f64,
-    /// The four accelerometer outputs A₁…A₄ (with bias, before the input noise) [m/s²].
+    /// The four accelerometer outputs A₁…A₄ (with bias, before the input noise) \[m/s²\].
     pub signals: Vector4<f64>,
     /// u_k = derived inputs + W_k (what the filter uses).
     pub inputs: Vector3<f64>,
-    /// E_k: the attitude measurement [rad], wrapped into (−π, π].
+    /// E_k: the attitude measurement \[rad\], wrapped into (−π, π].
     pub attitude: f64,
 }
 
