@@ -573,12 +573,15 @@ impl LeeHuangResult {
 }
 
 /// log₂ of the ratio of `h.position_rms` at `t` and `t/2`: the growth exponent k of a t^k law.
+/// NaN for an empty history.
 pub fn position_growth_exponent(h: &ErrorHistory, t: f64) -> f64 {
-    let (a, b) = (
-        h.position_rms[h.index_at(0.5 * t)],
-        h.position_rms[h.index_at(t)],
-    );
-    (b / a).log2()
+    let at = |t: f64| {
+        h.position_rms
+            .get(h.index_at(t))
+            .copied()
+            .unwrap_or(f64::NAN)
+    };
+    (at(t) / at(0.5 * t)).log2()
 }
 
 /// The paper's claims next to estim's numbers.
@@ -586,8 +589,13 @@ pub fn headlines(r: &LeeHuangResult) -> Vec<Headline> {
     let p = &r.paper;
     let n = p.config.seeds;
     let t_end = p.ckf.time.last().copied().unwrap_or(f64::NAN);
-    let at = |h: &ErrorHistory, t: f64| h.position_rms[h.index_at(t)];
-    let end = p.ckf.position_rms.len().saturating_sub(1);
+    let at = |h: &ErrorHistory, t: f64| {
+        h.position_rms
+            .get(h.index_at(t))
+            .copied()
+            .unwrap_or(f64::NAN)
+    };
+    let last = |v: &[f64]| v.last().copied().unwrap_or(f64::NAN);
     let var = |label: &str, f: fn(&VariantSummary) -> f64| r.variant(label).map_or(f64::NAN, f);
     let bias_end = p.bias_drift.last().map_or(f64::NAN, |b| b.norm());
     let deg = |x: f64| x.to_degrees();
@@ -628,10 +636,10 @@ pub fn headlines(r: &LeeHuangResult) -> Vec<Headline> {
             paper: "satisfactory in both CKF and CKF+OTE".into(),
             estim: format!(
                 "theta RMS {:.2} deg (sqrt P {:.2}), omega RMS {:.3} deg/s (sqrt P {:.3}) at {t_end:.0} s; identical with OTE",
-                deg(p.ckf.attitude_rms[end]),
-                deg(p.ckf.attitude_sigma[end]),
-                deg(p.ckf.rate_rms[end]),
-                deg(p.ckf.rate_sigma[end]),
+                deg(last(&p.ckf.attitude_rms)),
+                deg(last(&p.ckf.attitude_sigma)),
+                deg(last(&p.ckf.rate_rms)),
+                deg(last(&p.ckf.rate_sigma)),
             ),
             note: "reproduced: theta, omega are observable from E = theta and the OTE does not touch them".into(),
         },
