@@ -1,7 +1,8 @@
 //! Section IV in a fast form: assertions on what the honest run shows.
 //!
 //! Statistics are RMS over 20 seeds (a 20 s run with two filters costs ≈ 0.1 s). Each tolerance
-//! says how far it sits from the values observed over several disjoint seed sets.
+//! says where it sits against the values observed over 10 disjoint 20-seed sets (seeds 2002 to
+//! 2201; 5-seed tests: 10 disjoint 5-seed sets), so a change of seeds does not flip it.
 
 use estim_models::lee_huang::{
     CkfJacobian, LeeHuangConfig, LikelihoodForm, Plane, SectionIvConfig, SectionIvResult,
@@ -44,8 +45,9 @@ fn bias_alone_gives_half_b_t_squared() {
 
 /// The paper's CKF diverges (Figs 5–6 reproduced): position error grows without bound, faster
 /// than linearly, and far outside the filter's own √P (the CKF does not know the bias and drops
-/// the θ → v coupling). Observed over 6 disjoint seed sets: final RMS 54–158 m, growth exponent
-/// over 10–20 s 1.7–2.5, RMS/σ ≥ 6.
+/// the θ → v coupling). Observed: final RMS 83–121 m, growth exponent over 10–20 s 2.2–2.8
+/// (between t² for a constant error source and t³; the attitude-error part grows faster than
+/// the bias part), RMS/σ ≥ 9.
 #[test]
 fn ckf_position_error_is_unbounded_and_inconsistent() {
     let r = run_section_iv(&SectionIvConfig::paper()).unwrap();
@@ -61,9 +63,9 @@ fn ckf_position_error_is_unbounded_and_inconsistent() {
 }
 
 /// With an accurate attitude sensor the bias dominates and the CKF error follows the
-/// unobservability analysis: ∝ t² (exponent 2 ± 0.1; observed 1.97–2.01), with a mean equal to
-/// ½ R(θ) b t² (along-track within 5 %, observed < 1 %; cross-track, which also carries the
-/// attitude-noise part, within 15 %, observed 7 %).
+/// unobservability analysis: ∝ t² (exponent 2 ± 0.1; observed 1.99–2.02), with a mean equal to
+/// ½ R(θ) b t² (along-track within 2 %, observed 0.1 %; cross-track, which also carries the
+/// attitude-noise part, within 10 %, observed 3.2 %).
 #[test]
 fn ckf_error_grows_as_t_squared_when_bias_dominates() {
     let r = run_section_iv(&SectionIvConfig::radial()).unwrap();
@@ -74,12 +76,12 @@ fn ckf_error_grows_as_t_squared_when_bias_dominates() {
     let half_bt2 = 0.5 * 0.0980665 * 400.0;
     let mean = r.ckf.position_mean[end];
     assert!(
-        (mean.dot(&u) / half_bt2 - 1.0).abs() < 0.05,
+        (mean.dot(&u) / half_bt2 - 1.0).abs() < 0.02,
         "along {}",
         mean.dot(&u)
     );
     assert!(
-        (mean.dot(&n) / half_bt2 - 1.0).abs() < 0.15,
+        (mean.dot(&n) / half_bt2 - 1.0).abs() < 0.10,
         "cross {}",
         mean.dot(&n)
     );
@@ -87,8 +89,8 @@ fn ckf_error_grows_as_t_squared_when_bias_dominates() {
 
 /// θ and ω are estimated within their √P bands (Figs 9–10, "satisfactory"), and identically
 /// with and without the OTE (with Ψ the (θ, ω) block never sees the velocity). The mean of
-/// (RMS/σ)² over 5–20 s must lie in [0.3, 1.5]: the CKF starts at the true state, so errors sit
-/// somewhat inside √P (observed 0.5–1.6 with 5 seeds, 0.65–0.9 with 20).
+/// (RMS/σ)² over 5–20 s must lie in [0.5, 1.5]: the CKF starts at the true state, so errors sit
+/// somewhat inside √P (observed 0.77–1.15 for θ, 0.73–0.99 for ω).
 #[test]
 fn attitude_and_rate_within_sqrt_p_bands() {
     let r = run_section_iv(&SectionIvConfig::paper()).unwrap();
@@ -99,8 +101,8 @@ fn attitude_and_rate_within_sqrt_p_bands() {
     };
     let th = ratio(&h.attitude_rms, &h.attitude_sigma);
     let w = ratio(&h.rate_rms, &h.rate_sigma);
-    assert!((0.3..1.5).contains(&th), "theta {th}");
-    assert!((0.3..1.5).contains(&w), "omega {w}");
+    assert!((0.5..1.5).contains(&th), "theta {th}");
+    assert!((0.5..1.5).contains(&w), "omega {w}");
     for i in 0..h.time.len() {
         assert!((h.attitude_rms[i] - r.ckf_ote.attitude_rms[i]).abs() < 1e-12);
         assert!((h.rate_rms[i] - r.ckf_ote.rate_rms[i]).abs() < 1e-12);
@@ -110,8 +112,9 @@ fn attitude_and_rate_within_sqrt_p_bands() {
 }
 
 /// Erratum E10: with the paper's initial conditions the OTE does not converge within 5 s; it
-/// makes the position error larger (observed ratio 2.1–3.4 at 20 s over 6 seed sets, 2.0 for
-/// the 20 paper seeds; > 1.5 asserted), already at 5 s, and for γ = 0.99 as well (1.7).
+/// makes the position error larger (observed ratio 2.0–2.9 at 20 s; > 1.5 asserted), already at
+/// 5 s (7.7–13 m vs 2.3–3.1 m), and for γ = 0.99 as well (1.7–2.4; > 1.3 asserted). With only
+/// 5 seeds the ratio scatters more (1.35 for seeds 2002–2006), hence 20 here.
 #[test]
 fn ote_makes_position_worse_with_paper_initial_conditions() {
     let r = run_section_iv(&SectionIvConfig::paper()).unwrap();
@@ -133,10 +136,10 @@ fn ote_makes_position_worse_with_paper_initial_conditions() {
 }
 
 /// estim's second scenario (radial ICs, σ_ε = 0.01 rad — not the paper's): the OTE removes
-/// most of the mean cross-track drift (|cross| < 0.5 · ½ b t²; observed 0.1–0.45 with 5 seeds)
-/// but not the along-track ½ b t² (within 5 %), so the final position error drops (observed
-/// 21–24 m vs 27–28.5 m); meanwhile its velocity error exceeds the CKF's because d·ω̂ scales
-/// rate noise by the range (observed ×1.2–2.6, 20 seeds ×2.0; > 1.2 asserted).
+/// most of the mean cross-track drift (|cross| < 0.5 · ½ b t²; observed −0.09 to 0.35) but not
+/// the along-track ½ b t² (within 5 %, observed −1.2 to −1.9 %), so the final position error
+/// drops (observed ratio 0.78–0.87; < 0.95 asserted); meanwhile its velocity error exceeds the
+/// CKF's because d·ω̂ scales rate noise by the range (observed ×1.5–2.1; > 1.2 asserted).
 #[test]
 fn ote_removes_cross_track_drift_in_radial_scenario() {
     let r = run_section_iv(&SectionIvConfig::radial()).unwrap();
@@ -154,7 +157,7 @@ fn ote_removes_cross_track_drift_in_radial_scenario() {
         "along {}",
         mean.dot(&u)
     );
-    assert!(r.ckf_ote.position_rms[end] < 0.9 * r.ckf.position_rms[end]);
+    assert!(r.ckf_ote.position_rms[end] < 0.95 * r.ckf.position_rms[end]);
     assert!(r.ckf_ote.velocity_rms[end] > 1.2 * r.ckf.velocity_rms[end]);
 }
 
@@ -162,7 +165,7 @@ fn ote_removes_cross_track_drift_in_radial_scenario() {
 /// error dynamics: the CKF errors are the same in the horizontal and the vertical plane (to
 /// round-off; 1e-6 relative). Only the OTE differs: in the vertical plane the flight is level
 /// while the body is pitched 30°, and the radial-flight pseudo-measurement is far off
-/// (observed ×8 the horizontal OTE error; > 3 asserted).
+/// (observed ×5.7–11 the horizontal OTE error; > 3 asserted).
 #[test]
 fn gravity_does_not_change_ckf_errors() {
     let horizontal = run_section_iv(&SectionIvConfig::paper().with_seeds(5)).unwrap();
@@ -183,7 +186,7 @@ fn gravity_does_not_change_ckf_errors() {
 }
 
 /// Erratum E2 in the run: the OTE fed by eq 38/39 as printed drives the position error to
-/// kilometres (observed ≈ 1.9 km at 20 s; > 5 × the eq 27/28 OTE asserted).
+/// kilometres (observed 1.89–1.96 km at 20 s, ×6.2–12.8 the eq 27/28 OTE; > 5 × asserted).
 #[test]
 fn printed_eq38_39_likelihood_diverges() {
     let consistent = run_section_iv(&SectionIvConfig::paper().with_seeds(5)).unwrap();
@@ -197,7 +200,7 @@ fn printed_eq38_39_likelihood_diverges() {
 
 /// Keeping the θ → velocity coupling (the EKF over the full model) lets the attitude
 /// measurement correct part of the velocity error that attitude errors cause: the position
-/// error drops (observed 55 m vs 105 m for the 20 paper seeds; < 0.8 × asserted).
+/// error drops (observed ratio 0.52–0.78; < 0.9 asserted).
 #[test]
 fn full_jacobian_ekf_reduces_attitude_induced_drift() {
     let paper = run_section_iv(&SectionIvConfig::paper()).unwrap();
@@ -205,7 +208,7 @@ fn full_jacobian_ekf_reduces_attitude_induced_drift() {
     c.jacobian = CkfJacobian::Full;
     let full = run_section_iv(&c).unwrap();
     let end = last(&paper);
-    assert!(full.ckf.position_rms[end] < 0.8 * paper.ckf.position_rms[end]);
+    assert!(full.ckf.position_rms[end] < 0.9 * paper.ckf.position_rms[end]);
 }
 
 /// The example's computation in its quick form: every configuration runs, the steady state is
