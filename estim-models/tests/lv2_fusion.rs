@@ -1,6 +1,6 @@
 //! The note's closed forms (eq 2–7, the mirror ŷ, the covariance, the dropped-axis cases)
-//! against two independent routes: a weighted least squares written out here with explicit
-//! matrices and an LU inverse, and the framework's Kalman filter (exact prior from two axes,
+//! against two independent routes: a weighted least squares by QR of the whitened system (no
+//! normal equations; `lv2_support`), and the framework's Kalman filter (exact prior from two axes,
 //! update with the third), plus the library's own WLS.
 
 use core::f64::consts::SQRT_2;
@@ -16,20 +16,11 @@ use estim_models::lv2::xyq::{
 use estim_models::lv2::{AxisStatus, XyqModel};
 use proptest::prelude::*;
 
-/// WLS from scratch: θ̂ = (HᵀWH)⁻¹HᵀWz with W = R⁻¹, explicit products and LU inverse.
+mod lv2_support;
+
+/// WLS from scratch (QR of the whitened system, see `lv2_support`).
 fn naive_wls(h: &DMatrix<f64>, sigmas: &[f64], z: &[f64]) -> (DVector<f64>, DMatrix<f64>, f64) {
-    let w = DMatrix::from_diagonal(&DVector::from_iterator(
-        sigmas.len(),
-        sigmas.iter().map(|s| 1.0 / (s * s)),
-    ));
-    let z = DVector::from_column_slice(z);
-    let p = (h.transpose() * &w * h)
-        .try_inverse()
-        .expect("full rank in these tests");
-    let est = &p * h.transpose() * &w * &z;
-    let r = &z - h * &est;
-    let chi2 = (r.transpose() * &w * &r)[(0, 0)];
-    (est, p, chi2)
+    lv2_support::qr_wls(h, sigmas, z)
 }
 
 fn xyq_h() -> DMatrix<f64> {

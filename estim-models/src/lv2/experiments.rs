@@ -671,14 +671,15 @@ pub fn headlines(r: &Lv2Results) -> Vec<Headline> {
                 rate('q'),
                 mc.false_alarm
             ),
-            "one redundancy: detection, not isolation (agrees with the note)",
+            "one redundancy: detection, not isolation, as the note says",
         ),
         h(
             "saturation",
             "detect saturation and eliminate the saturated measurement",
             format!(
-                "RMS x error {:.4} m/s² screened vs {:.4} using clipped readings; {} of {} samples without an estimate (x, y only: {})",
+                "RMS x error {:.4} m/s² screened (claimed {:.4}) vs {:.4} using clipped readings; {} of {} samples without an estimate (x, y only: {})",
                 sat.screened.rms_error[0],
+                sat.screened.predicted_rms[0],
                 sat.naive.rms_error[0],
                 sat.screened.no_estimate,
                 sat.samples,
@@ -687,4 +688,26 @@ pub fn headlines(r: &Lv2Results) -> Vec<Headline> {
             "the note's scenario has no numbers; ours is a 2.1 m/s² turning acceleration on ±2 m/s² channels",
         ),
     ]
+}
+
+/// Points of the k-σ error ellipse {center + k L (cos t, sin t)}, L Lᵀ = `cov` (Cholesky),
+/// closed (first point repeated), for plotting. Empty if `cov` is not positive definite.
+pub fn error_ellipse(
+    center: &Vector2<f64>,
+    cov: &Matrix2<f64>,
+    k: f64,
+    points: usize,
+) -> Vec<(f64, f64)> {
+    let Some(chol) = cov.cholesky() else {
+        return Vec::new();
+    };
+    let l = chol.l();
+    let points = points.max(3);
+    (0..=points)
+        .map(|i| {
+            let t = 2.0 * core::f64::consts::PI * i as f64 / points as f64;
+            let p = center + l * Vector2::new(t.cos(), t.sin()) * k;
+            (p[0], p[1])
+        })
+        .collect()
 }

@@ -6,7 +6,7 @@ use core::f64::consts::FRAC_1_SQRT_2;
 
 use estim_core::linalg::{ensure_finite, ensure_shape, symmetrize};
 use estim_core::nalgebra::{
-    Cholesky, Const, DMatrix, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1, U2, U3, Vector1,
+    Cholesky, Const, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1, U2, U3, Vector1,
     allocator::Allocator,
 };
 use estim_core::scalar::real;
@@ -331,9 +331,12 @@ where
 
     /// The same fusion through the framework, with no approximation:
     ///
-    /// 1. pick the first N used axes that are linearly independent (set A) and solve them
+    /// 1. pick N used axes A that are as far from dependent as possible (pivoted Gram–Schmidt:
+    ///    each next axis is the one at the largest angle to the span of those already
+    ///    picked, ties to the lowest index; for x, y, q this is x then y) and solve them
     ///    exactly, θ₀ = H_A⁻¹ z_A, P₀ = H_A⁻¹ R_A H_A⁻ᵀ: this is the posterior given those
-    ///    axes alone, with no prior (the information form of a flat prior);
+    ///    axes alone under a flat prior (the pivoting keeps P₀, and so the round-off of the
+    ///    later updates, small);
     /// 2. start a [`KalmanFilter`] at N(θ₀, P₀) and update it with each remaining used axis
     ///    in turn, as a one-axis [`RedundantAxes`].
     ///
@@ -362,22 +365,10 @@ where
                 required: n,
             });
         }
-        let mut initial = Vec::with_capacity(n);
-        for &i in &used {
-            if initial.len() == n {
-                break;
-            }
-            initial.push(i);
-            if !self.independent(&initial) {
-                initial.pop();
-            }
-        }
-        if initial.len() < n {
-            return Err(FusionError::DependentAxes {
-                usable: used.len(),
-                required: n,
-            });
-        }
+        let initial = self.pivot_axes(&used).ok_or(FusionError::DependentAxes {
+            usable: used.len(),
+            required: n,
+        })?;
         let prior = self.exact_prior(z, &initial)?;
         let mut filter = KalmanFilter::new(prior);
         let mut chi2 = T::zero();
@@ -455,16 +446,41 @@ where
         Ok(used)
     }
 
-    /// Whether the directions of `axes` are linearly independent (Gram matrix of full rank
-    /// to working precision).
-    fn independent(&self, axes: &[usize]) -> bool {
-        let k = axes.len();
-        let gram = DMatrix::from_fn(k, k, |r, c| {
-            self.directions
-                .row(axes[r])
-                .dot(&self.directions.row(axes[c]))
-        });
-        full_rank_cholesky(gram).is_some()
+    /// N of the axes `candidates` chosen by pivoted Gram–Schmidt (largest sin² of the angle to
+    /// the span of the axes already chosen, first index on ties), or `None` when the best
+    /// remaining sin² is ≤ 10⁴ n ε (the candidates do not span the space).
+    fn pivot_axes(&self, candidates: &[usize]) -> Option<Vec<usize>> {
+        let n = self.state_dim();
+        let tol = real::<T>(1e4 * n as f64) * T::default_epsilon();
+        let mut basis: Vec<OVector<T, N>> = Vec::with_capacity(n);
+        let mut chosen = Vec::with_capacity(n);
+        while chosen.len() < n {
+            let mut best: Option<(T, usize, OVector<T, N>)> = None;
+            for &i in candidates.iter().filter(|i| !chosen.contains(*i)) {
+                let u = self.directions.row(i).transpose();
+                let norm2 = u.norm_squared();
+                if !(norm2 > T::zero()) {
+                    continue;
+                }
+                let mut v = u;
+                for b in &basis {
+                    let c = b.dot(&v);
+                    v.axpy(-c, b, T::one());
+                }
+                let sin2 = v.norm_squared() / norm2;
+                if best.as_ref().is_none_or(|(s, _, _)| sin2 > *s) {
+                    best = Some((sin2, i, v));
+                }
+            }
+            let (sin2, i, v) = best?;
+            if !(sin2 > tol) {
+                return None;
+            }
+            let len = v.norm();
+            basis.push(v / len);
+            chosen.push(i);
+        }
+        Some(chosen)
     }
 }
 
