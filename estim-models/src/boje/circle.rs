@@ -657,6 +657,38 @@ pub fn circle_variants(config: &CircleConfig) -> Result<Vec<MonteCarloSummary>> 
         .collect()
 }
 
+/// One headline per variant of [`circle_variants`]: the settled velocity consistency
+/// (RMS/√P for ẋ, ẏ) beside the position and heading √P.
+pub fn variant_headlines(variants: &[MonteCarloSummary]) -> Vec<Headline> {
+    variants
+        .iter()
+        .map(|s| {
+            let r = s.settled.ratio();
+            Headline {
+                quantity: format!("velocity RMS/√P, {:?} process, {:?}", s.process, s.filter),
+                paper: "— (the paper's model folds σ²_θ into Q)".into(),
+                estim: format!(
+                    "ẋ {:.2}, ẏ {:.2} (2nd half ẋ {:.2}); √P pos {:.3} m, θ {:.4} rad; {} runs",
+                    r[VX],
+                    r[VY],
+                    s.second_half.ratio()[VX],
+                    s.settled.position_sqrt_p(),
+                    s.settled.sqrt_p[HEADING],
+                    s.runs
+                ),
+                note: match s.process {
+                    ProcessKind::Linear => {
+                        "heading error treated as white input noise: velocity P optimistic".into()
+                    }
+                    ProcessKind::Nonlinear => {
+                        "θ inside f: heading–velocity coupling carried in P".into()
+                    }
+                },
+            }
+        })
+        .collect()
+}
+
 impl CircleResult {
     /// Paper vs estim for section 4.
     pub fn headlines(&self) -> Vec<Headline> {

@@ -161,7 +161,7 @@ pub mod rate;
 pub use circle::{
     CircleConfig, CircleData, CircleResult, FilterKind, FilterTrace, InitialConditions,
     MonteCarloSummary, ProcessKind, StateStats, circle_experiment, circle_monte_carlo,
-    circle_variants, run_circle_filter, simulate_circle,
+    circle_variants, run_circle_filter, simulate_circle, variant_headlines,
 };
 pub use filter::{
     AccelerometerProcess, NonlinearPlanarProcess, PlanarFilter, PlanarInput, PlanarProcess,
