@@ -4,7 +4,9 @@
 //! All of them work in place or on the stack for static sizes: none allocates unless the
 //! matrix type itself lives on the heap (`Dyn`).
 
-use nalgebra::{DefaultAllocator, Dim, Matrix, OMatrix, RawStorage, allocator::Allocator};
+use nalgebra::{
+    DefaultAllocator, Dim, Matrix, OMatrix, OVector, RawStorage, U1, allocator::Allocator,
+};
 
 use crate::error::{Error, Quantity, Result, Stage};
 use crate::scalar::{Real, real};
@@ -61,20 +63,49 @@ where
     real::<T>(16.0 * n as f64) * T::default_epsilon() * max_diag
 }
 
-/// Lower-triangular L with L Lᵀ = C for a symmetric positive **semi**-definite C.
+/// A square root S with S Sᵀ = C of a symmetric positive **semi**-definite C.
 ///
-/// A Cholesky factorisation that accepts zero pivots: a pivot within [`psd_tolerance`] of
-/// zero gives a zero column (that direction has no variance), a pivot below `−tolerance`
-/// is an error. This lets the unscented and sampled propagators handle states that are known
-/// exactly (zero variance), which the plain Cholesky rejects. Only the lower triangle of C is
-/// read.
+/// First a Cholesky factorisation that accepts zero pivots: a pivot within [`psd_tolerance`] of
+/// zero gives a zero column (that direction has no variance). This is the ordinary lower
+/// Cholesky factor whenever C is positive definite, so sigma points are the textbook ones.
+/// Without pivoting, round-off in an ill-conditioned leading block can push a later pivot of an
+/// exactly singular C below −tolerance; then the factorisation is repeated with diagonal
+/// pivoting (as LAPACK's `dpstrf`), which takes the largest remaining pivot first and so stops
+/// cleanly at the rank: S = Pᵀ L, no longer triangular. Only if that also finds a clearly
+/// negative direction is C rejected. Either way the unscented and sampled propagators get a
+/// valid square root, and states that are known exactly (zero variance) are allowed.
 pub fn psd_factor<T: Real, D: Dim>(c: &OMatrix<T, D, D>, stage: Stage) -> Result<OMatrix<T, D, D>>
+where
+    DefaultAllocator: Allocator<D> + Allocator<D, D>,
+{
+    unpivoted_psd_factor(c)
+        .or_else(|()| pivoted_psd_factor(c))
+        .map_err(|()| Error::NotPositiveSemiDefinite {
+            stage,
+            quantity: Quantity::Covariance,
+        })
+}
+
+/// Largest |Cᵢᵢ| and the entry bound for a zero-variance direction: |cᵢⱼ|² ≤ dᵢ dⱼ, so with a
+/// pivot within `tol` of zero the remaining covariances must be within √(tol · max Cᵢᵢ).
+fn zero_pivot_bounds<T: Real, D: Dim>(c: &OMatrix<T, D, D>) -> (T, T)
+where
+    DefaultAllocator: Allocator<D, D>,
+{
+    let tol = psd_tolerance(c);
+    let max_diag = (0..c.nrows()).fold(T::zero(), |m, i| m.max(c[(i, i)].abs()));
+    (tol, (tol * max_diag).sqrt() + tol)
+}
+
+/// Lower Cholesky factor accepting zero pivots; `Err(())` on a pivot below −tolerance.
+fn unpivoted_psd_factor<T: Real, D: Dim>(
+    c: &OMatrix<T, D, D>,
+) -> core::result::Result<OMatrix<T, D, D>, ()>
 where
     DefaultAllocator: Allocator<D, D>,
 {
     let n = c.nrows();
-    let tol = psd_tolerance(c);
-    let max_diag = (0..n).fold(T::zero(), |m, i| m.max(c[(i, i)].abs()));
+    let (tol, off_tol) = zero_pivot_bounds(c);
     let mut l = c.clone_owned();
     l.fill(T::zero());
     for j in 0..n {
@@ -83,40 +114,96 @@ where
             d -= l[(j, k)] * l[(j, k)];
         }
         if d < -tol || !d.is_finite() {
-            return Err(Error::NotPositiveSemiDefinite {
-                stage,
-                quantity: Quantity::Covariance,
-            });
+            return Err(());
         }
-        if d <= tol {
-            // Zero variance in this direction: the column stays zero, which is only consistent
-            // if the remaining covariances with this direction vanish too (|cᵢⱼ|² ≤ dᵢ dⱼ).
-            let off_tol = (tol * max_diag).sqrt() + tol;
-            for i in (j + 1)..n {
-                let mut s = c[(i, j)];
-                for k in 0..j {
-                    s -= l[(i, k)] * l[(j, k)];
-                }
-                if s.abs() > off_tol || !s.is_finite() {
-                    return Err(Error::NotPositiveSemiDefinite {
-                        stage,
-                        quantity: Quantity::Covariance,
-                    });
-                }
-            }
-            continue;
-        }
+        let zero_pivot = d <= tol;
         let ljj = d.sqrt();
-        l[(j, j)] = ljj;
+        if !zero_pivot {
+            l[(j, j)] = ljj;
+        }
         for i in (j + 1)..n {
             let mut s = c[(i, j)];
             for k in 0..j {
                 s -= l[(i, k)] * l[(j, k)];
             }
-            l[(i, j)] = s / ljj;
+            if zero_pivot {
+                // The column stays zero: consistent only if these covariances vanish too.
+                if s.abs() > off_tol || !s.is_finite() {
+                    return Err(());
+                }
+            } else {
+                l[(i, j)] = s / ljj;
+            }
         }
     }
     Ok(l)
+}
+
+/// S = Pᵀ L from the diagonally pivoted factorisation P C Pᵀ = L Lᵀ; `Err(())` if C has a
+/// direction with variance below −tolerance or is not finite.
+fn pivoted_psd_factor<T: Real, D: Dim>(
+    c: &OMatrix<T, D, D>,
+) -> core::result::Result<OMatrix<T, D, D>, ()>
+where
+    DefaultAllocator: Allocator<D> + Allocator<D, D>,
+{
+    let n = c.nrows();
+    let (tol, off_tol) = zero_pivot_bounds(c);
+    // `a` holds L in columns < j and the symmetric Schur complement in rows/columns ≥ j;
+    // `perm[i]` is the row of C that row i of `a` came from.
+    let mut a = c.clone_owned();
+    let mut perm = OVector::<usize, D>::from_fn_generic(c.shape_generic().0, U1, |i, _| i);
+    let mut rank = n;
+    for j in 0..n {
+        let mut p = j;
+        for i in j..n {
+            let d = a[(i, i)];
+            if !d.is_finite() || d < -tol {
+                return Err(());
+            }
+            if d > a[(p, p)] {
+                p = i;
+            }
+        }
+        if a[(p, p)] <= tol {
+            // The rest has (numerically) zero variance: every remaining covariance must vanish.
+            for k in j..n {
+                for i in k..n {
+                    if a[(i, k)].abs() > off_tol {
+                        return Err(());
+                    }
+                }
+            }
+            rank = j;
+            break;
+        }
+        if p != j {
+            a.swap_rows(j, p);
+            a.swap_columns(j, p);
+            perm.swap_rows(j, p);
+        }
+        let ljj = a[(j, j)].sqrt();
+        a[(j, j)] = ljj;
+        for i in (j + 1)..n {
+            a[(i, j)] /= ljj;
+        }
+        for k in (j + 1)..n {
+            for i in k..n {
+                let v = a[(i, k)] - a[(i, j)] * a[(k, j)];
+                a[(i, k)] = v;
+                a[(k, i)] = v;
+            }
+        }
+    }
+    // Row i of L is row perm[i] of S; columns ≥ rank and the upper triangle are zero.
+    let mut root = c.clone_owned();
+    root.fill(T::zero());
+    for i in 0..n {
+        for k in 0..rank.min(i + 1) {
+            root[(perm[i], k)] = a[(i, k)];
+        }
+    }
+    Ok(root)
 }
 
 /// Replaces `m` by (m + mᵀ)/2, in place.
@@ -177,7 +264,7 @@ pub fn ensure_psd<T: Real, D: Dim>(
     quantity: Quantity,
 ) -> Result<()>
 where
-    DefaultAllocator: Allocator<D, D>,
+    DefaultAllocator: Allocator<D> + Allocator<D, D>,
 {
     psd_factor(m, stage)
         .map(|_| ())

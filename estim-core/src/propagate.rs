@@ -1,7 +1,7 @@
 //! Moment propagation: the mean and covariance of y = g(x) for x ~ N(μ, C).
 //!
 //! Every Gaussian filter is the same algorithm around one question: given x ~ N(μ, C) and
-//! y = g(x), what are E[y], cov(y) and cov(x, y)? The answer is a [`MomentPropagator`]:
+//! y = g(x), what are E\[y\], cov(y) and cov(x, y)? The answer is a [`MomentPropagator`]:
 //!
 //! | propagator | needs | mean | covariance |
 //! |---|---|---|---|
@@ -45,11 +45,11 @@ pub struct Moments<T: Real, N: Dim, M: Dim>
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    /// E[y] (m).
+    /// E\[y\] (m).
     pub mean: OVector<T, M>,
-    /// cov(y) = E[(y − ȳ)(y − ȳ)ᵀ] (m × m).
+    /// cov(y) = E\[(y − ȳ)(y − ȳ)ᵀ\] (m × m).
     pub covariance: OMatrix<T, M, M>,
-    /// cov(x, y) = E[(x − μ)(y − ȳ)ᵀ] (n × m).
+    /// cov(x, y) = E\[(x − μ)(y − ȳ)ᵀ\] (n × m).
     pub cross_covariance: OMatrix<T, N, M>,
 }
 

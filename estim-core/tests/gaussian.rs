@@ -245,16 +245,13 @@ fn new_unchecked_keeps_what_it_is_given() {
     assert_eq!(g.covariance(), &c);
 }
 
-/// KNOWN LIMITATION (reported, not fixed here): the check factors C without pivoting, so for
-/// a singular C whose leading block is ill-conditioned the round-off of the factorisation is
-/// amplified (by ≈ ‖A₁₁⁻¹A₁₂‖², here ≈ 10⁴) past the 16 n ε max Cᵢᵢ tolerance, and an exactly
-/// positive semi-definite matrix is rejected. This C = B Bᵀ (B 5 × 3, found by proptest) has
-/// eigenvalues {0, 9·10⁻¹⁷, 0.11, 0.76, 1.87}, but the fourth pivot comes out −7.5·10⁻¹⁴
-/// against a tolerance of 2.5·10⁻¹⁴. Random B Bᵀ of rank < 5 hit this about once in 40.
-/// A pivoted (LAPACK dpstrf-style) semi-definite Cholesky would accept it; that changes the
-/// factor the unscented and sampled propagators use, so it is left to the maintainers.
+/// Regression: the unpivoted semi-definite Cholesky rejected this exactly PSD matrix, because
+/// round-off in its ill-conditioned leading block (amplified by ≈ ‖A₁₁⁻¹A₁₂‖², here ≈ 10⁴)
+/// pushed the fourth pivot to −7.5·10⁻¹⁴ against a tolerance of 2.5·10⁻¹⁴. C = B Bᵀ (B 5 × 3,
+/// found by proptest) has eigenvalues {0, 9·10⁻¹⁷, 0.11, 0.76, 1.87}. `psd_factor` now falls back
+/// to diagonal pivoting, which stops cleanly at the rank; the root it returns must reproduce C
+/// (to round-off relative to max Cᵢᵢ ≈ 1.9: 64 ε covers the O(n ε) factorisation error).
 #[test]
-#[ignore = "known limitation of the unpivoted semi-definite Cholesky; run with --ignored"]
 fn ill_conditioned_rank_deficient_is_accepted() {
     let b = [
         -0.4699356065633261,
@@ -276,4 +273,19 @@ fn ill_conditioned_rank_deficient_is_accepted() {
     let b = OMatrix::<f64, U5, estim_core::nalgebra::U3>::from_column_slice(&b);
     let c = b * b.transpose();
     assert!(Gaussian::new(OMatrix::<f64, U5, U1>::zeros(), c).is_ok());
+    let root = estim_core::linalg::psd_factor(&c, estim_core::Stage::Construction)
+        .expect("PSD matrix must factor");
+    let gap = (root * root.transpose() - c).amax();
+    assert!(gap <= 64.0 * f64::EPSILON * 1.9, "S Sᵀ − C = {gap:e}");
+}
+
+/// An indefinite matrix whose leading pivots are zero is still rejected by the pivoted
+/// fallback: diag(0, 0, 1) plus a coupling between the two zero-variance directions.
+#[test]
+fn indefinite_with_zero_leading_pivots_is_rejected() {
+    let c = estim_core::nalgebra::Matrix3::new(0.0, 1e-3, 0.0, 1e-3, 0.0, 0.0, 0.0, 0.0, 1.0);
+    assert!(matches!(
+        estim_core::linalg::psd_factor(&c, estim_core::Stage::Construction),
+        Err(estim_core::Error::NotPositiveSemiDefinite { .. })
+    ));
 }

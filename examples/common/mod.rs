@@ -43,6 +43,18 @@ pub fn line_plot(
     series: &[Series<'_>],
 ) -> Result<PathBuf, Box<dyn std::error::Error>> {
     let path = figure_dir().join(file);
+    draw_lines(&path, title, x_label, y_label, series)?;
+    Ok(path)
+}
+
+/// Renders the line plot of [`line_plot`] into `path`.
+fn draw_lines(
+    path: &std::path::Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series<'_>],
+) -> Result<(), Box<dyn std::error::Error>> {
     let finite = || {
         series
             .iter()
@@ -68,7 +80,7 @@ pub fn line_plot(
         y1 = y0 + 1.0;
     }
     let pad = 0.05 * (y1 - y0);
-    let root = SVGBackend::new(&path, (900, 540)).into_drawing_area();
+    let root = SVGBackend::new(path, (900, 540)).into_drawing_area();
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 20))
@@ -102,5 +114,5 @@ pub fn line_plot(
         .border_style(BLACK)
         .draw()?;
     root.present()?;
-    Ok(path)
+    Ok(())
 }

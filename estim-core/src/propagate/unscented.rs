@@ -22,11 +22,15 @@ use crate::scalar::{Real, real};
 /// ```
 ///
 /// This is algebraically the textbook form with W₀ᵐ = 1 − n/c and W₀ᶜ = W₀ᵐ + 1 − α² + β, but it
-/// never multiplies by the centre weight (≈ −10⁶ for α = 10⁻³), so it keeps full precision for
-/// small α; deviations go through the function's [`difference`](VectorFunction::difference),
-/// so wrapped outputs (angles) are handled. The factor L is a semi-definite Cholesky factor,
-/// so directions with zero variance are allowed. Each sigma point is built, evaluated and
-/// accumulated on the fly: for static sizes nothing is allocated.
+/// never multiplies by the centre weight (≈ −10⁶ for α = 10⁻³), so the covariance keeps full
+/// precision for small α. The mean cannot: it is g(μ) plus w Σᵢ dᵢ, and the round-off ε‖y‖ in
+/// each function value is multiplied by nw = 1/(2α²), so the mean carries an error of about
+/// ε‖y‖/α² (any formulation does). In `f64` with α = 10⁻³ that is ≈ 10⁻¹⁰ ‖y‖; in `f32` it is of
+/// the order of ‖y‖ itself, so with `f32` use α ≳ 0.3 or [`Unscented::cubature`].
+/// Deviations go through the function's [`difference`](VectorFunction::difference), so
+/// wrapped outputs (angles) are handled. The factor L is a semi-definite square root
+/// ([`psd_factor`]), so directions with zero variance are allowed. Each sigma point is built,
+/// evaluated and accumulated on the fly: for static sizes nothing is allocated.
 ///
 /// Requirements on g: [`VectorFunction`] only.
 #[derive(Clone, Copy, Debug, PartialEq)]
