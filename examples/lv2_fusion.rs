@@ -11,120 +11,9 @@
 //! each axis), `target/figures/lv2_chi2_cdf.svg` (Monte Carlo χ² CDF against χ²₁, fault-free
 //! and with a biased x axis).
 
-// Workaround: `examples/common/mod.rs` does not compile at the moment (`line_plot` returns
-// `Ok(path)` while the SVG backend still borrows `path`, E0505), so this example carries a copy
-// of the shared helpers with the backend dropped before returning. Replace the block with
-// `mod common;` once the shared module is fixed: names and signatures are the same.
-#[allow(dead_code)]
-mod common {
-    use std::path::PathBuf;
+mod common;
 
-    use plotters::prelude::*;
-
-    /// Whether `--json` was passed: then the example prints one JSON object as its last stdout line.
-    pub fn json_requested() -> bool {
-        std::env::args().any(|a| a == "--json")
-    }
-
-    /// Whether `--quick` was passed: a faithful but smaller run (fewer Monte Carlo realizations).
-    pub fn quick_requested() -> bool {
-        std::env::args().any(|a| a == "--quick")
-    }
-
-    /// `target/figures/` under the workspace root (created if missing).
-    pub fn figure_dir() -> PathBuf {
-        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("target")
-            .join("figures");
-        let _ = std::fs::create_dir_all(&dir);
-        dir
-    }
-
-    /// One named curve of a line plot.
-    pub struct Series<'a> {
-        /// Legend label.
-        pub label: &'a str,
-        /// (x, y) points.
-        pub points: Vec<(f64, f64)>,
-    }
-
-    /// Writes an SVG line plot of `series` to `target/figures/<file>` and returns its path.
-    /// Non-finite points are skipped. Errors are returned, not panicked on: a figure that fails
-    /// to render should not stop an example's numbers.
-    pub fn line_plot(
-        file: &str,
-        title: &str,
-        x_label: &str,
-        y_label: &str,
-        series: &[Series<'_>],
-    ) -> Result<PathBuf, Box<dyn std::error::Error>> {
-        let path = figure_dir().join(file);
-        let finite = || {
-            series
-                .iter()
-                .flat_map(|s| s.points.iter())
-                .filter(|(x, y)| x.is_finite() && y.is_finite())
-        };
-        let (mut x0, mut x1, mut y0, mut y1) = (
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-        );
-        for &(x, y) in finite() {
-            x0 = x0.min(x);
-            x1 = x1.max(x);
-            y0 = y0.min(y);
-            y1 = y1.max(y);
-        }
-        if !(x0 < x1) {
-            x1 = x0 + 1.0;
-        }
-        if !(y0 < y1) {
-            y1 = y0 + 1.0;
-        }
-        let pad = 0.05 * (y1 - y0);
-        let root = SVGBackend::new(&path, (900, 540)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 20))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
-            .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))?;
-        chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .draw()?;
-        for (i, s) in series.iter().enumerate() {
-            let color = Palette99::pick(i).to_rgba();
-            chart
-                .draw_series(LineSeries::new(
-                    s.points
-                        .iter()
-                        .copied()
-                        .filter(|(x, y)| x.is_finite() && y.is_finite()),
-                    color.stroke_width(2),
-                ))?
-                .label(s.label)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
-        root.present()?;
-        drop(chart);
-        drop(root);
-        Ok(path)
-    }
-}
-
-use common::{Series, figure_dir, json_requested, line_plot, quick_requested};
+use common::{Series, json_requested, line_plot, quick_requested};
 use estim::models::lv2::experiments::{self, Lv2Config, error_ellipse};
 use estim::models::lv2::xyq::XyqEstimate;
 use estim::nalgebra::Matrix2;
@@ -391,7 +280,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(path) => println!("figure: {}", path.display()),
         Err(e) => eprintln!("figure failed: {e}"),
     }
-    let _ = figure_dir;
 
     if json_requested() {
         let json = serde_json::json!({
