@@ -5,9 +5,6 @@
 //!
 //! `cargo run --release --example boje_rate [-- --json] [-- --quick]`
 
-// `examples/common/mod.rs` does not compile at the moment (E0505 in `line_plot`); this is a
-// fixed copy with the same API. Switch back to `mod common;` once the shared module is fixed.
-#[path = "boje_support/mod.rs"]
 mod common;
 
 use common::{Series, json_requested, line_plot, quick_requested};

@@ -22,6 +22,8 @@ pub enum Stage {
     Update,
     /// Checking derivatives by finite differences.
     DerivativeCheck,
+    /// Computing consistency statistics (NEES, NIS, whiteness, Monte Carlo ensembles).
+    ConsistencyCheck,
 }
 
 /// The quantity that failed a check.
@@ -54,6 +56,10 @@ pub enum Quantity {
     Gain,
     /// A time step Δt.
     TimeStep,
+    /// A filter innovation ν = z ⊖ ẑ.
+    Innovation,
+    /// A residual recorded for a consistency check.
+    Residual,
 }
 
 /// A parameter that failed validation.
@@ -76,6 +82,18 @@ pub enum Parameter {
     StepSize,
     /// A tolerance (must be finite and ≥ 0).
     Tolerance,
+    /// A confidence level (must lie strictly between 0 and 1).
+    Confidence,
+    /// Degrees of freedom of a χ² distribution (at least 1).
+    DegreesOfFreedom,
+    /// Number of Monte Carlo runs or of averaged terms (at least 1).
+    RunCount,
+    /// A time-slot index of a Monte Carlo runner (below the number of slots).
+    Slot,
+    /// A correlation lag (below the number of samples).
+    Lag,
+    /// A number of work chunks (at least 1).
+    ChunkCount,
 }
 
 /// Every error an estim algorithm returns.
@@ -156,6 +174,7 @@ impl fmt::Display for Stage {
             Stage::Prediction => "prediction",
             Stage::Update => "update",
             Stage::DerivativeCheck => "derivative check",
+            Stage::ConsistencyCheck => "consistency check",
         })
     }
 }
@@ -176,6 +195,8 @@ impl fmt::Display for Quantity {
             Quantity::InnovationCovariance => "innovation covariance",
             Quantity::Gain => "gain",
             Quantity::TimeStep => "time step",
+            Quantity::Innovation => "innovation",
+            Quantity::Residual => "residual",
         })
     }
 }
@@ -191,6 +212,12 @@ impl fmt::Display for Parameter {
             Parameter::GateThreshold => "gate threshold",
             Parameter::StepSize => "step size",
             Parameter::Tolerance => "tolerance",
+            Parameter::Confidence => "confidence",
+            Parameter::DegreesOfFreedom => "degrees of freedom",
+            Parameter::RunCount => "run count",
+            Parameter::Slot => "slot",
+            Parameter::Lag => "lag",
+            Parameter::ChunkCount => "chunk count",
         })
     }
 }

@@ -35,19 +35,36 @@
 //!
 //! Models are passed to each call, never stored, so one filter serves several sensors at
 //! several rates. [`Estimator`] is object safe: `Box<dyn Estimator<f64, U6>>` holds any of them.
+//!
+//! ## Verifying a filter
+//!
+//! - [`consistency`]: NEES, NIS, averaged NEES/NIS with χ² bands, innovation whiteness,
+//!   log-likelihood, and the [`Verdict`] of a set of checks.
+//! - [`monte_carlo`]: the Monte Carlo runner ([`MonteCarlo`]) giving per-time ensemble
+//!   statistics — Lu's four checks (mean error, ensemble vs filter covariance, orthogonality,
+//!   residual cross-correlation) and the NEES/NIS bands — for any model and filter; parallel
+//!   with feature `parallel`, bit-identical to the sequential run.
+//! - `proptest_support` (feature `proptest-support`): strategies for SPD matrices, Gaussians
+//!   and stable linear systems, and derivative-check assertions for proptests.
 #![deny(missing_docs)]
 
+pub mod consistency;
 mod correlated;
 mod gaussian_filter;
+pub mod monte_carlo;
+#[cfg(feature = "proptest-support")]
+pub mod proptest_support;
 mod report;
 mod rls;
 mod traits;
 pub mod update;
 
+pub use consistency::Verdict;
 pub use correlated::Decorrelated;
 pub use gaussian_filter::{
     Ekf, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, SecondOrderEkf, Ukf,
 };
+pub use monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Recorder};
 pub use report::{UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
 pub use traits::{Estimator, Predict, PredictCorrelated, Update};

@@ -1,0 +1,1286 @@
+//! The Monte Carlo consistency runner: many seeded realizations of a simulation and its filter,
+//! summarised per time slot without storing trajectories.
+//!
+//! These are the four checks of Lu's Monte Carlo validation (*Accelerometer calibration with
+//! GPS*, §3.2) — ensemble mean error ≈ 0, ensemble error covariance ≈ the filter's covariance,
+//! error orthogonal to the estimate, residuals at two times uncorrelated — plus the averaged
+//! NEES and NIS tests of Bar-Shalom, Li & Kirubarajan (2001, §5.4.2), for any model and filter.
+//!
+//! # Use
+//!
+//! You write one realization: simulate the truth and measurements from the given seed, run
+//! your filter, and record what the statistics need at the time slots you chose up front
+//! (0 … S−1: every step, or a few chosen times):
+//!
+//! - [`Recorder::record_estimate`]`(slot, &truth, x̂, P)` (or [`Recorder::record_filter`]) for
+//!   the error statistics, NEES and orthogonality,
+//! - [`Recorder::record_innovation`]`(slot, &report)` for the NIS,
+//! - [`Recorder::record_residual`]`(slot, &r)` at the two slots of each residual pair
+//!   requested with [`MonteCarlo::with_residual_pair`].
+//!
+//! ```
+//! use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+//! use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Matrix2x1, Vector1, Vector2};
+//! use estim_filters::monte_carlo::MonteCarlo;
+//! use estim_filters::{KalmanFilter, Predict, Update};
+//! use rand::{Rng, SeedableRng, rngs::StdRng};
+//! use rand_distr::StandardNormal;
+//!
+//! let process = LinearProcess {
+//!     transition: Matrix2::new(1.0, 0.1, 0.0, 1.0),
+//!     input: Matrix2x1::zeros(),
+//!     noise: Matrix2::new(1e-3, 0.0, 0.0, 1e-3),
+//! };
+//! let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.04) };
+//! let prior = Gaussian::new(Vector2::zeros(), Matrix2::identity())?;
+//!
+//! let steps = 40;
+//! let mc = MonteCarlo::new(200, steps)?.with_seed(7).with_residual_pair(10, 30)?;
+//! let stats = mc.run(|_run, seed, rec| {
+//!     let mut rng = StdRng::seed_from_u64(seed);
+//!     let mut normal = || rng.sample::<f64, _>(StandardNormal);
+//!     // The truth starts from the filter's prior (the checks assume it).
+//!     let mut x = Vector2::new(normal(), normal());
+//!     let mut kf = KalmanFilter::new(prior.clone());
+//!     for k in 0..steps {
+//!         x = process.transition * x + Vector2::new(normal(), normal()) * 1e-3f64.sqrt();
+//!         let z = sensor.observation * x + Vector1::new(0.2 * normal());
+//!         kf.predict(&process, &Vector1::new(0.0), 0.1)?;
+//!         let report = kf.update(&sensor, &z)?;
+//!         rec.record_innovation(k, &report)?; // NIS
+//!         rec.record_residual(k, &report.innovation)?; // used at slots 10 and 30
+//!         rec.record_filter(k, &x, &kf)?; // error, NEES, orthogonality
+//!     }
+//!     Ok(())
+//! })?;
+//! // Each check at 99%: a consistent filter passes all six in ≥ 94% of seeds.
+//! let verdict = stats.verdict(0.99)?;
+//! println!("{verdict}");
+//! assert!(verdict.consistent(), "{verdict}");
+//! let last = stats.slots[steps - 1].estimate.as_ref().unwrap();
+//! assert!(last.nees_band(0.99)?.contains(last.mean_nees));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! # Determinism and memory
+//!
+//! Run `i` gets the seed [`run_seed`]`(master, i)` (SplitMix64), whatever runs before it. The
+//! runs are split into a fixed number of contiguous chunks (64 by default, independent of the
+//! number of threads); each chunk is accumulated sequentially in run order, and the chunk
+//! accumulators are merged in chunk order. The sequential runner does exactly the same, so
+//! [`MonteCarlo::run_sequential`] and [`MonteCarlo::run_parallel`] return bit-identical
+//! statistics for the same seed, on any number of threads.
+//!
+//! Nothing is stored per run or per step: each slot holds running moments (O(n²) numbers for
+//! an n-state filter), so memory is O(slots × n²) per chunk in flight, with at most
+//! 2 × threads + 1 chunks alive at once — never O(runs × steps). Record trajectories yourself
+//! (in the closure) if you want them.
+//!
+//! Means and covariances are accumulated with Welford's update and merged with Chan, Golub &
+//! LeVeque's pairwise formula (a chunk of n_b samples with mean m_b and centred co-moment C_b
+//! joins one of n_a: δ = m_b − m_a, m = m_a + δ n_b/n, C = C_a + C_b + δδᵀ n_a n_b/n), so the
+//! ensemble covariance does not cancel catastrophically when the estimates are large compared
+//! with their spread.
+
+use core::fmt;
+use core::ops::Range;
+
+use estim_core::linalg::ensure_shape;
+use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector};
+use estim_core::{Alloc, Error, Parameter, Quantity, Real, error::Result};
+
+use crate::consistency::{
+    Check, ChiSquareBand, FamilyRule, FamilyTest, Location, STAGE, Verdict,
+    cholesky_quadratic_form, dist, to_f64, validate_confidence,
+};
+use crate::report::UpdateReport;
+use crate::traits::Estimator;
+
+/// The seed of run `run` under master seed `master`: the `run`-th output of SplitMix64
+/// (Steele, Lea & Flood 2014) seeded with `master`. Use it to replay one run alone.
+pub fn run_seed(master: u64, run: usize) -> u64 {
+    let mut z = master.wrapping_add(
+        (run as u64)
+            .wrapping_add(1)
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15),
+    );
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Why a Monte Carlo run failed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum MonteCarloError {
+    /// A realization returned an error, or recorded something invalid (a slot out of range,
+    /// a record made twice, a shape different from earlier runs' in the same chunk, a
+    /// covariance that is not positive definite). It is the failing run with the smallest
+    /// index, on any number of threads.
+    Run {
+        /// The run index.
+        run: usize,
+        /// Its seed ([`run_seed`]).
+        seed: u64,
+        /// The error.
+        error: Error,
+    },
+    /// Runs in different chunks recorded different shapes at the same slot or residual pair.
+    Shape {
+        /// The [`Error::DimensionMismatch`].
+        error: Error,
+    },
+}
+
+impl MonteCarloError {
+    /// The underlying error.
+    pub fn error(&self) -> Error {
+        match *self {
+            MonteCarloError::Run { error, .. } | MonteCarloError::Shape { error } => error,
+        }
+    }
+}
+
+impl fmt::Display for MonteCarloError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            MonteCarloError::Run { run, seed, error } => {
+                write!(f, "Monte Carlo run {run} (seed {seed}) failed: {error}")
+            }
+            MonteCarloError::Shape { error } => {
+                write!(f, "Monte Carlo runs disagree in shape: {error}")
+            }
+        }
+    }
+}
+
+impl std::error::Error for MonteCarloError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            MonteCarloError::Run { error, .. } | MonteCarloError::Shape { error } => Some(error),
+        }
+    }
+}
+
+impl From<MonteCarloError> for Error {
+    fn from(e: MonteCarloError) -> Self {
+        e.error()
+    }
+}
+
+/// Running moments of one slot's estimates, in f64, column-major n × n matrices.
+#[derive(Clone, Debug, Default)]
+struct SlotAcc {
+    n: usize,
+    count: usize,
+    mean_e: Vec<f64>,
+    mean_x: Vec<f64>,
+    /// Σ (e − ē)(e − ē)ᵀ.
+    c_ee: Vec<f64>,
+    /// Σ (e − ē)(x̂ − x̄)ᵀ.
+    c_ex: Vec<f64>,
+    /// Σ (x̂ᵢ − x̄ᵢ)².
+    m2_x: Vec<f64>,
+    sum_p: Vec<f64>,
+    sum_nees: f64,
+    nis_count: usize,
+    nis_dof: usize,
+    sum_nis: f64,
+    sum_ll: f64,
+}
+
+fn mismatch(quantity: Quantity, expected: usize, found: usize) -> Error {
+    Error::DimensionMismatch {
+        stage: STAGE,
+        quantity,
+        expected_rows: expected,
+        expected_cols: 1,
+        found_rows: found,
+        found_cols: 1,
+    }
+}
+
+impl SlotAcc {
+    fn ensure_dim(&mut self, n: usize) -> Result<()> {
+        if self.count == 0 && self.n == 0 {
+            self.n = n;
+            self.mean_e = vec![0.0; n];
+            self.mean_x = vec![0.0; n];
+            self.c_ee = vec![0.0; n * n];
+            self.c_ex = vec![0.0; n * n];
+            self.m2_x = vec![0.0; n];
+            self.sum_p = vec![0.0; n * n];
+            Ok(())
+        } else if self.n == n {
+            Ok(())
+        } else {
+            Err(mismatch(Quantity::Mean, self.n, n))
+        }
+    }
+
+    /// Welford: with δ = v − mean_old, mean += δ/k and C += (k − 1)/k δ δᵀ.
+    fn add(&mut self, e: &[f64], x: &[f64], p: &[f64], nees: f64, de: &mut [f64], dx: &mut [f64]) {
+        let n = self.n;
+        self.count += 1;
+        let k = self.count as f64;
+        let f = (k - 1.0) / k;
+        for i in 0..n {
+            de[i] = e[i] - self.mean_e[i];
+            dx[i] = x[i] - self.mean_x[i];
+            self.mean_e[i] += de[i] / k;
+            self.mean_x[i] += dx[i] / k;
+            self.m2_x[i] += f * (dx[i] * dx[i]);
+        }
+        for j in 0..n {
+            for i in 0..n {
+                self.c_ee[i + j * n] += f * (de[i] * de[j]);
+                self.c_ex[i + j * n] += f * (de[i] * dx[j]);
+                self.sum_p[i + j * n] += p[i + j * n];
+            }
+        }
+        self.sum_nees += nees;
+    }
+
+    /// Chan–Golub–LeVeque merge of `other` into `self`.
+    fn merge(&mut self, other: &SlotAcc) -> Result<()> {
+        self.nis_count += other.nis_count;
+        self.nis_dof += other.nis_dof;
+        self.sum_nis += other.sum_nis;
+        self.sum_ll += other.sum_ll;
+        if other.count == 0 {
+            return Ok(());
+        }
+        self.ensure_dim(other.n)?;
+        let n = self.n;
+        let (na, nb) = (self.count as f64, other.count as f64);
+        self.count += other.count;
+        let total = self.count as f64;
+        let w = nb / total;
+        let f = na * nb / total;
+        let de: Vec<f64> = (0..n).map(|i| other.mean_e[i] - self.mean_e[i]).collect();
+        let dx: Vec<f64> = (0..n).map(|i| other.mean_x[i] - self.mean_x[i]).collect();
+        for i in 0..n {
+            self.mean_e[i] += de[i] * w;
+            self.mean_x[i] += dx[i] * w;
+            self.m2_x[i] = self.m2_x[i] + other.m2_x[i] + f * (dx[i] * dx[i]);
+        }
+        for j in 0..n {
+            for i in 0..n {
+                let ij = i + j * n;
+                self.c_ee[ij] = self.c_ee[ij] + other.c_ee[ij] + f * (de[i] * de[j]);
+                self.c_ex[ij] = self.c_ex[ij] + other.c_ex[ij] + f * (de[i] * dx[j]);
+                self.sum_p[ij] += other.sum_p[ij];
+            }
+        }
+        self.sum_nees += other.sum_nees;
+        Ok(())
+    }
+}
+
+/// Σ r(a) r(b)ᵀ and the squares for normalising, for one residual pair.
+#[derive(Clone, Debug, Default)]
+struct PairAcc {
+    ma: usize,
+    mb: usize,
+    count: usize,
+    /// Σ r(a) r(b)ᵀ, ma × mb column-major.
+    sum_ab: Vec<f64>,
+    sum_a2: Vec<f64>,
+    sum_b2: Vec<f64>,
+}
+
+impl PairAcc {
+    fn ensure_dims(&mut self, ma: usize, mb: usize) -> Result<()> {
+        if self.count == 0 && self.ma == 0 && self.mb == 0 {
+            self.ma = ma;
+            self.mb = mb;
+            self.sum_ab = vec![0.0; ma * mb];
+            self.sum_a2 = vec![0.0; ma];
+            self.sum_b2 = vec![0.0; mb];
+            Ok(())
+        } else if self.ma != ma {
+            Err(mismatch(Quantity::Residual, self.ma, ma))
+        } else if self.mb != mb {
+            Err(mismatch(Quantity::Residual, self.mb, mb))
+        } else {
+            Ok(())
+        }
+    }
+
+    fn add(&mut self, a: &[f64], b: &[f64]) -> Result<()> {
+        self.ensure_dims(a.len(), b.len())?;
+        self.count += 1;
+        for (i, &ai) in a.iter().enumerate() {
+            self.sum_a2[i] += ai * ai;
+        }
+        for (j, &bj) in b.iter().enumerate() {
+            self.sum_b2[j] += bj * bj;
+            for (i, &ai) in a.iter().enumerate() {
+                self.sum_ab[i + j * self.ma] += ai * bj;
+            }
+        }
+        Ok(())
+    }
+
+    fn merge(&mut self, other: &PairAcc) -> Result<()> {
+        if other.count == 0 {
+            return Ok(());
+        }
+        self.ensure_dims(other.ma, other.mb)?;
+        self.count += other.count;
+        for (s, o) in self.sum_ab.iter_mut().zip(&other.sum_ab) {
+            *s += o;
+        }
+        for (s, o) in self.sum_a2.iter_mut().zip(&other.sum_a2) {
+            *s += o;
+        }
+        for (s, o) in self.sum_b2.iter_mut().zip(&other.sum_b2) {
+            *s += o;
+        }
+        Ok(())
+    }
+}
+
+/// Everything accumulated over a set of runs.
+#[derive(Clone, Debug)]
+struct Accumulator {
+    slots: Vec<SlotAcc>,
+    pairs: Vec<PairAcc>,
+}
+
+impl Accumulator {
+    fn new(slots: usize, pairs: usize) -> Self {
+        Self {
+            slots: vec![SlotAcc::default(); slots],
+            pairs: vec![PairAcc::default(); pairs],
+        }
+    }
+
+    fn merge(&mut self, other: &Accumulator) -> Result<()> {
+        for (s, o) in self.slots.iter_mut().zip(&other.slots) {
+            s.merge(o)?;
+        }
+        for (s, o) in self.pairs.iter_mut().zip(&other.pairs) {
+            s.merge(o)?;
+        }
+        Ok(())
+    }
+}
+
+/// A residual waiting for the end of its run, at one pair endpoint slot.
+#[derive(Clone, Debug, Default)]
+struct Pending {
+    set: bool,
+    values: Vec<f64>,
+}
+
+/// What a realization writes its statistics into; handed to the closure of
+/// [`MonteCarlo::run`]. Each record is checked before anything is accumulated, so a record
+/// that errors changes nothing.
+///
+/// Records are converted to `f64`; the recorder is not generic, so one realization may record
+/// filters of different scalar types or sizes at different slots (but each slot must have the
+/// same sizes in every run).
+#[derive(Debug)]
+pub struct Recorder {
+    acc: Accumulator,
+    pairs: Vec<(usize, usize)>,
+    run: usize,
+    seed: u64,
+    estimate_seen: Vec<usize>,
+    innovation_seen: Vec<usize>,
+    /// slot → index into `pending` when the slot is a pair endpoint.
+    endpoint: Vec<Option<usize>>,
+    pending: Vec<Pending>,
+    e: Vec<f64>,
+    x: Vec<f64>,
+    p: Vec<f64>,
+    chol: Vec<f64>,
+    de: Vec<f64>,
+    dx: Vec<f64>,
+}
+
+impl Recorder {
+    fn new(slots: usize, pairs: &[(usize, usize)]) -> Self {
+        let mut endpoint = vec![None; slots];
+        let mut pending = Vec::new();
+        for &(a, b) in pairs {
+            for s in [a, b] {
+                if endpoint[s].is_none() {
+                    endpoint[s] = Some(pending.len());
+                    pending.push(Pending::default());
+                }
+            }
+        }
+        Self {
+            acc: Accumulator::new(slots, pairs.len()),
+            pairs: pairs.to_vec(),
+            run: usize::MAX,
+            seed: 0,
+            estimate_seen: vec![usize::MAX; slots],
+            innovation_seen: vec![usize::MAX; slots],
+            endpoint,
+            pending,
+            e: Vec::new(),
+            x: Vec::new(),
+            p: Vec::new(),
+            chol: Vec::new(),
+            de: Vec::new(),
+            dx: Vec::new(),
+        }
+    }
+
+    fn begin(&mut self, run: usize, seed: u64) {
+        self.run = run;
+        self.seed = seed;
+        for p in &mut self.pending {
+            p.set = false;
+        }
+    }
+
+    /// Accumulates the residual pairs completed in this run.
+    fn end_run(&mut self) -> Result<()> {
+        for (k, &(a, b)) in self.pairs.iter().enumerate() {
+            if let (Some(ia), Some(ib)) = (self.endpoint[a], self.endpoint[b]) {
+                let (pa, pb) = (&self.pending[ia], &self.pending[ib]);
+                if pa.set && pb.set {
+                    self.acc.pairs[k].add(&pa.values, &pb.values)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The index of the run being recorded.
+    pub fn run_index(&self) -> usize {
+        self.run
+    }
+
+    /// Its seed.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    fn check_slot(&self, slot: usize) -> Result<()> {
+        if slot < self.estimate_seen.len() {
+            Ok(())
+        } else {
+            Err(slot_error(slot))
+        }
+    }
+
+    /// Records the estimate (x̂, P) of the truth x at `slot`: the error e = x − x̂ enters the
+    /// ensemble mean and covariance, the NEES eᵀP⁻¹e (Cholesky, in f64), P the mean filter
+    /// covariance, and (e, x̂) the orthogonality statistics.
+    ///
+    /// At most once per slot and run. Errors: slot out of range or recorded twice
+    /// ([`Parameter::Slot`]), shapes, non-finite values, P not positive definite.
+    pub fn record_estimate<T: Real, N: Dim>(
+        &mut self,
+        slot: usize,
+        truth: &OVector<T, N>,
+        estimate: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+    ) -> Result<()>
+    where
+        DefaultAllocator: Alloc<N>,
+    {
+        self.check_slot(slot)?;
+        if self.estimate_seen[slot] == self.run {
+            return Err(slot_error(slot));
+        }
+        let n = truth.nrows();
+        ensure_shape(estimate, n, 1, STAGE, Quantity::Mean)?;
+        ensure_shape(covariance, n, n, STAGE, Quantity::Covariance)?;
+        let acc = &self.acc.slots[slot];
+        if acc.n != 0 && acc.n != n {
+            return Err(mismatch(Quantity::Mean, acc.n, n));
+        }
+        fill(&mut self.x, estimate.iter().map(|&v| to_f64(v)));
+        fill(
+            &mut self.e,
+            truth.iter().zip(&self.x).map(|(&t, &x)| to_f64(t) - x),
+        );
+        fill(&mut self.p, covariance.iter().map(|&v| to_f64(v)));
+        if !self.e.iter().chain(&self.x).all(|v| v.is_finite()) {
+            return Err(Error::NonFinite {
+                stage: STAGE,
+                quantity: Quantity::Mean,
+            });
+        }
+        if !self.p.iter().all(|v| v.is_finite()) {
+            return Err(Error::NonFinite {
+                stage: STAGE,
+                quantity: Quantity::Covariance,
+            });
+        }
+        self.chol.clone_from(&self.p);
+        self.de.clone_from(&self.e);
+        let nees = cholesky_quadratic_form(&mut self.chol, &mut self.de, n).ok_or(
+            Error::NotPositiveDefinite {
+                stage: STAGE,
+                quantity: Quantity::Covariance,
+            },
+        )?;
+        self.dx.resize(n, 0.0);
+        let acc = &mut self.acc.slots[slot];
+        acc.ensure_dim(n)?;
+        acc.add(&self.e, &self.x, &self.p, nees, &mut self.de, &mut self.dx);
+        self.estimate_seen[slot] = self.run;
+        Ok(())
+    }
+
+    /// [`record_estimate`](Self::record_estimate) with the filter's current state and
+    /// covariance.
+    pub fn record_filter<T: Real, N: Dim, E: Estimator<T, N> + ?Sized>(
+        &mut self,
+        slot: usize,
+        truth: &OVector<T, N>,
+        filter: &E,
+    ) -> Result<()>
+    where
+        DefaultAllocator: Alloc<N>,
+    {
+        self.record_estimate(slot, truth, filter.state(), filter.covariance())
+    }
+
+    /// Records an update's NIS (and log-likelihood) at `slot`; its degrees of freedom are the
+    /// innovation's dimension m. At most once per slot and run (record the stacked
+    /// measurement, or use different slots, for several updates at one time).
+    pub fn record_innovation<T: Real, M: Dim>(
+        &mut self,
+        slot: usize,
+        report: &UpdateReport<T, M>,
+    ) -> Result<()>
+    where
+        DefaultAllocator: Alloc<M>,
+    {
+        self.check_slot(slot)?;
+        if self.innovation_seen[slot] == self.run {
+            return Err(slot_error(slot));
+        }
+        let (nis, ll) = (to_f64(report.nis), to_f64(report.log_likelihood));
+        if !(nis >= 0.0) || !nis.is_finite() || !ll.is_finite() {
+            return Err(Error::NonFinite {
+                stage: STAGE,
+                quantity: Quantity::Innovation,
+            });
+        }
+        let acc = &mut self.acc.slots[slot];
+        acc.nis_count += 1;
+        acc.nis_dof += report.innovation.nrows();
+        acc.sum_nis += nis;
+        acc.sum_ll += ll;
+        self.innovation_seen[slot] = self.run;
+        Ok(())
+    }
+
+    /// Records the residual r at `slot` for the residual cross-correlation
+    /// (1/N) Σ r(a) r(b)ᵀ of each requested pair (a, b) having `slot` as an end. Typically the
+    /// innovation ([`UpdateReport::innovation`]), as in Lu's check. Ignored when `slot` is not
+    /// the end of any pair; a pair counts in a run only if both its ends were recorded.
+    ///
+    /// At most once per slot and run. Errors: slot out of range or recorded twice, non-finite
+    /// values.
+    pub fn record_residual<T: Real, M: Dim>(
+        &mut self,
+        slot: usize,
+        residual: &OVector<T, M>,
+    ) -> Result<()>
+    where
+        DefaultAllocator: Alloc<M>,
+    {
+        self.check_slot(slot)?;
+        let Some(k) = self.endpoint[slot] else {
+            return Ok(());
+        };
+        let pending = &mut self.pending[k];
+        if pending.set {
+            return Err(slot_error(slot));
+        }
+        if !residual.iter().all(|v| v.is_finite()) {
+            return Err(Error::NonFinite {
+                stage: STAGE,
+                quantity: Quantity::Residual,
+            });
+        }
+        fill(&mut pending.values, residual.iter().map(|&v| to_f64(v)));
+        pending.set = true;
+        Ok(())
+    }
+}
+
+fn fill(buffer: &mut Vec<f64>, values: impl Iterator<Item = f64>) {
+    buffer.clear();
+    buffer.extend(values);
+}
+
+fn slot_error(slot: usize) -> Error {
+    Error::InvalidParameter {
+        parameter: Parameter::Slot,
+        value: slot as f64,
+    }
+}
+
+/// A Monte Carlo consistency experiment: how many runs, how many time slots, the master seed,
+/// the residual pairs, and the chunking that makes results independent of the thread count.
+/// See the [module docs](self).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MonteCarlo {
+    runs: usize,
+    slots: usize,
+    seed: u64,
+    chunks: usize,
+    pairs: Vec<(usize, usize)>,
+}
+
+impl MonteCarlo {
+    /// The default number of chunks the runs are split into.
+    pub const DEFAULT_CHUNKS: usize = 64;
+
+    /// `runs` ≥ 1 realizations with statistics at `slots` ≥ 1 time slots, master seed 0.
+    pub fn new(runs: usize, slots: usize) -> Result<Self> {
+        if runs == 0 {
+            return Err(Error::InvalidParameter {
+                parameter: Parameter::RunCount,
+                value: 0.0,
+            });
+        }
+        if slots == 0 {
+            return Err(slot_error(0));
+        }
+        Ok(Self {
+            runs,
+            slots,
+            seed: 0,
+            chunks: Self::DEFAULT_CHUNKS,
+            pairs: Vec::new(),
+        })
+    }
+
+    /// Sets the master seed from which every run's seed is derived ([`run_seed`]).
+    pub fn with_seed(mut self, master_seed: u64) -> Self {
+        self.seed = master_seed;
+        self
+    }
+
+    /// Requests the residual cross-correlation between slots `first` and `second` (distinct,
+    /// both < slots). Lu's check uses the innovations at t = 20 s and t = 30 s.
+    pub fn with_residual_pair(mut self, first: usize, second: usize) -> Result<Self> {
+        for s in [first, second] {
+            if s >= self.slots {
+                return Err(slot_error(s));
+            }
+        }
+        if first == second {
+            return Err(slot_error(second));
+        }
+        self.pairs.push((first, second));
+        Ok(self)
+    }
+
+    /// Splits the runs into `chunks` ≥ 1 contiguous chunks (default 64; fewer if there are
+    /// fewer runs). The statistics depend on it only through floating-point summation order;
+    /// more chunks let more threads work, at (2 × threads + 1) × slots accumulators of memory.
+    pub fn with_chunks(mut self, chunks: usize) -> Result<Self> {
+        if chunks == 0 {
+            return Err(Error::InvalidParameter {
+                parameter: Parameter::ChunkCount,
+                value: 0.0,
+            });
+        }
+        self.chunks = chunks;
+        Ok(self)
+    }
+
+    /// The number of runs N.
+    pub fn runs(&self) -> usize {
+        self.runs
+    }
+
+    /// The number of time slots S.
+    pub fn slots(&self) -> usize {
+        self.slots
+    }
+
+    /// The master seed.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// The requested residual pairs.
+    pub fn residual_pairs(&self) -> &[(usize, usize)] {
+        &self.pairs
+    }
+
+    /// The seed of run `run`: [`run_seed`]`(self.seed(), run)`.
+    pub fn run_seed(&self, run: usize) -> u64 {
+        run_seed(self.seed, run)
+    }
+
+    /// The run ranges of the chunks: chunk c covers runs ⌊c N / K⌋ … ⌊(c+1) N / K⌋ − 1.
+    fn chunk_ranges(&self) -> Vec<Range<usize>> {
+        let k = self.chunks.min(self.runs);
+        let bound = |c: usize| ((c as u128 * self.runs as u128) / k as u128) as usize;
+        (0..k).map(|c| bound(c)..bound(c + 1)).collect()
+    }
+
+    fn run_chunk<F>(&self, range: Range<usize>, f: &F) -> Result<Accumulator, MonteCarloError>
+    where
+        F: Fn(usize, u64, &mut Recorder) -> Result<()>,
+    {
+        let mut recorder = Recorder::new(self.slots, &self.pairs);
+        for run in range {
+            let seed = self.run_seed(run);
+            recorder.begin(run, seed);
+            f(run, seed, &mut recorder)
+                .and_then(|()| recorder.end_run())
+                .map_err(|error| MonteCarloError::Run { run, seed, error })?;
+        }
+        Ok(recorder.acc)
+    }
+
+    fn merge_into(total: &mut Accumulator, chunk: &Accumulator) -> Result<(), MonteCarloError> {
+        total
+            .merge(chunk)
+            .map_err(|error| MonteCarloError::Shape { error })
+    }
+
+    /// Runs every realization on this thread: `simulate(run, seed, recorder)` for run = 0 … N−1.
+    ///
+    /// Returns the first failure in run order, or the ensemble statistics.
+    pub fn run_sequential<F>(&self, simulate: F) -> Result<EnsembleStats, MonteCarloError>
+    where
+        F: Fn(usize, u64, &mut Recorder) -> Result<()>,
+    {
+        let mut total = Accumulator::new(self.slots, self.pairs.len());
+        for range in self.chunk_ranges() {
+            let chunk = self.run_chunk(range, &simulate)?;
+            Self::merge_into(&mut total, &chunk)?;
+        }
+        Ok(self.finish(&total))
+    }
+
+    /// Runs the realizations on rayon's current thread pool (install a pool to choose the
+    /// number of threads). Bit-identical to [`run_sequential`](Self::run_sequential): the
+    /// chunks are merged in the same order. Chunks run in waves of 2 × threads, which bounds
+    /// the memory.
+    #[cfg(feature = "parallel")]
+    pub fn run_parallel<F>(&self, simulate: F) -> Result<EnsembleStats, MonteCarloError>
+    where
+        F: Fn(usize, u64, &mut Recorder) -> Result<()> + Sync,
+    {
+        use rayon::prelude::*;
+        let wave = 2 * rayon::current_num_threads().max(1);
+        let ranges = self.chunk_ranges();
+        let mut total = Accumulator::new(self.slots, self.pairs.len());
+        for group in ranges.chunks(wave) {
+            let chunks: Vec<Result<Accumulator, MonteCarloError>> = group
+                .par_iter()
+                .map(|range| self.run_chunk(range.clone(), &simulate))
+                .collect();
+            for chunk in chunks {
+                Self::merge_into(&mut total, &chunk?)?;
+            }
+        }
+        Ok(self.finish(&total))
+    }
+
+    /// [`run_parallel`](Self::run_parallel) when the `parallel` feature is on (the `estim`
+    /// facade turns it on by default), else [`run_sequential`](Self::run_sequential). Both
+    /// give the same bits; the `Sync` bound is required either way so that code compiles with
+    /// and without the feature.
+    pub fn run<F>(&self, simulate: F) -> Result<EnsembleStats, MonteCarloError>
+    where
+        F: Fn(usize, u64, &mut Recorder) -> Result<()> + Sync,
+    {
+        #[cfg(feature = "parallel")]
+        {
+            self.run_parallel(simulate)
+        }
+        #[cfg(not(feature = "parallel"))]
+        {
+            self.run_sequential(simulate)
+        }
+    }
+
+    fn finish(&self, total: &Accumulator) -> EnsembleStats {
+        let slots = total
+            .slots
+            .iter()
+            .enumerate()
+            .map(|(slot, acc)| SlotStats {
+                slot,
+                estimate: (acc.count > 0).then(|| EstimateStats::from_acc(acc)),
+                innovation: (acc.nis_count > 0).then(|| InnovationStats {
+                    samples: acc.nis_count,
+                    degrees_of_freedom: acc.nis_dof,
+                    mean_nis: acc.sum_nis / acc.nis_count as f64,
+                    mean_log_likelihood: acc.sum_ll / acc.nis_count as f64,
+                }),
+            })
+            .collect();
+        let residual_pairs = self
+            .pairs
+            .iter()
+            .zip(&total.pairs)
+            .map(|(&(first, second), acc)| ResidualPairStats::from_acc(first, second, acc))
+            .collect();
+        EnsembleStats {
+            runs: self.runs,
+            slots,
+            residual_pairs,
+        }
+    }
+}
+
+/// The ensemble statistics of the estimates recorded at one slot, over the N runs that
+/// recorded one. e = x − x̂ is the error, P the filter's covariance.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EstimateStats {
+    /// N.
+    pub samples: usize,
+    /// The ensemble mean error ē = (1/N) Σ eˡ (Lu's e^ave).
+    pub mean_error: DVector<f64>,
+    /// The ensemble error covariance P_ens = 1/(N − 1) Σ (eˡ − ē)(eˡ − ē)ᵀ (Lu's P^ave);
+    /// NaN when N < 2.
+    pub error_covariance: DMatrix<f64>,
+    /// The mean filter covariance P̄ = (1/N) Σ Pˡ, which P_ens should match.
+    pub mean_covariance: DMatrix<f64>,
+    /// The average NEES ε̄ = (1/N) Σ eˡᵀ (Pˡ)⁻¹ eˡ, ~ χ²_{N·n}/N when consistent.
+    pub mean_nees: f64,
+    /// Lu's orthogonality matrix (1/N) Σ (eˡ − ē) x̂ˡᵀ = (1/N) Σ (eˡ − ē)(x̂ˡ − x̄)ᵀ, entry
+    /// (i, j) pairing error component i with estimate component j.
+    pub orthogonality: DMatrix<f64>,
+    /// Its normalised version: the sample correlation of eᵢ and x̂ⱼ across runs, in [−1, 1];
+    /// NaN where either has no spread (e.g. x̂ at the prior, the same in every run).
+    pub orthogonality_correlation: DMatrix<f64>,
+    /// The sample variance of each estimate component across runs, 1/(N − 1) Σ (x̂ˡ − x̄)².
+    pub estimate_variance: DVector<f64>,
+}
+
+impl EstimateStats {
+    fn from_acc(acc: &SlotAcc) -> Self {
+        let n = acc.n;
+        let count = acc.count as f64;
+        let dof = count - 1.0;
+        let unbiased = |v: f64| if acc.count >= 2 { v / dof } else { f64::NAN };
+        let c_ee = DMatrix::from_column_slice(n, n, &acc.c_ee);
+        let c_ex = DMatrix::from_column_slice(n, n, &acc.c_ex);
+        let correlation = DMatrix::from_fn(n, n, |i, j| {
+            let denominator = (c_ee[(i, i)] * acc.m2_x[j]).sqrt();
+            if denominator > 0.0 {
+                c_ex[(i, j)] / denominator
+            } else {
+                f64::NAN
+            }
+        });
+        Self {
+            samples: acc.count,
+            mean_error: DVector::from_column_slice(&acc.mean_e),
+            error_covariance: c_ee.map(unbiased),
+            mean_covariance: DMatrix::from_column_slice(n, n, &acc.sum_p) / count,
+            mean_nees: acc.sum_nees / count,
+            orthogonality: c_ex / count,
+            orthogonality_correlation: correlation,
+            estimate_variance: DVector::from_iterator(n, acc.m2_x.iter().map(|&v| unbiased(v))),
+        }
+    }
+
+    /// The state dimension n.
+    pub fn state_dim(&self) -> usize {
+        self.mean_error.nrows()
+    }
+
+    /// The band of [`mean_nees`](Self::mean_nees): χ²_{N·n}/N at `confidence`.
+    pub fn nees_band(&self, confidence: f64) -> Result<ChiSquareBand> {
+        ChiSquareBand::two_sided(self.state_dim(), self.samples, confidence)
+    }
+
+    /// The ratios (P_ens)ᵢᵢ / (P̄)ᵢᵢ, ≈ 1 when consistent.
+    pub fn covariance_ratio(&self) -> DVector<f64> {
+        DVector::from_fn(self.state_dim(), |i, _| {
+            self.error_covariance[(i, i)] / self.mean_covariance[(i, i)]
+        })
+    }
+
+    /// The band of each [`covariance_ratio`](Self::covariance_ratio) at `confidence`:
+    /// χ²_{N−1}((1 ∓ c)/2)/(N − 1) (exact for Gaussian errors and a covariance that does not
+    /// depend on the run, as in a linear Kalman filter). Needs N ≥ 2.
+    pub fn covariance_ratio_band(&self, confidence: f64) -> Result<(f64, f64)> {
+        let band = ChiSquareBand::for_sum(self.samples.saturating_sub(1), 1, confidence)?;
+        let dof = (self.samples - 1) as f64;
+        Ok((band.lower / dof, band.upper / dof))
+    }
+
+    /// The half-width of each component's band for [`mean_error`](Self::mean_error):
+    /// t_{N−1,(1+c)/2} · sᵢ / √N with sᵢ² = (P_ens)ᵢᵢ. Needs N ≥ 2.
+    pub fn mean_error_bound(&self, confidence: f64) -> Result<DVector<f64>> {
+        let t = dist::t_two_sided(
+            validate_confidence(confidence)?,
+            self.samples.saturating_sub(1),
+        )?;
+        let root_n = (self.samples as f64).sqrt();
+        Ok(DVector::from_fn(self.state_dim(), |i, _| {
+            t * self.error_covariance[(i, i)].sqrt() / root_n
+        }))
+    }
+
+    /// The bound on each entry of
+    /// [`orthogonality_correlation`](Self::orthogonality_correlation) at `confidence`: the
+    /// sample correlation r of independent Gaussians satisfies r √(N−2)/√(1−r²) ~ t_{N−2}, so
+    /// |r| ≤ t/√(N − 2 + t²) with t = t_{N−2,(1+c)/2} (≈ z/√N). Needs N ≥ 3.
+    pub fn orthogonality_bound(&self, confidence: f64) -> Result<f64> {
+        let dof = self.samples.saturating_sub(2);
+        let t = dist::t_two_sided(validate_confidence(confidence)?, dof)?;
+        Ok(t / (dof as f64 + t * t).sqrt())
+    }
+}
+
+/// The NIS statistics recorded at one slot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InnovationStats {
+    /// Number of innovations recorded N.
+    pub samples: usize,
+    /// Σ m over them (N·m for a fixed measurement size m).
+    pub degrees_of_freedom: usize,
+    /// The average NIS (1/N) Σ νᵀS⁻¹ν, ~ χ²_{N·m}/N when consistent.
+    pub mean_nis: f64,
+    /// The average log-likelihood of the measurement at this slot.
+    pub mean_log_likelihood: f64,
+}
+
+impl InnovationStats {
+    /// The band of [`mean_nis`](Self::mean_nis) at `confidence`.
+    pub fn nis_band(&self, confidence: f64) -> Result<ChiSquareBand> {
+        ChiSquareBand::for_sum(self.degrees_of_freedom, self.samples, confidence)
+    }
+}
+
+/// The statistics of one slot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SlotStats {
+    /// The slot index.
+    pub slot: usize,
+    /// Estimate statistics, if any run recorded an estimate here.
+    pub estimate: Option<EstimateStats>,
+    /// NIS statistics, if any run recorded an innovation here.
+    pub innovation: Option<InnovationStats>,
+}
+
+/// Lu's residual check between slots a and b: (1/N) Σ r(a) r(b)ᵀ ≈ 0 for a consistent filter,
+/// whose innovations are white.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ResidualPairStats {
+    /// The first slot a.
+    pub first: usize,
+    /// The second slot b.
+    pub second: usize,
+    /// Number of runs that recorded both N.
+    pub samples: usize,
+    /// (1/N) Σ r(a) r(b)ᵀ (m_a × m_b; 0 × 0 when N = 0).
+    pub cross_correlation: DMatrix<f64>,
+    /// Entry (i, j) normalised as in Bar-Shalom et al. eq 5.4.2-12:
+    /// Σ rᵢ(a) rⱼ(b) / √(Σ rᵢ(a)² Σ rⱼ(b)²), ≈ N(0, 1/N) when r(a) and r(b) are independent
+    /// and zero-mean; NaN where a component is identically 0.
+    pub normalized: DMatrix<f64>,
+}
+
+impl ResidualPairStats {
+    fn from_acc(first: usize, second: usize, acc: &PairAcc) -> Self {
+        let (ma, mb) = (acc.ma, acc.mb);
+        let sum = DMatrix::from_column_slice(ma, mb, &acc.sum_ab);
+        let normalized = DMatrix::from_fn(ma, mb, |i, j| {
+            let d = (acc.sum_a2[i] * acc.sum_b2[j]).sqrt();
+            if d > 0.0 { sum[(i, j)] / d } else { f64::NAN }
+        });
+        Self {
+            first,
+            second,
+            samples: acc.count,
+            cross_correlation: sum / (acc.count.max(1) as f64),
+            normalized,
+        }
+    }
+
+    /// The bound z₍₁₊c₎/₂ / √N on each entry of [`normalized`](Self::normalized).
+    pub fn bound(&self, confidence: f64) -> Result<f64> {
+        crate::consistency::autocorrelation_bound(self.samples, confidence)
+    }
+}
+
+/// What [`MonteCarlo::run`] returns: per-slot ensemble statistics and the residual pairs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnsembleStats {
+    /// The number of runs N.
+    pub runs: usize,
+    /// One entry per slot, in slot order.
+    pub slots: Vec<SlotStats>,
+    /// One entry per requested residual pair, in request order.
+    pub residual_pairs: Vec<ResidualPairStats>,
+}
+
+impl EnsembleStats {
+    /// Runs every check at `confidence` (e.g. 0.95: a consistent filter fails each check with
+    /// probability at most 5%), combining each check's single tests by Simes' rule
+    /// ([`FamilyRule::Simes`]). See [`verdict_with`](Self::verdict_with).
+    pub fn verdict(&self, confidence: f64) -> Result<Verdict> {
+        self.verdict_with(confidence, FamilyRule::Simes)
+    }
+
+    /// Runs every check at `confidence`, combining each check's single tests by `rule`.
+    ///
+    /// Each single test has a two-sided band at c (= `confidence` under Simes, the rule's
+    /// `test_confidence` under the binomial rule) and a two-sided p-value from the same
+    /// distribution; the rule turns a check's p-values into its decision:
+    ///
+    /// | check | single test (one per slot and component or entry) | band at c |
+    /// |---|---|---|
+    /// | [`MeanError`](Check::MeanError) | t = ēᵢ / (sᵢ/√N), sᵢ² = (P_ens)ᵢᵢ | ±t_{N−1,(1+c)/2} |
+    /// | [`ErrorCovariance`](Check::ErrorCovariance) | (P_ens)ᵢᵢ / (P̄)ᵢᵢ | χ²_{N−1}((1∓c)/2)/(N−1) |
+    /// | [`Nees`](Check::Nees) | ε̄ | χ²_{N·n}((1∓c)/2)/N |
+    /// | [`Nis`](Check::Nis) | average NIS | χ²_{N·m}((1∓c)/2)/N |
+    /// | [`Orthogonality`](Check::Orthogonality) | corr(eᵢ, x̂ⱼ) | ±t/√(N−2+t²), t = t_{N−2,(1+c)/2} |
+    /// | [`ResidualCorrelation`](Check::ResidualCorrelation) | normalised Σ rᵢ(a) rⱼ(b) | ±z_{(1+c)/2}/√N |
+    ///
+    /// The mean-error test uses the ensemble spread, not the filter's P, so it tests bias
+    /// alone (a filter that is unbiased but over-confident fails only the covariance and NEES
+    /// checks). Tests whose statistic is undefined (a component with no spread, e.g. x̂ at the
+    /// prior) are skipped; a check with no test is [`NotRun`](crate::consistency::Outcome::NotRun).
+    ///
+    /// The bands are exact for a linear-Gaussian system and a Kalman filter whose model is
+    /// the truth's (errors Gaussian, P the same in every run), and asymptotic otherwise. They
+    /// assume the truth's initial state is drawn from the filter's prior: with a fixed initial
+    /// truth, e and x̂ are correlated through the prior, and the orthogonality, covariance and
+    /// NEES checks can fail for a correct filter until the prior is forgotten.
+    pub fn verdict_with(&self, confidence: f64, rule: FamilyRule) -> Result<Verdict> {
+        let family = |check| FamilyTest::new(check, confidence, rule);
+        let mut mean = family(Check::MeanError)?;
+        let mut cov = family(Check::ErrorCovariance)?;
+        let mut nees = family(Check::Nees)?;
+        let mut nis = family(Check::Nis)?;
+        let mut orth = family(Check::Orthogonality)?;
+        let mut resid = family(Check::ResidualCorrelation)?;
+        let c = mean.band_confidence();
+        let mut nees_band: Option<ChiSquareBand> = None;
+        let mut nis_band: Option<ChiSquareBand> = None;
+        for s in &self.slots {
+            if let Some(e) = &s.estimate {
+                estimate_tests(s.slot, e, c, &mut mean, &mut cov, &mut orth)?;
+                let band = cached_band(&mut nees_band, e.state_dim() * e.samples, e.samples, c)?;
+                nees.add(
+                    Location::Slot { slot: s.slot },
+                    e.mean_nees,
+                    band.lower,
+                    band.upper,
+                    band.p_value(e.mean_nees)?,
+                );
+            }
+            if let Some(i) = &s.innovation {
+                let band = cached_band(&mut nis_band, i.degrees_of_freedom, i.samples, c)?;
+                nis.add(
+                    Location::Slot { slot: s.slot },
+                    i.mean_nis,
+                    band.lower,
+                    band.upper,
+                    band.p_value(i.mean_nis)?,
+                );
+            }
+        }
+        for p in &self.residual_pairs {
+            if p.samples == 0 {
+                continue;
+            }
+            let bound = p.bound(c)?;
+            let root_n = (p.samples as f64).sqrt();
+            for j in 0..p.normalized.ncols() {
+                for i in 0..p.normalized.nrows() {
+                    let rho = p.normalized[(i, j)];
+                    if rho.is_nan() {
+                        continue;
+                    }
+                    let location = Location::Pair {
+                        first: p.first,
+                        second: p.second,
+                        row: i,
+                        col: j,
+                    };
+                    resid.add(
+                        location,
+                        rho,
+                        -bound,
+                        bound,
+                        dist::normal_p_value(rho * root_n),
+                    );
+                }
+            }
+        }
+        Ok(Verdict {
+            runs: self.runs,
+            confidence,
+            rule,
+            checks: vec![
+                mean.finish(),
+                cov.finish(),
+                nees.finish(),
+                nis.finish(),
+                orth.finish(),
+                resid.finish(),
+            ],
+        })
+    }
+}
+
+/// The χ² band for (dof, terms), recomputed only when they change (usually they never do).
+fn cached_band(
+    cache: &mut Option<ChiSquareBand>,
+    dof: usize,
+    terms: usize,
+    confidence: f64,
+) -> Result<ChiSquareBand> {
+    match cache {
+        Some(b) if b.degrees_of_freedom == dof && b.terms == terms => Ok(*b),
+        _ => {
+            let b = ChiSquareBand::for_sum(dof, terms, confidence)?;
+            *cache = Some(b);
+            Ok(b)
+        }
+    }
+}
+
+/// The mean-error, covariance and orthogonality tests of one slot.
+fn estimate_tests(
+    slot: usize,
+    e: &EstimateStats,
+    confidence: f64,
+    mean: &mut FamilyTest,
+    cov: &mut FamilyTest,
+    orth: &mut FamilyTest,
+) -> Result<()> {
+    let n = e.state_dim();
+    let samples = e.samples;
+    if samples >= 2 {
+        let dof = samples - 1;
+        let t_crit = dist::t_two_sided(confidence, dof)?;
+        let (lo, hi) = e.covariance_ratio_band(confidence)?;
+        let root_n = (samples as f64).sqrt();
+        for i in 0..n {
+            let location = Location::Component { slot, component: i };
+            let (m, var, p) = (
+                e.mean_error[i],
+                e.error_covariance[(i, i)],
+                e.mean_covariance[(i, i)],
+            );
+            if !(m == 0.0 && var == 0.0) {
+                let t = m / (var.sqrt() / root_n);
+                mean.add(location, t, -t_crit, t_crit, dist::t_p_value(t, dof)?);
+            }
+            if !(var == 0.0 && p == 0.0) {
+                let ratio = var / p;
+                let p_value = dist::chi2_p_value(ratio * dof as f64, dof)?;
+                cov.add(location, ratio, lo, hi, p_value);
+            }
+        }
+    }
+    if samples >= 3 {
+        let dof = samples - 2;
+        let bound = e.orthogonality_bound(confidence)?;
+        for j in 0..n {
+            for i in 0..n {
+                let r = e.orthogonality_correlation[(i, j)];
+                if r.is_nan() {
+                    continue;
+                }
+                let t = r * (dof as f64 / (1.0 - r * r)).sqrt();
+                let location = Location::Entry {
+                    slot,
+                    row: i,
+                    col: j,
+                };
+                orth.add(location, r, -bound, bound, dist::t_p_value(t, dof)?);
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chunk_ranges_cover_every_run_once() {
+        for (runs, chunks) in [(1, 64), (10, 64), (64, 64), (1000, 64), (1001, 7)] {
+            let mc = MonteCarlo::new(runs, 1)
+                .unwrap()
+                .with_chunks(chunks)
+                .unwrap();
+            let ranges = mc.chunk_ranges();
+            assert_eq!(ranges.len(), chunks.min(runs));
+            assert_eq!(ranges[0].start, 0);
+            assert_eq!(ranges.last().unwrap().end, runs);
+            assert!(ranges.windows(2).all(|w| w[0].end == w[1].start));
+            assert!(ranges.iter().all(|r| !r.is_empty()));
+        }
+    }
+
+    #[test]
+    fn welford_and_chan_merge_match_two_pass() {
+        // 7 samples of a 2-vector with a large offset (cancellation-prone for raw sums).
+        let data: Vec<([f64; 2], [f64; 2])> = (0..7)
+            .map(|k| {
+                let k = k as f64;
+                (
+                    [0.3 * k - 1.0, (k * 1.7).sin()],
+                    [1e8 + k * k, 1e8 - 2.0 * k],
+                )
+            })
+            .collect();
+        let p = [1.0, 0.0, 0.0, 1.0];
+        let add = |acc: &mut SlotAcc, (e, x): &([f64; 2], [f64; 2])| {
+            acc.ensure_dim(2).unwrap();
+            acc.add(e, x, &p, 0.0, &mut [0.0; 2], &mut [0.0; 2]);
+        };
+        let mut a = SlotAcc::default();
+        let mut b = SlotAcc::default();
+        for d in &data[..3] {
+            add(&mut a, d);
+        }
+        for d in &data[3..] {
+            add(&mut b, d);
+        }
+        a.merge(&b).unwrap();
+        let n = data.len() as f64;
+        let me: Vec<f64> = (0..2)
+            .map(|i| data.iter().map(|d| d.0[i]).sum::<f64>() / n)
+            .collect();
+        let mx: Vec<f64> = (0..2)
+            .map(|i| data.iter().map(|d| d.1[i]).sum::<f64>() / n)
+            .collect();
+        for i in 0..2 {
+            assert!((a.mean_e[i] - me[i]).abs() < 1e-14);
+            for j in 0..2 {
+                let cee: f64 = data
+                    .iter()
+                    .map(|d| (d.0[i] - me[i]) * (d.0[j] - me[j]))
+                    .sum();
+                let cex: f64 = data
+                    .iter()
+                    .map(|d| (d.0[i] - me[i]) * (d.1[j] - mx[j]))
+                    .sum();
+                assert!((a.c_ee[i + 2 * j] - cee).abs() < 1e-12 * cee.abs().max(1.0));
+                assert!((a.c_ex[i + 2 * j] - cex).abs() < 1e-9 * cex.abs().max(1.0));
+            }
+            let m2: f64 = data.iter().map(|d| (d.1[i] - mx[i]).powi(2)).sum();
+            assert!((a.m2_x[i] - m2).abs() < 1e-9 * m2);
+        }
+        assert_eq!(a.count, 7);
+    }
+
+    #[test]
+    fn run_seed_is_splitmix64() {
+        // SplitMix64 seeded with 0: first outputs (reference values of the algorithm).
+        assert_eq!(run_seed(0, 0), 0xE220_A839_7B1D_CDAF);
+        assert_eq!(run_seed(0, 1), 0x6E78_9E6A_A1B9_65F4);
+    }
+}
