@@ -17,6 +17,8 @@
 #![deny(missing_docs)]
 
 pub mod boje;
+mod headline;
+pub use headline::Headline;
 pub mod lee_huang;
 pub mod lu;
 pub mod lv2;

@@ -175,18 +175,7 @@ pub use lambda_example::{LambdaConfig, LambdaResult, lambda_experiment};
 pub use moments::{MomentsConfig, MomentsResult, TrigMoments, TrigProducts, moments_experiment};
 pub use rate::{RateConfig, RateResult, ScalarRateProcess, ScalarRateSquared, rate_experiment};
 
-/// One headline number: what the paper claims and what estim computes.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Headline {
-    /// What is compared.
-    pub quantity: String,
-    /// The paper's value or sentence.
-    pub paper: String,
-    /// estim's value(s).
-    pub estim: String,
-    /// Why they differ, when they do (empty otherwise).
-    pub note: String,
-}
+pub use crate::Headline;
 
 /// An angle wrapped to (−π, π].
 pub fn wrap_angle(a: f64) -> f64 {

@@ -552,18 +552,7 @@ pub fn run(config: &LeeHuangConfig) -> Result<LeeHuangResult, Error> {
     })
 }
 
-/// A headline number: the paper's claim next to estim's value.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Headline {
-    /// What is compared.
-    pub quantity: String,
-    /// What the paper says.
-    pub paper: String,
-    /// What estim finds.
-    pub estim: String,
-    /// Why they differ (empty when they agree).
-    pub note: String,
-}
+pub use crate::Headline;
 
 impl LeeHuangResult {
     /// The summary row with label `label` (see [`labels`]).

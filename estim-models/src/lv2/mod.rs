@@ -139,15 +139,4 @@ pub use model::{
     screen,
 };
 
-/// One headline number: the note's claim next to estim's value.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Headline {
-    /// What is compared.
-    pub quantity: String,
-    /// What the note says (value or text).
-    pub paper: String,
-    /// What estim computes.
-    pub estim: String,
-    /// Why they differ, or what the comparison rests on (may be empty).
-    pub note: String,
-}
+pub use crate::Headline;
