@@ -3,6 +3,23 @@
 
 use std::path::PathBuf;
 
+use estim::models::Headline;
+
+pub mod boje_circle;
+pub mod boje_lambda;
+pub mod boje_moments;
+pub mod boje_rate;
+pub mod lee_huang;
+pub mod lv2_fusion;
+
+/// What an example's run returns: its `--json` object and its headline comparisons.
+pub struct Output {
+    /// The object printed as the last stdout line with `--json`.
+    pub json: serde_json::Value,
+    /// The paper's claims next to estim's values.
+    pub headlines: Vec<Headline>,
+}
+
 use plotters::prelude::*;
 
 /// Whether `--json` was passed: then the example prints one JSON object as its last stdout line.
