@@ -50,19 +50,19 @@ pub use estim_core::nalgebra;
 /// The types and traits a typical estimation program needs.
 pub mod prelude {
     pub use estim_core::derivative::{check_derivatives, check_jacobian};
-    pub use estim_core::{
-        AffineFunction, Differentiable, Error, Gaussian, LinearMeasurement,
-        LinearMeasurementModel, LinearProcess, LinearProcessModel, MeasurementHessian,
-        MeasurementJacobian, MeasurementModel, MomentPropagator, ProcessHessian, ProcessJacobian,
-        ProcessModel, Real, TwiceDifferentiable, VectorFunction,
-    };
     pub use estim_core::propagate::{
         Affine, Linearized, Sampled, SecondOrder, SecondOrderGaussian, Unscented,
     };
+    pub use estim_core::{
+        AffineFunction, Differentiable, Error, Gaussian, LinearMeasurement, LinearMeasurementModel,
+        LinearProcess, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
+        MeasurementModel, MomentPropagator, ProcessHessian, ProcessJacobian, ProcessModel, Real,
+        TwiceDifferentiable, VectorFunction,
+    };
     pub use estim_filters::{
-        CovarianceUpdate, Ekf, Estimator, FadingMemoryRls, GaussianFilter,
-        GaussianSecondOrderEkf, KalmanFilter, Predict, PredictCorrelated, SecondOrderEkf, Ukf,
-        Update, UpdateOutcome, UpdateReport,
+        CovarianceUpdate, Ekf, Estimator, FadingMemoryRls, GaussianFilter, GaussianSecondOrderEkf,
+        KalmanFilter, Predict, PredictCorrelated, SecondOrderEkf, Ukf, Update, UpdateOutcome,
+        UpdateReport,
     };
 }
 
