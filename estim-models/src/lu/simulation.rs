@@ -1,0 +1,173 @@
+//! Seeded simulator of the truth, the biased accelerometer and the GPS receiver.
+//!
+//! One realization draws, in this order from one `StdRng` seeded with the run's seed:
+//! p(0) ~ N(p̄₀, M₀ᵖ), v(0) ~ N(v̄₀, M₀ᵛ), b ~ N(0, M₀ᵇ) (constant for the run); then, as the
+//! caller asks for them, one accelerometer noise sample w_j per step and two GPS noise samples
+//! (η_p, η_v) per fix. At step j (t_j = j Δt):
+//!
+//! ```text
+//! a_c(t_j) = a(t_j) + b + w_j,   w_j ~ N(0, W)
+//! truth, Euler (default):  v(t_{j+1}) = v(t_j) + a(t_j) Δt,  p(t_{j+1}) = p(t_j) + v(t_j) Δt + a(t_j) Δt²/2
+//! truth, exact:            the closed forms of §2.1
+//! z(t_j) = (p(t_j) + η_p, v(t_j) + η_v),   η ~ N(0, diag(V_p, V_v))
+//! ```
+
+use nalgebra::{Vector2, Vector3};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use rand_distr::StandardNormal;
+
+use super::model::{Mechanisation, Scenario, TruthIntegration};
+
+/// The true kinematic state at one time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Truth {
+    /// p \[m\].
+    pub position: f64,
+    /// v \[m/s\].
+    pub velocity: f64,
+    /// The accelerometer bias b \[m/s²\].
+    pub bias: f64,
+}
+
+impl Truth {
+    /// The true error state δx = (p − p_c, v − v_c, b) against a mechanisation.
+    pub fn error_state(&self, mechanisation: &Mechanisation) -> Vector3<f64> {
+        Vector3::new(
+            self.position - mechanisation.position,
+            self.velocity - mechanisation.velocity,
+            self.bias,
+        )
+    }
+}
+
+/// A realization being generated step by step (no storage: what the Monte Carlo uses).
+#[derive(Clone, Debug)]
+pub struct Simulator {
+    scenario: Scenario,
+    rng: StdRng,
+    step: usize,
+    truth: Truth,
+    initial_position: f64,
+    initial_velocity: f64,
+}
+
+impl Simulator {
+    /// Draws the initial position, velocity and bias of one realization from `seed`.
+    pub fn new(scenario: &Scenario, seed: u64) -> Self {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let mut normal = || rng.sample::<f64, _>(StandardNormal);
+        let p0 = scenario.position_mean + scenario.position_variance.sqrt() * normal();
+        let v0 = scenario.velocity_mean + scenario.velocity_variance.sqrt() * normal();
+        let b = scenario.bias_variance.sqrt() * normal();
+        Self {
+            scenario: *scenario,
+            rng,
+            step: 0,
+            truth: Truth {
+                position: p0,
+                velocity: v0,
+                bias: b,
+            },
+            initial_position: p0,
+            initial_velocity: v0,
+        }
+    }
+
+    /// The scenario.
+    pub fn scenario(&self) -> &Scenario {
+        &self.scenario
+    }
+
+    /// The current step index j (0 at the start).
+    pub fn step_index(&self) -> usize {
+        self.step
+    }
+
+    /// The current time t_j = j Δt \[s\].
+    pub fn time(&self) -> f64 {
+        self.step as f64 * self.scenario.dt
+    }
+
+    /// The truth at the current time.
+    pub fn truth(&self) -> Truth {
+        self.truth
+    }
+
+    /// The accelerometer reading a_c(t_j) at the current step j; then advances the truth to
+    /// t_{j+1}.
+    pub fn accelerometer(&mut self) -> f64 {
+        let s = &self.scenario;
+        let dt = s.dt;
+        let t = self.time();
+        let a = s.acceleration(t);
+        let w = s.accel_noise_variance.sqrt() * self.rng.sample::<f64, _>(StandardNormal);
+        self.step += 1;
+        match s.truth {
+            TruthIntegration::Euler => {
+                let truth = &mut self.truth;
+                truth.position += truth.velocity * dt + 0.5 * a * dt * dt;
+                truth.velocity += a * dt;
+            }
+            TruthIntegration::Exact => {
+                let (p, v) = s.exact_position_velocity(
+                    self.initial_position,
+                    self.initial_velocity,
+                    self.time(),
+                );
+                self.truth.position = p;
+                self.truth.velocity = v;
+            }
+        }
+        a + self.truth.bias + w
+    }
+
+    /// A GPS fix (z_p, z_v) of the truth at the current time.
+    pub fn gps(&mut self) -> Vector2<f64> {
+        let s = &self.scenario;
+        let (sp, sv) = (
+            s.gps_position_variance.sqrt(),
+            s.gps_velocity_variance.sqrt(),
+        );
+        let ep = sp * self.rng.sample::<f64, _>(StandardNormal);
+        let ev = sv * self.rng.sample::<f64, _>(StandardNormal);
+        Vector2::new(self.truth.position + ep, self.truth.velocity + ev)
+    }
+
+    /// Whether a GPS fix is due at the current step (every `gps_every` steps, not at t = 0).
+    pub fn gps_due(&self) -> bool {
+        self.step > 0 && self.step.is_multiple_of(self.scenario.gps_every)
+    }
+}
+
+/// One whole realization, stored: the sensor streams and the truth at every step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SensorRecord {
+    /// a_c(t_j) for j = 0 … steps − 1 \[m/s²\].
+    pub accelerometer: Vec<f64>,
+    /// (step index, z) of every GPS fix, at steps gps_every, 2 gps_every, ….
+    pub gps: Vec<(usize, Vector2<f64>)>,
+    /// The truth at t_j for j = 0 … steps.
+    pub truth: Vec<Truth>,
+}
+
+/// Simulates one realization of `scenario` from `seed` and stores it. Draws the same numbers as
+/// a [`Simulator`] driven step by step (accelerometer, then the GPS fix when due).
+pub fn simulate(scenario: &Scenario, seed: u64) -> SensorRecord {
+    let mut sim = Simulator::new(scenario, seed);
+    let mut record = SensorRecord {
+        accelerometer: Vec::with_capacity(scenario.steps),
+        gps: Vec::with_capacity(scenario.updates()),
+        truth: Vec::with_capacity(scenario.steps + 1),
+    };
+    record.truth.push(sim.truth());
+    for _ in 0..scenario.steps {
+        record.accelerometer.push(sim.accelerometer());
+        record.truth.push(sim.truth());
+        if sim.gps_due() {
+            let z = sim.gps();
+            record.gps.push((sim.step_index(), z));
+        }
+    }
+    record
+}
