@@ -100,11 +100,14 @@ pub fn quadrature_drive(scenario: &Scenario, j: usize) -> Vector3<f64> {
     }
 }
 
-/// The covariance analysis of the filter `settings` on `scenario` (module docs).
+/// The covariance analysis of the filter `settings` on `scenario` (module docs). Errors if
+/// the scenario or settings are invalid or an innovation covariance is singular.
 pub fn covariance_analysis(
     scenario: &Scenario,
     settings: &FilterSettings,
 ) -> Result<CovarianceAnalysis, Error> {
+    scenario.validate()?;
+    settings.validate()?;
     let dt = scenario.dt;
     let phi_t = transition_matrix(dt, Default::default());
     let phi_f = transition_matrix(dt, settings.coupling);

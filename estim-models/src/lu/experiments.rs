@@ -482,7 +482,7 @@ fn vec3e(v: &Vector3<f64>) -> String {
 
 fn mat2(m: &Matrix2<f64>) -> String {
     format!(
-        "[[{:.4}, {:.4}], [{:.4}, {:.4}]]",
+        "[[{:.1}, {:.1}], [{:.1}, {:.1}]]",
         m[(0, 0)],
         m[(0, 1)],
         m[(1, 0)],
@@ -676,7 +676,7 @@ pub fn headlines(r: &LuResult) -> Vec<Headline> {
         "[[0.0486, −0.0023], [0.0002, 0.0002]] ≈ 0",
         format!(
             "{} = {} standard errors (SE = {} for white residuals, N = {n}); residual check {}",
-            mat2(&mc.residual_correlation),
+            mat2e(&mc.residual_correlation),
             mat2(&estim_z),
             mat2e(&se),
             check_p(mc, Check::ResidualCorrelation)

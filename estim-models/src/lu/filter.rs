@@ -64,6 +64,17 @@ impl FilterSettings {
         }
     }
 
+    /// Checks W (finite, ≥ 0) and M₀ (finite, symmetric, positive semi-definite).
+    pub fn validate(&self) -> Result<(), Error> {
+        if !(self.accel_noise_variance >= 0.0 && self.accel_noise_variance.is_finite()) {
+            return Err(Error::NotPositiveSemiDefinite {
+                stage: Stage::Construction,
+                quantity: Quantity::ProcessNoise,
+            });
+        }
+        Gaussian::new(Vector3::zeros(), self.initial_covariance).map(|_| ())
+    }
+
     /// The process model these settings give.
     pub fn process(&self) -> ErrorStateProcess {
         ErrorStateProcess {
@@ -91,8 +102,11 @@ pub struct LuFilter {
 
 impl LuFilter {
     /// The filter for `scenario` with `settings`; the mechanisation starts at the prior means.
-    /// Errors if M₀ is not a valid covariance.
+    /// Errors if the scenario is invalid ([`Scenario::validate`]) or M₀ or W is not a valid
+    /// covariance.
     pub fn new(scenario: &Scenario, settings: &FilterSettings) -> Result<Self, Error> {
+        scenario.validate()?;
+        settings.validate()?;
         let prior = Gaussian::new(Vector3::zeros(), settings.initial_covariance)?;
         Ok(Self {
             kalman: KalmanFilter::new(prior),
@@ -205,12 +219,15 @@ pub(crate) fn nearest(times: &[f64], t: f64) -> usize {
 /// The paper's covariance recursion (§2.6) written out, for `steps` accelerometer steps:
 /// M ← Φ P Φᵀ + Γ W Γᵀ each step and, every `gps_every` steps, the information form
 /// P = (M⁻¹ + Hᵀ V⁻¹ H)⁻¹, K = P Hᵀ V⁻¹. An independent route to the framework filter's
-/// (Joseph-form) covariance. Errors if M or the information matrix is not invertible.
+/// (Joseph-form) covariance. Errors if the scenario or settings are invalid, or M or the
+/// information matrix is not invertible.
 pub fn covariance_history(
     scenario: &Scenario,
     settings: &FilterSettings,
     steps: usize,
 ) -> Result<CovarianceHistory, Error> {
+    scenario.validate()?;
+    settings.validate()?;
     let phi = transition_matrix(scenario.dt, settings.coupling);
     let q = settings.process().noise_covariance(scenario.dt);
     let gps = scenario.gps();

@@ -9,8 +9,8 @@
 //! ```
 
 use estim_core::{
-    LinearMeasurementModel, LinearProcessModel, MeasurementJacobian, MeasurementModel,
-    ProcessJacobian, ProcessModel,
+    Error, LinearMeasurementModel, LinearProcessModel, MeasurementJacobian, MeasurementModel,
+    Parameter, ProcessJacobian, ProcessModel, Quantity, Stage,
 };
 use nalgebra::{Matrix2, Matrix2x3, Matrix3, U2, U3, Vector2, Vector3};
 
@@ -112,6 +112,58 @@ impl Scenario {
     pub fn with_truth(mut self, truth: TruthIntegration) -> Self {
         self.truth = truth;
         self
+    }
+
+    /// Checks the parameters: Δt finite and > 0, a GPS fix every ≥ 1 steps, finite
+    /// trajectory, prior and noise variances ≥ 0, GPS variances > 0.
+    pub fn validate(&self) -> Result<(), Error> {
+        if !(self.dt > 0.0 && self.dt.is_finite()) {
+            return Err(Error::InvalidParameter {
+                parameter: Parameter::StepSize,
+                value: self.dt,
+            });
+        }
+        if self.gps_every == 0 {
+            return Err(Error::InvalidParameter {
+                parameter: Parameter::SampleCount,
+                value: 0.0,
+            });
+        }
+        let finite = [
+            self.amplitude,
+            self.frequency,
+            self.position_mean,
+            self.velocity_mean,
+        ];
+        if !finite.iter().all(|v| v.is_finite()) {
+            return Err(Error::NonFinite {
+                stage: Stage::Construction,
+                quantity: Quantity::Mean,
+            });
+        }
+        let semi_definite = |v: f64, quantity| {
+            if v >= 0.0 && v.is_finite() {
+                Ok(())
+            } else {
+                Err(Error::NotPositiveSemiDefinite {
+                    stage: Stage::Construction,
+                    quantity,
+                })
+            }
+        };
+        semi_definite(self.position_variance, Quantity::Covariance)?;
+        semi_definite(self.velocity_variance, Quantity::Covariance)?;
+        semi_definite(self.bias_variance, Quantity::Covariance)?;
+        semi_definite(self.accel_noise_variance, Quantity::ProcessNoise)?;
+        for v in [self.gps_position_variance, self.gps_velocity_variance] {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(Error::NotPositiveDefinite {
+                    stage: Stage::Construction,
+                    quantity: Quantity::MeasurementNoise,
+                });
+            }
+        }
+        Ok(())
     }
 
     /// Run length \[s\].
