@@ -5,20 +5,31 @@
 //! matrix type itself lives on the heap (`Dyn`).
 
 use nalgebra::{
-    DefaultAllocator, Dim, Matrix, OMatrix, OVector, RawStorage, U1, allocator::Allocator,
+    DefaultAllocator, Dim, IsContiguous, Matrix, OMatrix, OVector, RawStorage, U1,
+    allocator::Allocator,
 };
 
 use crate::error::{Error, Quantity, Result, Stage};
 use crate::scalar::{Real, real};
 
+/// Whether every entry of `m` is finite. A branch-free scan of the contiguous storage (it
+/// vectorises; an early-exit `iter().all()` over nalgebra's generic iterator costs ≈ 4× more,
+/// which is a fifth of a small filter step).
+#[inline(always)]
+pub fn all_finite<T: Real, R: Dim, C: Dim, S: RawStorage<T, R, C> + IsContiguous>(
+    m: &Matrix<T, R, C, S>,
+) -> bool {
+    m.as_slice().iter().fold(true, |ok, v| ok & v.is_finite())
+}
+
 /// `Ok(())` if every entry of `m` is finite, else [`Error::NonFinite`].
-#[inline]
-pub fn ensure_finite<T: Real, R: Dim, C: Dim, S: RawStorage<T, R, C>>(
+#[inline(always)]
+pub fn ensure_finite<T: Real, R: Dim, C: Dim, S: RawStorage<T, R, C> + IsContiguous>(
     m: &Matrix<T, R, C, S>,
     stage: Stage,
     quantity: Quantity,
 ) -> Result<()> {
-    if m.iter().all(|v| v.is_finite()) {
+    if all_finite(m) {
         Ok(())
     } else {
         Err(Error::NonFinite { stage, quantity })

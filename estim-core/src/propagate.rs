@@ -81,6 +81,7 @@ where
 }
 
 /// Symmetrises the covariance and checks the result is finite.
+#[inline(always)]
 fn finish<T: Real, N: Dim, M: Dim>(mut m: Moments<T, N, M>) -> Result<Moments<T, N, M>>
 where
     DefaultAllocator: Alloc<N, M>,

@@ -1,6 +1,6 @@
 //! The Kalman family as one filter parameterised by its moment propagator.
 
-use estim_core::linalg::{ensure_finite, ensure_shape, symmetrize};
+use estim_core::linalg::{all_finite, ensure_shape, symmetrize};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{
     Affine, Linearized, MomentPropagator, SecondOrder, SecondOrderGaussian, Unscented,
@@ -157,6 +157,7 @@ where
 }
 
 /// Moments of `g` plus additive noise `q`: the predicted estimate, not yet committed.
+#[inline(always)]
 pub(crate) fn predicted<T, N, Pr, G>(
     propagator: &Pr,
     state: &OVector<T, N>,
@@ -173,15 +174,24 @@ where
     let stage = Stage::Prediction;
     let n = state.nrows();
     ensure_shape(&q, n, n, stage, Quantity::ProcessNoise)?;
-    ensure_finite(&q, stage, Quantity::ProcessNoise)?;
+    // The propagator checks its own outputs; Q is checked through P⁻ = cov f + Q, and only on
+    // failure is it examined to name the culprit.
     let moments = propagator.propagate(state, covariance, g)?;
     ensure_shape(&moments.mean, n, 1, stage, Quantity::Mean)?;
-    let mut p = moments.covariance + q;
+    let mut p = moments.covariance + &q;
     symmetrize(&mut p);
-    ensure_finite(&p, stage, Quantity::Covariance)?;
+    if !all_finite(&p) {
+        let quantity = if all_finite(&q) {
+            Quantity::Covariance
+        } else {
+            Quantity::ProcessNoise
+        };
+        return Err(Error::NonFinite { stage, quantity });
+    }
     Ok((moments.mean, p))
 }
 
+#[inline(always)]
 pub(crate) fn ensure_time_step<T: Real>(dt: T) -> Result<()> {
     if dt.is_finite() {
         Ok(())
@@ -201,6 +211,7 @@ where
     Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T>>,
     DefaultAllocator: Alloc<N>,
 {
+    #[inline(always)]
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
         ensure_time_step(dt)?;
         let q = model.process_noise(&self.state, input, dt);
@@ -222,6 +233,7 @@ where
     Pr: for<'a> MomentPropagator<T, N, N, Decorrelated<'a, P, P::Input, H, T, N, M>>,
     DefaultAllocator: Alloc<N, M>,
 {
+    #[inline(always)]
     fn predict_correlated(
         &mut self,
         process: &P,
@@ -249,6 +261,7 @@ where
 
 /// The measurement update of any filter whose predicted-measurement moments come from
 /// `propagator` at (`state`, `covariance`): returns the uncommitted posterior.
+#[inline(always)]
 pub(crate) fn measurement_update<T, N, M, Pr, H>(
     propagator: &Pr,
     state: &OVector<T, N>,
@@ -288,6 +301,7 @@ where
     Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
     DefaultAllocator: Alloc<N, M>,
 {
+    #[inline(always)]
     fn update(&mut self, model: &H, z: &OVector<T, M>) -> Result<UpdateReport<T, M>> {
         let (posterior, report) = measurement_update(
             &self.propagator,

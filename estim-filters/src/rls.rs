@@ -109,6 +109,7 @@ where
     H: MeasurementJacobian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
+    #[inline(always)]
     fn update(&mut self, model: &H, z: &OVector<T, M>) -> Result<UpdateReport<T, M>> {
         let inflated = &self.covariance / self.forgetting;
         let (posterior, report) = measurement_update(

@@ -16,7 +16,7 @@
 //! in K: with K = K* + δK it equals P − K* S K*ᵀ + δK S δKᵀ. But it needs no H, so it serves
 //! the unscented filter too.
 
-use estim_core::linalg::{ensure_finite, ensure_shape, symmetrize};
+use estim_core::linalg::{all_finite, ensure_finite, ensure_shape, symmetrize};
 use estim_core::nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::Moments;
 use estim_core::scalar::real;
@@ -43,10 +43,30 @@ pub(crate) type Estimate<T, N> = (OVector<T, N>, OMatrix<T, N, N>);
 /// The result of [`apply`]: the new estimate (`None` if gated) and the report.
 pub(crate) type Posterior<T, N, M> = (Option<Estimate<T, N>>, UpdateReport<T, M>);
 
+/// ln det S = 2 Σ ln Lᵢᵢ from the Cholesky factor: one logarithm of the product of the diagonal
+/// when that product is comfortably normal (the common case), else the sum of logarithms (no
+/// overflow or underflow for large or badly scaled S).
+#[inline(always)]
+fn log_det_from_cholesky<T: Real, M: Dim>(l: &OMatrix<T, M, M>) -> T
+where
+    DefaultAllocator: Alloc<M>,
+{
+    let n = l.nrows();
+    let product = (0..n).fold(T::one(), |p, i| p * l[(i, i)]);
+    let two = real::<T>(2.0);
+    // 1e-30 keeps clear of subnormals in both f32 and f64.
+    if product.is_finite() && product > real::<T>(1e-30) {
+        two * product.ln()
+    } else {
+        two * (0..n).fold(T::zero(), |acc, i| acc + l[(i, i)].ln())
+    }
+}
+
 /// The Kalman update shared by every filter: see the [module docs](self).
 ///
 /// `innovation` is z ⊖ ẑ (the caller applies the model's residual). Nothing is written to the
 /// filter here: the caller commits the returned estimate, so a failure leaves it untouched.
+#[inline(always)]
 pub(crate) fn apply<T: Real, N: Dim, M: Dim>(
     state: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
@@ -62,24 +82,46 @@ where
     let stage = Stage::Update;
     let m = predicted.mean.nrows();
     ensure_shape(&noise, m, m, stage, Quantity::MeasurementNoise)?;
-    ensure_finite(&noise, stage, Quantity::MeasurementNoise)?;
     ensure_shape(&innovation, m, 1, stage, Quantity::Measurement)?;
-    ensure_finite(&innovation, stage, Quantity::Measurement)?;
+    // Inputs are not scanned up front: a non-finite z or R makes the factorisation, the NIS or
+    // the committed results non-finite, and only then are they examined to name the culprit.
+    let bad_input = |innovation: &OVector<T, M>| {
+        if !all_finite(innovation) {
+            Some(Error::NonFinite {
+                stage,
+                quantity: Quantity::Measurement,
+            })
+        } else if !all_finite(&noise) {
+            Some(Error::NonFinite {
+                stage,
+                quantity: Quantity::MeasurementNoise,
+            })
+        } else {
+            None
+        }
+    };
 
-    let mut s = predicted.covariance + noise;
+    let mut s = &predicted.covariance + &noise;
     symmetrize(&mut s);
-    let chol = Cholesky::new(s.clone()).ok_or(Error::NotPositiveDefinite {
-        stage,
-        quantity: Quantity::InnovationCovariance,
-    })?;
+    let Some(chol) = Cholesky::new(s.clone()) else {
+        return Err(
+            bad_input(&innovation).unwrap_or(Error::NotPositiveDefinite {
+                stage,
+                quantity: Quantity::InnovationCovariance,
+            }),
+        );
+    };
     let nis = innovation.dot(&chol.solve(&innovation));
-    let log_det = chol
-        .l_dirty()
-        .diagonal()
-        .iter()
-        .fold(T::zero(), |acc, d| acc + d.ln());
+    if !nis.is_finite() {
+        // A bad measurement is an error, never a gated outlier. (With finite inputs an
+        // overflowing NIS is gated if a gate is set, else it fails below.)
+        if let Some(e) = bad_input(&innovation) {
+            return Err(e);
+        }
+    }
+    let log_det = log_det_from_cholesky(chol.l_dirty());
     let log_likelihood = -real::<T>(0.5)
-        * (nis + log_det + log_det + real::<T>(m as f64 * (2.0 * core::f64::consts::PI).ln()));
+        * (nis + log_det + real::<T>(m as f64 * (2.0 * core::f64::consts::PI).ln()));
     let mut report = UpdateReport {
         innovation,
         innovation_covariance: s,
@@ -109,8 +151,9 @@ where
         CovarianceUpdate::Standard => {}
         CovarianceUpdate::Symmetrized => symmetrize(&mut new_covariance),
     }
-    ensure_finite(&gain, stage, Quantity::Gain)?;
-    ensure_finite(&new_state, stage, Quantity::Mean)?;
-    ensure_finite(&new_covariance, stage, Quantity::Covariance)?;
+    // A non-finite gain shows up in both of these.
+    ensure_finite(&new_state, stage, Quantity::Mean)
+        .and_then(|()| ensure_finite(&new_covariance, stage, Quantity::Covariance))
+        .map_err(|e| bad_input(&report.innovation).unwrap_or(e))?;
     Ok((Some((new_state, new_covariance)), report))
 }

@@ -24,6 +24,7 @@ where
     G: AffineFunction<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
+    #[inline(always)]
     fn propagate(
         &self,
         mean: &OVector<T, N>,

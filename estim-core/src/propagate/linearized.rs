@@ -16,6 +16,7 @@ use crate::scalar::Real;
 pub struct Linearized;
 
 /// g(μ), J(μ), J C Jᵀ and C Jᵀ: the part every derivative-based propagator shares.
+#[inline(always)]
 pub(super) fn linear_moments<T, N, M, G>(
     mean: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
@@ -51,6 +52,7 @@ where
     G: Differentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
+    #[inline(always)]
     fn propagate(
         &self,
         mean: &OVector<T, N>,

@@ -41,6 +41,7 @@ pub struct SecondOrder;
 pub struct SecondOrderGaussian;
 
 /// The Hessian of component k, shape-checked.
+#[inline(always)]
 fn hessian<T, N, M, G>(g: &G, mean: &OVector<T, N>, k: usize) -> Result<Option<OMatrix<T, N, N>>>
 where
     T: Real,
@@ -60,6 +61,7 @@ where
 }
 
 /// Linear moments plus the ½ Σᵢⱼ (Hₖ ∘ C)ᵢⱼ mean correction.
+#[inline(always)]
 fn second_order_moments<T, N, M, G>(
     mean: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
@@ -91,6 +93,7 @@ where
     G: TwiceDifferentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
+    #[inline(always)]
     fn propagate(
         &self,
         mean: &OVector<T, N>,
@@ -109,6 +112,7 @@ where
     G: TwiceDifferentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
+    #[inline(always)]
     fn propagate(
         &self,
         mean: &OVector<T, N>,

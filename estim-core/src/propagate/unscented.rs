@@ -111,6 +111,7 @@ where
     G: VectorFunction<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
+    #[inline(always)]
     fn propagate(
         &self,
         mean: &OVector<T, N>,
