@@ -11,11 +11,14 @@
 //! realizations on the calling thread; by default they run on rayon's pool
 //! (`RAYON_NUM_THREADS` sets its size), with bit-identical results.
 //!
-//! `cargo run --release --example lu_calibration [-- --json] [-- --quick] [-- --sequential]`
+//! `--bench` runs only the consistent filter's Monte Carlo (5000 × 6000 steps, or 500 with
+//! `--quick`) and prints its wall time (for BENCHMARKS.md).
+//!
+//! `cargo run --release --example lu_calibration [-- --json] [-- --quick] [-- --sequential] [-- --bench]`
 
 mod common;
 
-use estim::models::lu::Execution;
+use estim::models::lu::{Execution, MonteCarloConfig, run_monte_carlo};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let execution = if std::env::args().any(|a| a == "--sequential") {
@@ -23,6 +26,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     } else {
         Execution::Default
     };
+    if std::env::args().any(|a| a == "--bench") {
+        let config = if common::quick_requested() {
+            MonteCarloConfig::quick()
+        } else {
+            MonteCarloConfig::full()
+        };
+        let r = run_monte_carlo(&config.with_execution(execution))?;
+        println!(
+            "lu Monte Carlo: {} runs x {} steps, {:?} execution, wall_s {:.3}, consistent {}",
+            r.config.runs,
+            r.config.scenario.steps,
+            execution,
+            r.wall_s,
+            r.verdict.consistent()
+        );
+        return Ok(());
+    }
     let output = common::lu_calibration::run_with(common::quick_requested(), execution)?;
     if common::json_requested() {
         println!("{}", output.json);

@@ -280,6 +280,8 @@ impl MonteCarloResult {
 pub fn run_monte_carlo(config: &MonteCarloConfig) -> Result<MonteCarloResult, Error> {
     let scenario = config.scenario;
     let settings = config.filter;
+    // Fail early (not inside a run) on an invalid scenario or prior.
+    LuFilter::new(&scenario, &settings)?;
     let updates = scenario.updates();
     let slots = updates + 1;
     let (a, b) = (
@@ -289,8 +291,6 @@ pub fn run_monte_carlo(config: &MonteCarloConfig) -> Result<MonteCarloResult, Er
     let mc = MonteCarlo::new(config.runs, slots)?
         .with_seed(config.seed)
         .with_residual_pair(a, b)?;
-    // Fail early (not inside a run) on an invalid prior.
-    LuFilter::new(&scenario, &settings)?;
     let realization = |_run: usize, seed: u64, rec: &mut Recorder| -> Result<(), Error> {
         let mut sim = Simulator::new(&scenario, seed);
         let mut filter = LuFilter::new(&scenario, &settings)?;
