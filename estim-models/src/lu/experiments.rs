@@ -535,11 +535,12 @@ pub fn verdict_line(v: &Verdict) -> String {
 
 fn check_p(r: &MonteCarloResult, check: Check) -> String {
     r.verdict.check(check).map_or("not run".into(), |c| {
-        format!(
-            "{} (p = {:.2})",
-            if c.passed() { "passes" } else { "FAILS" },
-            c.p_value
-        )
+        let p = if c.p_value >= 0.01 {
+            format!("{:.2}", c.p_value)
+        } else {
+            format!("{:.1e}", c.p_value)
+        };
+        format!("{} (p = {p})", if c.passed() { "passes" } else { "FAILS" })
     })
 }
 
