@@ -54,6 +54,12 @@ const PAPERS: &[Paper] = &[
         module: "estim_models::lv2",
         examples: &[("lv2_fusion", common::lv2_fusion::run)],
     },
+    Paper {
+        title: "Lu: calibration of an accelerometer using GPS measurements",
+        citation: "J. Lu, Calibration of an accelerometer using GPS measurements (course report).",
+        module: "estim_models::lu",
+        examples: &[("lu_calibration", common::lu_calibration::run)],
+    },
 ];
 
 /// Escapes `|` so a cell stays one Markdown table cell.
