@@ -9,6 +9,7 @@ pub mod boje_circle;
 pub mod boje_lambda;
 pub mod boje_moments;
 pub mod boje_rate;
+pub mod consistency;
 pub mod lee_huang;
 pub mod lu_calibration;
 pub mod lv2_fusion;
