@@ -60,9 +60,9 @@ pub mod prelude {
         TwiceDifferentiable, VectorFunction,
     };
     pub use estim_filters::{
-        CovarianceUpdate, Ekf, Estimator, FadingMemoryRls, GaussianFilter, GaussianSecondOrderEkf,
-        KalmanFilter, Predict, PredictCorrelated, SecondOrderEkf, Ukf, Update, UpdateOutcome,
-        UpdateReport,
+        CovarianceUpdate, Ekf, EnsembleStats, Estimator, FadingMemoryRls, GaussianFilter,
+        GaussianSecondOrderEkf, KalmanFilter, MonteCarlo, Predict, PredictCorrelated, Recorder,
+        SecondOrderEkf, Ukf, Update, UpdateOutcome, UpdateReport, Verdict,
     };
 }
 

@@ -14,7 +14,8 @@ use crate::scalar::{Real, real};
 
 /// Whether every entry of `m` is finite. A branch-free scan of the contiguous storage (it
 /// vectorises; an early-exit `iter().all()` over nalgebra's generic iterator costs ≈ 4× more,
-/// which is a fifth of a small filter step).
+/// which is a fifth of a small filter step). Needs contiguous storage (owned matrices and
+/// vectors); for a strided view use `view.iter().all(|v| v.is_finite())`.
 #[inline(always)]
 pub fn all_finite<T: Real, R: Dim, C: Dim, S: RawStorage<T, R, C> + IsContiguous>(
     m: &Matrix<T, R, C, S>,
