@@ -1,7 +1,11 @@
 //! The consistency toolkit (`estim_filters::monte_carlo`, `estim_filters::consistency`) run on
 //! each paper's filter: the Boje circle EKF (the paper's linear process, and the nonlinear
 //! process for contrast), the Lu calibration filter (its consistent configuration), and the
-//! Lee & Huang section IV CKF, alone and followed by the OTE.
+//! Lee & Huang section IV CKF, alone and followed by the OTE — plus two Lee & Huang
+//! diagnostics that are not the paper's (no bias and a drawn initial error, with the paper's Ψ
+//! Jacobian and with the full Jacobian) to separate the causes of its inconsistency. What the
+//! runs show is written up in the `# Consistency (estim's toolkit)` sections of the model
+//! modules' docs (`estim::models::{boje, lu, lee_huang}`).
 //!
 //! Each filter runs on the seeded Monte Carlo runner with the module's own simulator; the
 //! example prints each verdict table (every check at 99 %, Simes' rule) and one summary line
@@ -21,8 +25,8 @@ use std::time::Instant;
 use super::Output;
 use estim::core::Error;
 use estim::filters::consistency::{Check, Outcome, Verdict};
-use estim::filters::monte_carlo::{MonteCarlo, Recorder};
-use estim::filters::{Ekf, Estimator, KalmanFilter, PredictCorrelated, Update};
+use estim::filters::monte_carlo::{EnsembleStats, MonteCarlo, Recorder};
+use estim::filters::{Ekf, Estimator, KalmanFilter, Predict, PredictCorrelated, Update};
 use estim::models::Headline;
 use estim::models::boje::filter::HEADING;
 use estim::models::boje::geometry::rate_squared;
@@ -36,7 +40,10 @@ use estim::models::lee_huang::{
     SectionIvConfig, SensorConfig, simulate,
 };
 use estim::models::lu::{MonteCarloConfig, run_monte_carlo};
-use estim::nalgebra::{Matrix3, U1, U3, U6, Vector1, Vector6};
+use estim::nalgebra::{Matrix3, U1, U3, U6, Vector1, Vector3, Vector6};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use rand_distr::StandardNormal;
 
 /// Confidence of every check.
 pub const CONFIDENCE: f64 = 0.99;
@@ -79,6 +86,45 @@ pub struct Run {
     pub fixed_truth: bool,
     /// Wall time \[s\].
     pub wall_s: f64,
+    /// The average NEES and its band at a few slots.
+    pub nees_profile: Vec<NeesPoint>,
+}
+
+/// The average NEES at one slot with its band at [`CONFIDENCE`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NeesPoint {
+    /// Slot time \[s\].
+    pub t: f64,
+    /// Average NEES over the runs.
+    pub mean: f64,
+    /// Lower end of the band.
+    pub lower: f64,
+    /// Upper end of the band.
+    pub upper: f64,
+}
+
+/// The average NEES and its band at the slots whose times are nearest to `pick`.
+fn nees_profile(
+    stats: &EnsembleStats,
+    times: &[f64],
+    pick: &[f64],
+) -> Result<Vec<NeesPoint>, Box<dyn std::error::Error>> {
+    let mut out = Vec::new();
+    for &t in pick {
+        let k = (0..times.len())
+            .min_by(|&a, &b| (times[a] - t).abs().total_cmp(&(times[b] - t).abs()))
+            .unwrap_or(0);
+        if let Some(e) = stats.slots.get(k).and_then(|s| s.estimate.as_ref()) {
+            let band = e.nees_band(CONFIDENCE)?;
+            out.push(NeesPoint {
+                t: times[k],
+                mean: e.mean_nees,
+                lower: band.lower,
+                upper: band.upper,
+            });
+        }
+    }
+    Ok(out)
 }
 
 impl Run {
@@ -124,6 +170,21 @@ impl Run {
         )
     }
 
+    /// The NEES profile as one line.
+    pub fn nees_line(&self) -> String {
+        let parts: Vec<String> = self
+            .nees_profile
+            .iter()
+            .map(|n| {
+                format!(
+                    "t={:.1}s: {:.3} [{:.2}, {:.2}]",
+                    n.t, n.mean, n.lower, n.upper
+                )
+            })
+            .collect();
+        format!("average NEES [band]: {}", parts.join("; "))
+    }
+
     /// The JSON object of this run.
     pub fn json(&self) -> serde_json::Value {
         let mut checks = serde_json::Map::new();
@@ -164,6 +225,9 @@ impl Run {
             "consistent_apart_from_orthogonality": self.consistent_apart_from_orthogonality(),
             "checks": checks,
             "wall_s": self.wall_s,
+            "nees_profile": self.nees_profile.iter().map(|n| {
+                serde_json::json!({"t": n.t, "mean_nees": finite(n.mean), "lower": n.lower, "upper": n.upper})
+            }).collect::<Vec<_>>(),
         })
     }
 }
@@ -262,6 +326,9 @@ pub fn boje(runs: usize, process: BojeProcess) -> Result<Run, Box<dyn std::error
         BojeProcess::Linear => ("boje_ekf", "Boje circle EKF (paper's linear process)"),
         BojeProcess::Nonlinear => ("boje_ekf_nonlinear", "Boje circle EKF, nonlinear process"),
     };
+    let times: Vec<f64> = (1..=slots)
+        .map(|k| (k * config.fix_every()) as f64 * config.dt)
+        .collect();
     Ok(Run {
         key,
         label,
@@ -269,23 +336,79 @@ pub fn boje(runs: usize, process: BojeProcess) -> Result<Run, Box<dyn std::error
         verdict: stats.verdict(CONFIDENCE)?,
         fixed_truth: true,
         wall_s,
+        nees_profile: nees_profile(&stats, &times, &[1.0, 2.0, 5.0, 9.0, 12.0, 15.0, 19.0])?,
     })
 }
 
-/// The Lee & Huang section IV Monte Carlo: the paper's CKF (Ψ Jacobian, linear Kalman filter),
-/// with `ote` the OTE correcting its velocity each cycle (recorded after the correction).
-pub fn lee_huang(runs: usize, ote: bool) -> Result<Run, Box<dyn std::error::Error>> {
+/// Which Lee & Huang filter, on which data.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LeeHuangCase {
+    /// Section IV: the paper's CKF (Ψ Jacobian, linear Kalman filter), 10 mg input bias, the
+    /// CKF started at the true D(0) with P(0) = diag(1, 1, 0.1, 0.1, (1°)², (1°/s)²).
+    Ckf,
+    /// The same CKF followed each cycle by the OTE (recorded after the OTE correction).
+    CkfOte,
+    /// Diagnostic, not the paper's: the same CKF without the input bias and with
+    /// D̂(0) − D(0) ~ N(0, P(0)) per run (the data the filter's model assumes).
+    CkfNoBiasDrawnPrior,
+    /// Diagnostic, not the paper's: as [`CkfNoBiasDrawnPrior`](Self::CkfNoBiasDrawnPrior) but
+    /// with the full Jacobian ∂f/∂D (the θ → velocity coupling kept) in the EKF.
+    EkfFullJacobianNoBiasDrawnPrior,
+}
+
+/// The per-run loop shared by the Lee & Huang cases: predict with `predict`, update with the
+/// attitude, the OTE if any, and record every [`LEE_HUANG_SLOT_STEPS`].
+fn lee_huang_loop<F>(
+    filter: &mut F,
+    mut predict: impl FnMut(&mut F, &Vector3<f64>) -> Result<(), Error>,
+    measurement: &AttitudeMeasurement,
+    mut ote: Option<OwnShipTrajectoryEstimator>,
+    sim: &estim::models::lee_huang::Simulation,
+    rec: &mut Recorder,
+) -> Result<(), Error>
+where
+    F: Update<f64, U6, U1, AttitudeMeasurement>,
+{
+    for k in 1..sim.samples.len() {
+        predict(filter, &sim.samples[k - 1].inputs)?;
+        let report = filter.update(measurement, &Vector1::new(sim.samples[k].attitude))?;
+        if let Some(o) = ote.as_mut() {
+            o.correct(filter)?;
+        }
+        if k % LEE_HUANG_SLOT_STEPS == 0 {
+            let slot = k / LEE_HUANG_SLOT_STEPS - 1;
+            rec.record_innovation(slot, &report)?;
+            rec.record_residual(slot, &report.innovation)?;
+            let mut e: Vector6<f64> = sim.truth[k] - filter.state();
+            e[4] = wrap_angle(e[4]);
+            let truth = filter.state() + e;
+            rec.record_filter(slot, &truth, filter)?;
+        }
+    }
+    Ok(())
+}
+
+/// The Lee & Huang section IV Monte Carlo of `case`.
+pub fn lee_huang_case(runs: usize, case: LeeHuangCase) -> Result<Run, Box<dyn std::error::Error>> {
     let config = SectionIvConfig::paper();
     let steps = config.steps();
+    let unbiased = matches!(
+        case,
+        LeeHuangCase::CkfNoBiasDrawnPrior | LeeHuangCase::EkfFullJacobianNoBiasDrawnPrior
+    );
     let sensors = SensorConfig {
         dt: config.dt,
         steps,
         accelerometers: FourAccelerometers::default(),
-        input_bias: config.input_bias,
+        input_bias: if unbiased {
+            Vector3::zeros()
+        } else {
+            config.input_bias
+        },
         input_noise_std: config.input_noise_std,
         attitude_std: config.attitude_std,
     };
-    let process = InsProcess {
+    let full = InsProcess {
         input_noise: Matrix3::from_diagonal(
             &config
                 .input_noise_std
@@ -293,8 +416,8 @@ pub fn lee_huang(runs: usize, ote: bool) -> Result<Run, Box<dyn std::error::Erro
         ),
         discretization: config.discretization,
         plane: config.scenario.plane,
-    }
-    .ckf();
+    };
+    let process = full.ckf();
     let measurement = AttitudeMeasurement {
         variance: config.attitude_std * config.attitude_std,
     };
@@ -305,42 +428,51 @@ pub fn lee_huang(runs: usize, ote: bool) -> Result<Run, Box<dyn std::error::Erro
     let start = Instant::now();
     let stats = mc.run(|_, seed, rec| -> Result<(), Error> {
         let sim = simulate(&config.scenario, &sensors, seed);
-        let prior =
-            estim::core::Gaussian::new(config.scenario.initial_state, config.initial_covariance)?;
-        let mut filter = KalmanFilter::new(prior);
-        let mut ote_filter = if ote {
+        let mut initial = config.scenario.initial_state;
+        if unbiased {
+            let mut rng = StdRng::seed_from_u64(seed ^ 0x1ee_4a46);
+            for i in 0..6 {
+                let n: f64 = rng.sample(StandardNormal);
+                initial[i] += config.initial_covariance[(i, i)].sqrt() * n;
+            }
+        }
+        let prior = estim::core::Gaussian::new(initial, config.initial_covariance)?;
+        let ote = if case == LeeHuangCase::CkfOte {
             Some(OwnShipTrajectoryEstimator::new(&config.ote)?)
         } else {
             None
         };
-        for k in 1..=steps {
-            let input = CkfInput {
-                signals: sim.samples[k - 1].inputs,
-                attitude: filter.state()[4],
-            };
-            estim::filters::Predict::predict(&mut filter, &process, &input, config.dt)?;
-            let report = filter.update(&measurement, &Vector1::new(sim.samples[k].attitude))?;
-            if let Some(o) = ote_filter.as_mut() {
-                o.correct(&mut filter)?;
-            }
-            if k % LEE_HUANG_SLOT_STEPS == 0 {
-                let slot = k / LEE_HUANG_SLOT_STEPS - 1;
-                rec.record_innovation(slot, &report)?;
-                rec.record_residual(slot, &report.innovation)?;
-                let mut e: Vector6<f64> = sim.truth[k] - filter.state();
-                e[4] = wrap_angle(e[4]);
-                let truth = filter.state() + e;
-                rec.record_filter(slot, &truth, &filter)?;
-            }
+        if case == LeeHuangCase::EkfFullJacobianNoBiasDrawnPrior {
+            let mut filter = Ekf::new(prior);
+            let predict = |f: &mut Ekf<f64, U6>, u: &Vector3<f64>| f.predict(&full, u, config.dt);
+            return lee_huang_loop(&mut filter, predict, &measurement, ote, &sim, rec);
         }
-        Ok(())
+        let mut filter = KalmanFilter::new(prior);
+        let predict = |f: &mut KalmanFilter<f64, U6>, u: &Vector3<f64>| {
+            let input = CkfInput {
+                signals: *u,
+                attitude: f.state()[4],
+            };
+            f.predict(&process, &input, config.dt)
+        };
+        lee_huang_loop(&mut filter, predict, &measurement, ote, &sim, rec)
     })?;
     let wall_s = start.elapsed().as_secs_f64();
-    let (key, label) = if ote {
-        ("lee_huang_ckf_ote", "Lee & Huang CKF+OTE (section IV)")
-    } else {
-        ("lee_huang_ckf", "Lee & Huang CKF (section IV)")
+    let (key, label) = match case {
+        LeeHuangCase::Ckf => ("lee_huang_ckf", "Lee & Huang CKF (section IV)"),
+        LeeHuangCase::CkfOte => ("lee_huang_ckf_ote", "Lee & Huang CKF+OTE (section IV)"),
+        LeeHuangCase::CkfNoBiasDrawnPrior => (
+            "lee_huang_ckf_no_bias",
+            "Lee & Huang CKF, no bias, D(0) error drawn from P(0) (diagnostic)",
+        ),
+        LeeHuangCase::EkfFullJacobianNoBiasDrawnPrior => (
+            "lee_huang_ekf_full_jacobian_no_bias",
+            "Lee & Huang full-Jacobian EKF, no bias, D(0) error drawn from P(0) (diagnostic)",
+        ),
     };
+    let times: Vec<f64> = (1..=slots)
+        .map(|k| (k * LEE_HUANG_SLOT_STEPS) as f64 * config.dt)
+        .collect();
     Ok(Run {
         key,
         label,
@@ -348,7 +480,21 @@ pub fn lee_huang(runs: usize, ote: bool) -> Result<Run, Box<dyn std::error::Erro
         verdict: stats.verdict(CONFIDENCE)?,
         fixed_truth: true,
         wall_s,
+        nees_profile: nees_profile(&stats, &times, &[0.5, 1.0, 2.0, 5.0, 10.0, 20.0])?,
     })
+}
+
+/// The section IV CKF ([`LeeHuangCase::Ckf`]) or, with `ote`, CKF+OTE
+/// ([`LeeHuangCase::CkfOte`]).
+pub fn lee_huang(runs: usize, ote: bool) -> Result<Run, Box<dyn std::error::Error>> {
+    lee_huang_case(
+        runs,
+        if ote {
+            LeeHuangCase::CkfOte
+        } else {
+            LeeHuangCase::Ckf
+        },
+    )
 }
 
 /// The Lu calibration filter's own Monte Carlo (the consistent configuration, 30 s, every GPS
@@ -362,6 +508,7 @@ pub fn lu(runs: usize) -> Result<Run, Box<dyn std::error::Error>> {
         key: "lu",
         label: "Lu calibration filter (consistent configuration)",
         slots: r.time.len(),
+        nees_profile: nees_profile(&r.stats, &r.time, &[0.0, 1.0, 5.0, 10.0, 20.0, 30.0])?,
         verdict: r.verdict,
         fixed_truth: false,
         wall_s,
@@ -387,10 +534,13 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
         lu(n_lu)?,
         lee_huang(n_lh, false)?,
         lee_huang(n_lh, true)?,
+        lee_huang_case(n_lh, LeeHuangCase::CkfNoBiasDrawnPrior)?,
+        lee_huang_case(n_lh, LeeHuangCase::EkfFullJacobianNoBiasDrawnPrior)?,
     ];
     for r in &runs {
         println!("== {} ==", r.label);
-        println!("{}", r.verdict);
+        print!("{}", r.verdict);
+        println!("{}\n", r.nees_line());
     }
     println!(
         "Summary (every check at {:.0}%, Simes):",

@@ -112,6 +112,18 @@
 //! | E11 | (1/N) Σ r(20) r(30)ᵀ = \[\[0.0486, −0.0023\], \[0.0002, 0.0002\]\] "≈ 0" | with N = 5000 the standard errors are ≈ \[\[0.0143, 0.0006\], \[0.0006, 2.3e-5\]\]: the printed entries are 3.4, 4.0, 0.3 and 8.5 SE, not consistent with white residuals; estim's are within ≈ 1.3 SE | `paper_residual_matrix_is_not_white`, `consistent_filter_passes_every_check` |
 //! | E12 | "K₁₂ the only one that is not going to zero" | only the bias-row gains K₃₁, K₃₂ → 0 (no process noise on b); K₁₁ → 0.0075, K₂₁ → 0.0002, K₂₂ → 0.0148, K₁₂ → 0.132 (the largest) | `only_the_bias_gains_vanish` |
 //! | E13 | the error-state equation has −Γ w, the listing +Γ | the sign is irrelevant for Γ W Γᵀ; the simulator's error state follows −Γ w | `euler_truth_follows_the_derived_error_dynamics` |
+//!
+//! ## Consistency (estim's toolkit)
+//!
+//! `cargo run --release --example consistency` runs this module's Monte Carlo
+//! ([`run_monte_carlo`], consistent configuration, master seed 271) on estim's runner: 5000
+//! runs (500 with `--quick`), 151 slots (t = 0 and every GPS update), NIS of every update,
+//! residual pair 20 s × 30 s; each check at 99 % (Simes). **All six checks pass**: mean error
+//! p = 0.93, ensemble/filter variance ratio p = 0.99, average NEES p = 0.48 (2.93–3.02 against
+//! the band \[2.91, 3.09\] at the slots listed), NIS p = 0.41, orthogonality p = 0.26, residual
+//! correlation p = 0.39 (the quick form passes too). The filter is consistent with the corrected
+//! readings (E2–E5): the truth is drawn from the filter's prior and propagated by the same
+//! error dynamics the filter models, so nothing is left unmodelled.
 
 pub mod analysis;
 pub mod experiments;
