@@ -35,9 +35,7 @@ where
     type Input = OVector<T, U>;
 
     fn transition(&self, x: &OVector<T, N>, u: &OVector<T, U>, _dt: T) -> OVector<T, N> {
-        let mut next = &self.transition * x;
-        next.gemv(T::one(), &self.input, u, T::one());
-        next
+        &self.transition * x + &self.input * u
     }
 
     fn process_noise(&self, _: &OVector<T, N>, _: &OVector<T, U>, _dt: T) -> OMatrix<T, N, N> {

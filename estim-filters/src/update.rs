@@ -136,8 +136,7 @@ where
 
     let cross = predicted.cross_covariance;
     let gain = chol.solve(&cross.transpose()).transpose();
-    let mut new_state = state.clone();
-    new_state.gemv(T::one(), &gain, &report.innovation, T::one());
+    let new_state = state + &gain * &report.innovation;
     let k_cross_t = &gain * cross.transpose();
     let mut new_covariance = covariance - &k_cross_t;
     match form {

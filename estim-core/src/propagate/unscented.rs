@@ -147,8 +147,10 @@ where
                 let d = g.difference(&y, &y0);
                 ensure_shape(&d, m, 1, Stage::Propagation, Quantity::FunctionValue)?;
                 sum_d += &d;
-                sum_dd.ger(T::one(), &d, &d, T::one());
-                sum_xd.ger(T::one(), &dx, &d, T::one());
+                // Operator forms: for small static sizes they unroll, where nalgebra's generic
+                // `ger` loops column by column (measured: the filters bench).
+                sum_dd += &d * d.transpose();
+                sum_xd += &dx * d.transpose();
             }
         }
         let w = T::one() / (real::<T>(2.0) * c);
