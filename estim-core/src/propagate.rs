@@ -39,6 +39,10 @@ pub use sampled::Sampled;
 pub use second_order::{SecondOrder, SecondOrderGaussian};
 pub use unscented::Unscented;
 
+/// E\[y\] and cov(y), as returned by
+/// [`MomentPropagator::propagate_mean_covariance`].
+pub type MeanCovariance<T, M> = (OVector<T, M>, OMatrix<T, M, M>);
+
 /// The first two moments of y = g(x) and its covariance with x.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Moments<T: Real, N: Dim, M: Dim>
@@ -77,6 +81,20 @@ where
     /// [`propagate`](Self::propagate) for a [`Gaussian`].
     fn propagate_gaussian(&self, x: &Gaussian<T, N>, g: &G) -> Result<Moments<T, N, M>> {
         self.propagate(x.mean(), x.covariance(), g)
+    }
+
+    /// E\[y\] and cov(y) only, for callers that do not need cov(x, y) (a filter's prediction).
+    /// The default is [`propagate`](Self::propagate) without the cross-covariance; propagators
+    /// that would accumulate it separately (the unscented one) skip that work.
+    #[inline(always)]
+    fn propagate_mean_covariance(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+    ) -> Result<MeanCovariance<T, M>> {
+        self.propagate(mean, covariance, g)
+            .map(|m| (m.mean, m.covariance))
     }
 }
 

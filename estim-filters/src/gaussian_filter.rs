@@ -176,9 +176,10 @@ where
     ensure_shape(&q, n, n, stage, Quantity::ProcessNoise)?;
     // The propagator checks its own outputs; Q is checked through P⁻ = cov f + Q, and only on
     // failure is it examined to name the culprit.
-    let moments = propagator.propagate(state, covariance, g)?;
-    ensure_shape(&moments.mean, n, 1, stage, Quantity::Mean)?;
-    let mut p = moments.covariance + &q;
+    let (mean, predicted_covariance) =
+        propagator.propagate_mean_covariance(state, covariance, g)?;
+    ensure_shape(&mean, n, 1, stage, Quantity::Mean)?;
+    let mut p = predicted_covariance + &q;
     symmetrize(&mut p);
     if !all_finite(&p) {
         let quantity = if all_finite(&q) {
@@ -188,7 +189,7 @@ where
         };
         return Err(Error::NonFinite { stage, quantity });
     }
-    Ok((moments.mean, p))
+    Ok((mean, p))
 }
 
 #[inline(always)]

@@ -103,21 +103,21 @@ impl<T: Real> Default for Unscented<T> {
     }
 }
 
-impl<T, N, M, G> MomentPropagator<T, N, M, G> for Unscented<T>
-where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    G: VectorFunction<T, N, M> + ?Sized,
-    DefaultAllocator: Alloc<N, M>,
-{
+impl<T: Real> Unscented<T> {
+    /// The transform; the cross-covariance is accumulated only when `CROSS` (zero otherwise).
     #[inline(always)]
-    fn propagate(
+    fn transform<N, M, G, const CROSS: bool>(
         &self,
         mean: &OVector<T, N>,
         covariance: &OMatrix<T, N, N>,
         g: &G,
-    ) -> Result<Moments<T, N, M>> {
+    ) -> Result<Moments<T, N, M>>
+    where
+        N: Dim,
+        M: Dim,
+        G: VectorFunction<T, N, M> + ?Sized,
+        DefaultAllocator: Alloc<N, M>,
+    {
         let n = mean.nrows();
         ensure_shape(covariance, n, n, Stage::Propagation, Quantity::Covariance)?;
         let c = self.alpha * self.alpha * (real::<T>(n as f64) + self.kappa);
@@ -150,7 +150,9 @@ where
                 // Operator forms: for small static sizes they unroll, where nalgebra's generic
                 // `ger` loops column by column (measured: the filters bench).
                 sum_dd += &d * d.transpose();
-                sum_xd += &dx * d.transpose();
+                if CROSS {
+                    sum_xd += &dx * d.transpose();
+                }
             }
         }
         let w = T::one() / (real::<T>(2.0) * c);
@@ -167,5 +169,35 @@ where
             covariance: covariance_y,
             cross_covariance: sum_xd * w,
         })
+    }
+}
+
+impl<T, N, M, G> MomentPropagator<T, N, M, G> for Unscented<T>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    G: VectorFunction<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    #[inline(always)]
+    fn propagate(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+    ) -> Result<Moments<T, N, M>> {
+        self.transform::<N, M, G, true>(mean, covariance, g)
+    }
+
+    #[inline(always)]
+    fn propagate_mean_covariance(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+    ) -> Result<super::MeanCovariance<T, M>> {
+        self.transform::<N, M, G, false>(mean, covariance, g)
+            .map(|m| (m.mean, m.covariance))
     }
 }
