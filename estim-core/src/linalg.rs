@@ -70,8 +70,19 @@ pub fn psd_tolerance<T: Real, D: Dim>(c: &OMatrix<T, D, D>) -> T
 where
     DefaultAllocator: Allocator<D, D>,
 {
-    let n = c.nrows();
-    let max_diag = (0..n).fold(T::zero(), |m, i| m.max(c[(i, i)].abs()));
+    tolerance_for(c.nrows(), max_abs_diagonal(c))
+}
+
+/// max |Cᵢᵢ|.
+fn max_abs_diagonal<T: Real, D: Dim>(c: &OMatrix<T, D, D>) -> T
+where
+    DefaultAllocator: Allocator<D, D>,
+{
+    (0..c.nrows()).fold(T::zero(), |m, i| m.max(c[(i, i)].abs()))
+}
+
+/// 16 n ε max|Cᵢᵢ| (see [`psd_tolerance`]).
+fn tolerance_for<T: Real>(n: usize, max_diag: T) -> T {
     real::<T>(16.0 * n as f64) * T::default_epsilon() * max_diag
 }
 
@@ -104,8 +115,8 @@ fn zero_pivot_bounds<T: Real, D: Dim>(c: &OMatrix<T, D, D>) -> (T, T)
 where
     DefaultAllocator: Allocator<D, D>,
 {
-    let tol = psd_tolerance(c);
-    let max_diag = (0..c.nrows()).fold(T::zero(), |m, i| m.max(c[(i, i)].abs()));
+    let max_diag = max_abs_diagonal(c);
+    let tol = tolerance_for(c.nrows(), max_diag);
     (tol, (tol * max_diag).sqrt() + tol)
 }
 

@@ -7,14 +7,13 @@ use estim_core::propagate::{
 };
 use estim_core::{
     AffineFunction, Alloc, Error, Gaussian, LinearMeasurementModel, LinearProcessModel,
-    MeasurementModel, Observation, Parameter, ProcessModel, Quantity, Real, Stage, Transition,
-    error::Result,
+    MeasurementModel, Observation, ProcessModel, Quantity, Real, Stage, Transition, error::Result,
 };
 
 use crate::correlated::Decorrelated;
 use crate::report::UpdateReport;
 use crate::traits::{Estimator, Predict, PredictCorrelated, Update};
-use crate::update::{self, CovarianceUpdate};
+use crate::update::{self, CovarianceUpdate, UpdateSettings};
 
 /// A Gaussian filter: the estimate is N(x̂, P), and both steps ask the propagator `Pr` for the
 /// moments of a function of it.
@@ -38,8 +37,7 @@ where
     state: OVector<T, N>,
     covariance: OMatrix<T, N, N>,
     propagator: Pr,
-    covariance_update: CovarianceUpdate,
-    gate: Option<T>,
+    settings: UpdateSettings<T>,
 }
 
 /// The linear Kalman filter (Kalman 1960): exact for linear models and accepts only those
@@ -93,14 +91,13 @@ where
             state,
             covariance,
             propagator,
-            covariance_update: CovarianceUpdate::default(),
-            gate: None,
+            settings: UpdateSettings::new(),
         }
     }
 
     /// Uses `form` for the covariance update (default: Joseph).
     pub fn with_covariance_update(mut self, form: CovarianceUpdate) -> Self {
-        self.covariance_update = form;
+        self.settings.form = form;
         self
     }
 
@@ -108,7 +105,7 @@ where
     /// NIS exceeds `threshold`, e.g. the 99% χ² quantile for the measurement's dimension.
     /// `threshold` must be finite and > 0.
     pub fn with_gate(mut self, threshold: T) -> Result<Self> {
-        self.gate = Some(validate_gate(threshold)?);
+        self.settings = self.settings.with_gate(threshold)?;
         Ok(self)
     }
 
@@ -119,23 +116,12 @@ where
 
     /// The covariance update form.
     pub fn covariance_update(&self) -> CovarianceUpdate {
-        self.covariance_update
+        self.settings.form
     }
 
     /// The gate threshold, if any.
     pub fn gate(&self) -> Option<T> {
-        self.gate
-    }
-}
-
-pub(crate) fn validate_gate<T: Real>(threshold: T) -> Result<T> {
-    if threshold.is_finite() && threshold > T::zero() {
-        Ok(threshold)
-    } else {
-        Err(Error::InvalidParameter {
-            parameter: Parameter::GateThreshold,
-            value: estim_core::nalgebra::try_convert::<T, f64>(threshold).unwrap_or(f64::NAN),
-        })
+        self.settings.gate
     }
 }
 
@@ -269,8 +255,7 @@ pub(crate) fn measurement_update<T, N, M, Pr, H>(
     covariance: &OMatrix<T, N, N>,
     model: &H,
     z: &OVector<T, M>,
-    form: CovarianceUpdate,
-    gate: Option<T>,
+    settings: UpdateSettings<T>,
 ) -> Result<update::Posterior<T, N, M>>
 where
     T: Real,
@@ -290,7 +275,7 @@ where
     )?;
     let innovation = model.residual(z, &predicted.mean);
     let noise = model.measurement_noise(state);
-    update::apply(state, covariance, predicted, noise, innovation, form, gate)
+    update::apply(state, covariance, predicted, noise, innovation, settings)
 }
 
 impl<T, N, M, Pr, H> Update<T, N, M, H> for GaussianFilter<T, N, Pr>
@@ -310,8 +295,7 @@ where
             &self.covariance,
             model,
             z,
-            self.covariance_update,
-            self.gate,
+            self.settings,
         )?;
         if let Some((x, p)) = posterior {
             self.state = x;

@@ -4,10 +4,10 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::Linearized;
 use estim_core::{Alloc, Error, Gaussian, MeasurementJacobian, Parameter, Real, error::Result};
 
-use crate::gaussian_filter::{measurement_update, validate_gate};
+use crate::gaussian_filter::measurement_update;
 use crate::report::UpdateReport;
 use crate::traits::{Estimator, Update};
-use crate::update::CovarianceUpdate;
+use crate::update::{CovarianceUpdate, UpdateSettings};
 
 /// Recursive least squares with exponential forgetting (the own-ship trajectory estimator,
 /// OTE, of Lee & Huang 2002, eq 46-48), for observations z = B θ + v, v ~ N(0, S):
@@ -39,8 +39,7 @@ where
     state: OVector<T, N>,
     covariance: OMatrix<T, N, N>,
     forgetting: T,
-    covariance_update: CovarianceUpdate,
-    gate: Option<T>,
+    settings: UpdateSettings<T>,
 }
 
 impl<T: Real, N: Dim> FadingMemoryRls<T, N>
@@ -61,20 +60,19 @@ where
             state,
             covariance,
             forgetting,
-            covariance_update: CovarianceUpdate::default(),
-            gate: None,
+            settings: UpdateSettings::new(),
         })
     }
 
     /// Uses `form` for the covariance update (default: Joseph).
     pub fn with_covariance_update(mut self, form: CovarianceUpdate) -> Self {
-        self.covariance_update = form;
+        self.settings.form = form;
         self
     }
 
     /// Rejects updates whose NIS exceeds `threshold` (finite, > 0).
     pub fn with_gate(mut self, threshold: T) -> Result<Self> {
-        self.gate = Some(validate_gate(threshold)?);
+        self.settings = self.settings.with_gate(threshold)?;
         Ok(self)
     }
 
@@ -112,15 +110,8 @@ where
     #[inline(always)]
     fn update(&mut self, model: &H, z: &OVector<T, M>) -> Result<UpdateReport<T, M>> {
         let inflated = &self.covariance / self.forgetting;
-        let (posterior, report) = measurement_update(
-            &Linearized,
-            &self.state,
-            &inflated,
-            model,
-            z,
-            self.covariance_update,
-            self.gate,
-        )?;
+        let (posterior, report) =
+            measurement_update(&Linearized, &self.state, &inflated, model, z, self.settings)?;
         if let Some((x, p)) = posterior {
             self.state = x;
             self.covariance = p;

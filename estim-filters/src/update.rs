@@ -20,7 +20,7 @@ use estim_core::linalg::{all_finite, ensure_finite, ensure_shape, symmetrize};
 use estim_core::nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::Moments;
 use estim_core::scalar::real;
-use estim_core::{Alloc, Error, Quantity, Real, Stage, error::Result};
+use estim_core::{Alloc, Error, Parameter, Quantity, Real, Stage, error::Result};
 
 use crate::report::{UpdateOutcome, UpdateReport};
 
@@ -35,6 +35,41 @@ pub enum CovarianceUpdate {
     Standard,
     /// The standard form followed by P⁺ ← (P⁺ + P⁺ᵀ)/2.
     Symmetrized,
+}
+
+/// What every filter's measurement update is configured with: the covariance form and an
+/// optional NIS gate. Shared by the Kalman family and the fading-memory RLS.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct UpdateSettings<T> {
+    /// The covariance update form.
+    pub(crate) form: CovarianceUpdate,
+    /// The NIS gate threshold, if any.
+    pub(crate) gate: Option<T>,
+}
+
+impl<T: Real> UpdateSettings<T> {
+    /// Joseph form, no gate.
+    pub(crate) fn new() -> Self {
+        Self {
+            form: CovarianceUpdate::default(),
+            gate: None,
+        }
+    }
+
+    /// Gates at `threshold`, which must be finite and > 0.
+    pub(crate) fn with_gate(self, threshold: T) -> Result<Self> {
+        if threshold.is_finite() && threshold > T::zero() {
+            Ok(Self {
+                gate: Some(threshold),
+                ..self
+            })
+        } else {
+            Err(Error::InvalidParameter {
+                parameter: Parameter::GateThreshold,
+                value: estim_core::nalgebra::try_convert::<T, f64>(threshold).unwrap_or(f64::NAN),
+            })
+        }
+    }
 }
 
 /// A state estimate and its covariance, computed but not yet committed to a filter.
@@ -73,8 +108,7 @@ pub(crate) fn apply<T: Real, N: Dim, M: Dim>(
     predicted: Moments<T, N, M>,
     noise: OMatrix<T, M, M>,
     innovation: OVector<T, M>,
-    form: CovarianceUpdate,
-    gate: Option<T>,
+    settings: UpdateSettings<T>,
 ) -> Result<Posterior<T, N, M>>
 where
     DefaultAllocator: Alloc<N, M>,
@@ -129,7 +163,7 @@ where
         log_likelihood,
         outcome: UpdateOutcome::Applied,
     };
-    if gate.is_some_and(|g| !(nis <= g)) {
+    if settings.gate.is_some_and(|g| !(nis <= g)) {
         report.outcome = UpdateOutcome::Gated;
         return Ok((None, report));
     }
@@ -139,7 +173,7 @@ where
     let new_state = state + &gain * &report.innovation;
     let k_cross_t = &gain * cross.transpose();
     let mut new_covariance = covariance - &k_cross_t;
-    match form {
+    match settings.form {
         CovarianceUpdate::Joseph => {
             // P − K Pₓᵤᵀ − Pₓᵤ Kᵀ + K S Kᵀ
             new_covariance -= k_cross_t.transpose();

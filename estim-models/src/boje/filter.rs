@@ -163,10 +163,17 @@ pub trait AccelerometerProcess: ProcessModel<f64, U6> {
     ) -> Matrix6x1<f64>;
 
     /// The θ̇² measurement from the same accelerometers (R = λ44).
-    fn rate_measurement(&self) -> RateSquaredMeasurement;
+    fn rate_measurement(&self) -> RateSquaredMeasurement {
+        RateSquaredMeasurement {
+            noise: rate_squared_variance(self.variances(), self.half_separation()),
+        }
+    }
 
     /// R, half the sensor separation, m.
     fn half_separation(&self) -> f64;
+
+    /// The accelerometer channel variances.
+    fn variances(&self) -> &ChannelVariances;
 }
 
 /// λ44 = (σ²_u1 + σ²_u2)/(4R²), the variance of the accelerometer θ̇².
@@ -199,14 +206,12 @@ impl AccelerometerProcess for PlanarProcess {
         input_matrix(dt) * lambda_vw(&input.lambda)
     }
 
-    fn rate_measurement(&self) -> RateSquaredMeasurement {
-        RateSquaredMeasurement {
-            noise: rate_squared_variance(&self.variances, self.half_separation),
-        }
-    }
-
     fn half_separation(&self) -> f64 {
         self.half_separation
+    }
+
+    fn variances(&self) -> &ChannelVariances {
+        &self.variances
     }
 }
 
@@ -317,14 +322,12 @@ impl AccelerometerProcess for NonlinearPlanarProcess {
         input_matrix(dt) * lambda_vw(&self.lambda_at(a, state[HEADING]))
     }
 
-    fn rate_measurement(&self) -> RateSquaredMeasurement {
-        RateSquaredMeasurement {
-            noise: rate_squared_variance(&self.variances, self.half_separation),
-        }
-    }
-
     fn half_separation(&self) -> f64 {
         self.half_separation
+    }
+
+    fn variances(&self) -> &ChannelVariances {
+        &self.variances
     }
 }
 
