@@ -1,0 +1,3 @@
+//! Dynamic-size filter steps against hand-written DMatrix and faer baselines (being written).
+
+fn main() {}
