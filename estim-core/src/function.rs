@@ -7,6 +7,12 @@
 //!
 //! A propagator states in its bounds which level it needs, so a function without Hessians
 //! fails at compile time when given to a second-order propagator.
+//!
+//! Every method also has an `_into` form that writes into a buffer the caller owns (already of
+//! the right shape). By default it stores the owned result there, which for runtime (`Dyn`)
+//! sizes allocates; implement the `_into` forms to make dynamic-size propagation, and the
+//! filter steps built on it, allocation-free. Whatever they write is shape-checked by the
+//! caller, so a wrong size is a typed error, not a wrong answer.
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
@@ -27,6 +33,18 @@ where
     fn difference(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
         a - b
     }
+
+    /// [`eval`](Self::eval) into `out`.
+    #[inline(always)]
+    fn eval_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
+        *out = self.eval(x);
+    }
+
+    /// [`difference`](Self::difference) into `out`.
+    #[inline(always)]
+    fn difference_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        *out = self.difference(a, b);
+    }
 }
 
 /// A [`VectorFunction`] with an analytic Jacobian.
@@ -36,6 +54,12 @@ where
 {
     /// J(x) = ∂g/∂x, an m × n matrix: row k is the gradient of gₖ.
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N>;
+
+    /// [`jacobian`](Self::jacobian) into `out`.
+    #[inline(always)]
+    fn jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
+        *out = self.jacobian(x);
+    }
 }
 
 /// A [`Differentiable`] function with analytic Hessians.
@@ -46,6 +70,19 @@ where
     /// Hₖ(x) = ∂²gₖ/∂x², the symmetric n × n Hessian of output component `k` (0-based), or
     /// `None` when gₖ is affine in x (its Hessian is zero), so no work is spent on it.
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>>;
+
+    /// [`hessian`](Self::hessian) into `out`: `true` if it wrote Hₖ, `false` if gₖ is affine
+    /// (then `out` is unspecified).
+    #[inline(always)]
+    fn hessian_into(&self, x: &OVector<T, N>, k: usize, out: &mut OMatrix<T, N, N>) -> bool {
+        match self.hessian(x, k) {
+            Some(h) => {
+                *out = h;
+                true
+            }
+            None => false,
+        }
+    }
 }
 
 /// Marker: g is affine, g(x) = J x + c with a constant Jacobian J, so every propagator is exact

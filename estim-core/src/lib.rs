@@ -14,10 +14,14 @@
 //!   Gaussian second order, unscented and sampled.
 //! - [`linear`]: linear-Gaussian models with constant matrices.
 //! - [`derivative`]: checks analytic Jacobians and Hessians against finite differences.
+//! - [`kernel`]: the dense products, Cholesky factorisation and triangular solves behind every
+//!   step: nalgebra for static sizes, faer (into preallocated buffers) for runtime sizes.
 //! - [`Error`]: the one error type.
 //!
 //! Sizes are generic: the same code serves `SVector<f64, 6>` (stack only, no heap allocation)
-//! and `DVector<f64>`. The allocator bounds nalgebra needs are gathered in [`Alloc`].
+//! and `DVector<f64>` (heavy kernels on faer; allocation-free once a [`Workspace`] is sized,
+//! for models that implement the `_into` methods). The allocator bounds nalgebra needs are
+//! gathered in [`Alloc`].
 #![deny(missing_docs)]
 
 pub mod alloc;
@@ -25,6 +29,7 @@ pub mod derivative;
 pub mod error;
 pub mod function;
 pub mod gaussian;
+pub mod kernel;
 pub mod linalg;
 pub mod linear;
 pub mod model;
@@ -42,7 +47,7 @@ pub use model::{
 };
 pub use propagate::{
     Affine, Linearized, MomentPropagator, Moments, Sampled, SecondOrder, SecondOrderGaussian,
-    Unscented,
+    Unscented, Workspace,
 };
 pub use scalar::Real;
 

@@ -10,6 +10,7 @@ use nalgebra::{
 };
 
 use crate::error::{Error, Quantity, Result, Stage};
+use crate::kernel::{CholeskyScratch, cholesky_in_place, is_static};
 use crate::scalar::{Real, real};
 
 /// Whether every entry of `m` is finite. A branch-free scan of the contiguous storage (it
@@ -107,6 +108,30 @@ where
             stage,
             quantity: Quantity::Covariance,
         })
+}
+
+/// [`psd_factor`] into `out`. For runtime sizes it first tries faer's Cholesky factorisation in
+/// place (allocation-free with a sized `scratch`), which succeeds for every positive definite C
+/// and gives the same lower factor up to round-off; only a semi-definite C falls back to
+/// [`psd_factor`] (which allocates). Static sizes use [`psd_factor`] directly.
+pub fn psd_factor_into<T: Real, D: Dim>(
+    c: &OMatrix<T, D, D>,
+    out: &mut OMatrix<T, D, D>,
+    scratch: &mut CholeskyScratch,
+    stage: Stage,
+) -> Result<()>
+where
+    DefaultAllocator: Allocator<D> + Allocator<D, D>,
+{
+    if !is_static::<D>() && out.shape() == c.shape() {
+        out.copy_from(c);
+        if cholesky_in_place(out, scratch) {
+            out.fill_upper_triangle(T::zero(), 1);
+            return Ok(());
+        }
+    }
+    *out = psd_factor(c, stage)?;
+    Ok(())
 }
 
 /// Largest |Cᵢᵢ| and the entry bound for a zero-variance direction: |cᵢⱼ|² ≤ dᵢ dⱼ, so with a

@@ -4,10 +4,16 @@
 //! v ~ N(0, R). Both implement every model capability (their Hessians are zero), so they work
 //! with every filter, including the linear Kalman filter. For matrices that depend on Δt,
 //! implement the model traits on your own type.
+//!
+//! Both implement the `_into` forms, so with `Dyn` sizes a filter step over them allocates
+//! nothing. Matrices whose shapes disagree with the state are reported by the filter as a
+//! [`DimensionMismatch`](crate::Error::DimensionMismatch) (or, for an inner dimension nalgebra
+//! cannot multiply, by nalgebra's panic).
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
+use crate::kernel::is_static;
 use crate::model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementJacobian, MeasurementModel,
     ProcessJacobian, ProcessModel,
@@ -41,6 +47,50 @@ where
     fn process_noise(&self, _: &OVector<T, N>, _: &OVector<T, U>, _dt: T) -> OMatrix<T, N, N> {
         self.noise.clone()
     }
+
+    #[inline(always)]
+    fn transition_into(
+        &self,
+        x: &OVector<T, N>,
+        u: &OVector<T, U>,
+        _dt: T,
+        out: &mut OVector<T, N>,
+    ) {
+        let (f, b) = (&self.transition, &self.input);
+        let fits = f.shape() == (out.nrows(), x.nrows()) && b.shape() == (out.nrows(), u.nrows());
+        // Static sizes: the operator form unrolls and allocates nothing anyway.
+        let dynamic = !(is_static::<N>() && is_static::<U>());
+        if dynamic && fits {
+            out.gemv(T::one(), f, x, T::zero());
+            out.gemv(T::one(), b, u, T::one());
+        } else {
+            *out = f * x + b * u;
+        }
+    }
+
+    #[inline(always)]
+    fn process_noise_into(
+        &self,
+        _: &OVector<T, N>,
+        _: &OVector<T, U>,
+        _dt: T,
+        out: &mut OMatrix<T, N, N>,
+    ) {
+        assign(out, &self.noise);
+    }
+}
+
+/// `out` ← `value`, copying in place when the shapes agree.
+#[inline(always)]
+fn assign<T: Real, R: Dim, C: Dim>(out: &mut OMatrix<T, R, C>, value: &OMatrix<T, R, C>)
+where
+    DefaultAllocator: nalgebra::allocator::Allocator<R, C>,
+{
+    if out.shape() == value.shape() {
+        out.copy_from(value);
+    } else {
+        *out = value.clone();
+    }
 }
 
 impl<T: Real, N: Dim, U: Dim> ProcessJacobian<T, N> for LinearProcess<T, N, U>
@@ -54,6 +104,17 @@ where
         _dt: T,
     ) -> OMatrix<T, N, N> {
         self.transition.clone()
+    }
+
+    #[inline(always)]
+    fn transition_jacobian_into(
+        &self,
+        _: &OVector<T, N>,
+        _: &OVector<T, U>,
+        _dt: T,
+        out: &mut OMatrix<T, N, N>,
+    ) {
+        assign(out, &self.transition);
     }
 }
 
@@ -85,6 +146,27 @@ where
     fn measurement_noise(&self, _: &OVector<T, N>) -> OMatrix<T, M, M> {
         self.noise.clone()
     }
+
+    #[inline(always)]
+    fn measure_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
+        let h = &self.observation;
+        let dynamic = !(is_static::<N>() && is_static::<M>());
+        if dynamic && h.shape() == (out.nrows(), x.nrows()) {
+            out.gemv(T::one(), h, x, T::zero());
+        } else {
+            *out = h * x;
+        }
+    }
+
+    #[inline(always)]
+    fn measurement_noise_into(&self, _: &OVector<T, N>, out: &mut OMatrix<T, M, M>) {
+        assign(out, &self.noise);
+    }
+
+    #[inline(always)]
+    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        crate::model::subtract_into(a, b, out);
+    }
 }
 
 impl<T: Real, N: Dim, M: Dim> MeasurementJacobian<T, N, M> for LinearMeasurement<T, N, M>
@@ -93,6 +175,11 @@ where
 {
     fn measurement_jacobian(&self, _: &OVector<T, N>) -> OMatrix<T, M, N> {
         self.observation.clone()
+    }
+
+    #[inline(always)]
+    fn measurement_jacobian_into(&self, _: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
+        assign(out, &self.observation);
     }
 }
 

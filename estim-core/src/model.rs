@@ -15,6 +15,14 @@
 //!
 //! [`Transition`] and [`Observation`] turn a model into a [`VectorFunction`] (with the same
 //! derivative capabilities), which is what the moment propagators consume.
+//!
+//! **Allocation-free dynamic sizes.** Every method has an `_into` form writing into a buffer
+//! the filter owns (already of the right shape). The defaults store the owned result, which for
+//! `Dyn` sizes allocates; a model meant for large runtime-sized states implements the `_into`
+//! forms (as [`LinearProcess`](crate::LinearProcess) and
+//! [`LinearMeasurement`](crate::LinearMeasurement) do), and then a filter step allocates
+//! nothing. What a model writes is shape-checked: a wrong size is a
+//! [`DimensionMismatch`](crate::Error::DimensionMismatch), never a wrong answer.
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
@@ -35,6 +43,24 @@ where
 
     /// Q(x, u, Δt): covariance of the additive process noise over the step.
     fn process_noise(&self, x: &OVector<T, N>, u: &Self::Input, dt: T) -> OMatrix<T, N, N>;
+
+    /// [`transition`](Self::transition) into `out`.
+    #[inline(always)]
+    fn transition_into(&self, x: &OVector<T, N>, u: &Self::Input, dt: T, out: &mut OVector<T, N>) {
+        *out = self.transition(x, u, dt);
+    }
+
+    /// [`process_noise`](Self::process_noise) into `out`.
+    #[inline(always)]
+    fn process_noise_into(
+        &self,
+        x: &OVector<T, N>,
+        u: &Self::Input,
+        dt: T,
+        out: &mut OMatrix<T, N, N>,
+    ) {
+        *out = self.process_noise(x, u, dt);
+    }
 }
 
 /// A [`ProcessModel`] with an analytic Jacobian.
@@ -44,6 +70,18 @@ where
 {
     /// F = ∂f/∂x at (x, u, Δt).
     fn transition_jacobian(&self, x: &OVector<T, N>, u: &Self::Input, dt: T) -> OMatrix<T, N, N>;
+
+    /// [`transition_jacobian`](Self::transition_jacobian) into `out`.
+    #[inline(always)]
+    fn transition_jacobian_into(
+        &self,
+        x: &OVector<T, N>,
+        u: &Self::Input,
+        dt: T,
+        out: &mut OMatrix<T, N, N>,
+    ) {
+        *out = self.transition_jacobian(x, u, dt);
+    }
 }
 
 /// A [`ProcessJacobian`] with analytic Hessians.
@@ -59,6 +97,35 @@ where
         dt: T,
         k: usize,
     ) -> Option<OMatrix<T, N, N>>;
+
+    /// [`transition_hessian`](Self::transition_hessian) into `out`: `true` if written,
+    /// `false` if fₖ is affine.
+    #[inline(always)]
+    fn transition_hessian_into(
+        &self,
+        x: &OVector<T, N>,
+        u: &Self::Input,
+        dt: T,
+        k: usize,
+        out: &mut OMatrix<T, N, N>,
+    ) -> bool {
+        store_hessian(self.transition_hessian(x, u, dt, k), out)
+    }
+}
+
+/// Stores `Some(h)` into `out` (`true`); `None` leaves it (`false`).
+#[inline(always)]
+fn store_hessian<T: Real, N: Dim>(h: Option<OMatrix<T, N, N>>, out: &mut OMatrix<T, N, N>) -> bool
+where
+    DefaultAllocator: Alloc<N>,
+{
+    match h {
+        Some(h) => {
+            *out = h;
+            true
+        }
+        None => false,
+    }
 }
 
 /// Marker: f is affine in x, f(x, u, Δt) = F(u, Δt) x + b(u, Δt), with F the
@@ -84,6 +151,18 @@ where
     ) -> Option<OMatrix<T, N, N>> {
         None
     }
+
+    #[inline(always)]
+    fn transition_hessian_into(
+        &self,
+        _: &OVector<T, N>,
+        _: &P::Input,
+        _: T,
+        _: usize,
+        _: &mut OMatrix<T, N, N>,
+    ) -> bool {
+        false
+    }
 }
 
 /// A measurement model z = h(x) + v, v ~ N(0, R(x)), with `M` components.
@@ -102,6 +181,26 @@ where
     fn residual(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
         a - b
     }
+
+    /// [`measure`](Self::measure) into `out`.
+    #[inline(always)]
+    fn measure_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
+        *out = self.measure(x);
+    }
+
+    /// [`measurement_noise`](Self::measurement_noise) into `out`.
+    #[inline(always)]
+    fn measurement_noise_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, M>) {
+        *out = self.measurement_noise(x);
+    }
+
+    /// [`residual`](Self::residual) into `out`. The default stores `residual(a, b)`; a model
+    /// that keeps the default subtraction can make it allocation-free for `Dyn` sizes with
+    /// `out.copy_from(a); *out -= b;`.
+    #[inline(always)]
+    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        *out = self.residual(a, b);
+    }
 }
 
 /// A [`MeasurementModel`] with an analytic Jacobian.
@@ -111,6 +210,12 @@ where
 {
     /// H = ∂h/∂x at x.
     fn measurement_jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N>;
+
+    /// [`measurement_jacobian`](Self::measurement_jacobian) into `out`.
+    #[inline(always)]
+    fn measurement_jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
+        *out = self.measurement_jacobian(x);
+    }
 }
 
 /// A [`MeasurementJacobian`] with analytic Hessians.
@@ -120,6 +225,18 @@ where
 {
     /// ∂²hₖ/∂x² of measurement component `k`, or `None` when hₖ is affine in x.
     fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>>;
+
+    /// [`measurement_hessian`](Self::measurement_hessian) into `out`: `true` if written,
+    /// `false` if hₖ is affine.
+    #[inline(always)]
+    fn measurement_hessian_into(
+        &self,
+        x: &OVector<T, N>,
+        k: usize,
+        out: &mut OMatrix<T, N, N>,
+    ) -> bool {
+        store_hessian(self.measurement_hessian(x, k), out)
+    }
 }
 
 /// Marker: h is affine in x, h(x) = H x + c, with H the
@@ -137,6 +254,16 @@ where
 {
     fn measurement_hessian(&self, _: &OVector<T, N>, _: usize) -> Option<OMatrix<T, N, N>> {
         None
+    }
+
+    #[inline(always)]
+    fn measurement_hessian_into(
+        &self,
+        _: &OVector<T, N>,
+        _: usize,
+        _: &mut OMatrix<T, N, N>,
+    ) -> bool {
+        false
     }
 }
 
@@ -165,6 +292,33 @@ where
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, N> {
         self.model.transition(x, self.input, self.dt)
     }
+
+    #[inline(always)]
+    fn eval_into(&self, x: &OVector<T, N>, out: &mut OVector<T, N>) {
+        self.model.transition_into(x, self.input, self.dt, out);
+    }
+
+    #[inline(always)]
+    fn difference_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
+        subtract_into(a, b, out);
+    }
+}
+
+/// out ← a − b without allocating (`out` takes a's shape if it differs).
+#[inline(always)]
+pub(crate) fn subtract_into<T: Real, D: Dim>(
+    a: &OVector<T, D>,
+    b: &OVector<T, D>,
+    out: &mut OVector<T, D>,
+) where
+    DefaultAllocator: Alloc<D>,
+{
+    if out.shape() == a.shape() {
+        out.copy_from(a);
+    } else {
+        *out = a.clone();
+    }
+    *out -= b;
 }
 
 impl<P, U, T, N> Differentiable<T, N, N> for Transition<'_, P, U, T>
@@ -177,6 +331,12 @@ where
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, N, N> {
         self.model.transition_jacobian(x, self.input, self.dt)
     }
+
+    #[inline(always)]
+    fn jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, N, N>) {
+        self.model
+            .transition_jacobian_into(x, self.input, self.dt, out);
+    }
 }
 
 impl<P, U, T, N> TwiceDifferentiable<T, N, N> for Transition<'_, P, U, T>
@@ -188,6 +348,12 @@ where
 {
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.transition_hessian(x, self.input, self.dt, k)
+    }
+
+    #[inline(always)]
+    fn hessian_into(&self, x: &OVector<T, N>, k: usize, out: &mut OMatrix<T, N, N>) -> bool {
+        self.model
+            .transition_hessian_into(x, self.input, self.dt, k, out)
     }
 }
 
@@ -219,6 +385,16 @@ where
     fn difference(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
         self.model.residual(a, b)
     }
+
+    #[inline(always)]
+    fn eval_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
+        self.model.measure_into(x, out);
+    }
+
+    #[inline(always)]
+    fn difference_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        self.model.residual_into(a, b, out);
+    }
 }
 
 impl<H, T, N, M> Differentiable<T, N, M> for Observation<'_, H>
@@ -232,6 +408,11 @@ where
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
         self.model.measurement_jacobian(x)
     }
+
+    #[inline(always)]
+    fn jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
+        self.model.measurement_jacobian_into(x, out);
+    }
 }
 
 impl<H, T, N, M> TwiceDifferentiable<T, N, M> for Observation<'_, H>
@@ -244,6 +425,11 @@ where
 {
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.measurement_hessian(x, k)
+    }
+
+    #[inline(always)]
+    fn hessian_into(&self, x: &OVector<T, N>, k: usize, out: &mut OMatrix<T, N, N>) -> bool {
+        self.model.measurement_hessian_into(x, k, out)
     }
 }
 

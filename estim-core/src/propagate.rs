@@ -23,8 +23,9 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
 use crate::error::{Quantity, Result, Stage};
+use crate::function::VectorFunction;
 use crate::gaussian::Gaussian;
-use crate::linalg::{ensure_finite, symmetrize};
+use crate::linalg::{ensure_finite, ensure_shape, symmetrize};
 use crate::scalar::Real;
 
 mod affine;
@@ -32,12 +33,14 @@ mod linearized;
 mod sampled;
 mod second_order;
 mod unscented;
+mod workspace;
 
 pub use affine::Affine;
 pub use linearized::Linearized;
 pub use sampled::Sampled;
 pub use second_order::{SecondOrder, SecondOrderGaussian};
 pub use unscented::Unscented;
+pub use workspace::Workspace;
 
 /// E\[y\] and cov(y), as returned by
 /// [`MomentPropagator::propagate_mean_covariance`].
@@ -57,57 +60,230 @@ where
     pub cross_covariance: OMatrix<T, N, M>,
 }
 
+impl<T: Real, N: Dim, M: Dim> Moments<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// Zeros of the shapes for a map from `n` to `m` dimensions: a buffer for
+    /// [`MomentPropagator::propagate_into`].
+    pub fn zeros(n: N, m: M) -> Self {
+        Self {
+            mean: OVector::zeros_generic(m, nalgebra::U1),
+            covariance: OMatrix::zeros_generic(m, m),
+            cross_covariance: OMatrix::zeros_generic(n, m),
+        }
+    }
+}
+
 /// Computes the [`Moments`] of y = g(x), x ~ N(μ, C).
 ///
 /// Generic over the function type `G`, so each propagator bounds only the capability it
 /// needs: `Linearized` implements this for every `G: Differentiable`, `Unscented` for every
 /// `G: VectorFunction`.
-pub trait MomentPropagator<T: Real, N: Dim, M: Dim, G: ?Sized>
+///
+/// The `_into` methods are the primitives: they write into caller-owned buffers and keep their
+/// scratch in a [`Workspace`], so repeated propagation with runtime sizes allocates nothing
+/// after the first call (given a function that implements the `_into` forms of
+/// [`VectorFunction`]). The owned methods wrap them for one-off use.
+pub trait MomentPropagator<T: Real, N: Dim, M: Dim, G: VectorFunction<T, N, M> + ?Sized>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     /// The moments of g(x) for x with mean `mean` and covariance `covariance` (symmetric
-    /// positive semi-definite; a propagator that factorises it reports when it is not).
+    /// positive semi-definite; a propagator that factorises it reports when it is not), written
+    /// into `out`, for the dimensions n and m of `workspace`.
     ///
-    /// Errors: a non-finite result, a runtime shape mismatch between g and x, or a
-    /// covariance that cannot be factorised.
+    /// Errors: a non-finite result, a shape mismatch between g, x and the workspace's
+    /// dimensions, or a covariance that cannot be factorised. On error `out` is unspecified.
+    fn propagate_into(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+        out: &mut Moments<T, N, M>,
+        workspace: &mut Workspace<T, N, M>,
+    ) -> Result<()>;
+
+    /// E\[y\] and cov(y) only, for callers that do not need cov(x, y) (a filter's
+    /// prediction). The default calls [`propagate_into`](Self::propagate_into) with a fresh
+    /// [`Moments`] buffer; the built-in propagators skip the cross-covariance instead.
+    fn propagate_mean_covariance_into(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+        out_mean: &mut OVector<T, M>,
+        out_covariance: &mut OMatrix<T, M, M>,
+        workspace: &mut Workspace<T, N, M>,
+    ) -> Result<()> {
+        let mut out = Moments::zeros(workspace.n, workspace.m);
+        self.propagate_into(mean, covariance, g, &mut out, workspace)?;
+        *out_mean = out.mean;
+        *out_covariance = out.covariance;
+        Ok(())
+    }
+
+    /// The moments of g(x) for x with mean `mean` and covariance `covariance`: see
+    /// [`propagate_into`](Self::propagate_into).
     fn propagate(
         &self,
         mean: &OVector<T, N>,
         covariance: &OMatrix<T, N, N>,
         g: &G,
-    ) -> Result<Moments<T, N, M>>;
+    ) -> Result<Moments<T, N, M>> {
+        let (n, m) = dimensions(mean, g);
+        let mut out = Moments::zeros(n, m);
+        self.propagate_into(mean, covariance, g, &mut out, &mut Workspace::new(n, m))?;
+        Ok(out)
+    }
 
     /// [`propagate`](Self::propagate) for a [`Gaussian`].
     fn propagate_gaussian(&self, x: &Gaussian<T, N>, g: &G) -> Result<Moments<T, N, M>> {
         self.propagate(x.mean(), x.covariance(), g)
     }
 
-    /// E\[y\] and cov(y) only, for callers that do not need cov(x, y) (a filter's prediction).
-    /// The default is [`propagate`](Self::propagate) without the cross-covariance; propagators
-    /// that would accumulate it separately (the unscented one) skip that work.
-    #[inline(always)]
+    /// E\[y\] and cov(y) only: see
+    /// [`propagate_mean_covariance_into`](Self::propagate_mean_covariance_into).
     fn propagate_mean_covariance(
         &self,
         mean: &OVector<T, N>,
         covariance: &OMatrix<T, N, N>,
         g: &G,
     ) -> Result<MeanCovariance<T, M>> {
-        self.propagate(mean, covariance, g)
-            .map(|m| (m.mean, m.covariance))
+        let (n, m) = dimensions(mean, g);
+        let mut out_mean = OVector::zeros_generic(m, nalgebra::U1);
+        let mut out_covariance = OMatrix::zeros_generic(m, m);
+        self.propagate_mean_covariance_into(
+            mean,
+            covariance,
+            g,
+            &mut out_mean,
+            &mut out_covariance,
+            &mut Workspace::new(n, m),
+        )?;
+        Ok((out_mean, out_covariance))
     }
 }
 
-/// Symmetrises the covariance and checks the result is finite.
-#[inline(always)]
-fn finish<T: Real, N: Dim, M: Dim>(mut m: Moments<T, N, M>) -> Result<Moments<T, N, M>>
+/// n from x, and m from the type or, for a runtime size, from g(x).
+fn dimensions<T: Real, N: Dim, M: Dim, G: VectorFunction<T, N, M> + ?Sized>(
+    x: &OVector<T, N>,
+    g: &G,
+) -> (N, M)
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    symmetrize(&mut m.covariance);
-    let stage = Stage::Propagation;
-    ensure_finite(&m.mean, stage, Quantity::Mean)?;
-    ensure_finite(&m.covariance, stage, Quantity::Covariance)?;
-    ensure_finite(&m.cross_covariance, stage, Quantity::CrossCovariance)?;
-    Ok(m)
+    let m = M::try_to_usize().unwrap_or_else(|| g.eval(x).nrows());
+    (x.shape_generic().0, M::from_usize(m))
 }
+
+/// Checks that x and C have the workspace's n, and resets output buffers of the wrong shape
+/// (left by an earlier failure), so the kernels only ever see agreeing shapes.
+#[inline(always)]
+fn check_inputs<T: Real, N: Dim, M: Dim>(
+    mean: &OVector<T, N>,
+    covariance: &OMatrix<T, N, N>,
+    out_mean: &mut OVector<T, M>,
+    out_covariance: &mut OMatrix<T, M, M>,
+    cross: Option<&mut OMatrix<T, N, M>>,
+    workspace: &Workspace<T, N, M>,
+) -> Result<()>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let (n, m) = (workspace.n, workspace.m);
+    let stage = Stage::Propagation;
+    ensure_shape(mean, n.value(), 1, stage, Quantity::Mean)?;
+    ensure_shape(
+        covariance,
+        n.value(),
+        n.value(),
+        stage,
+        Quantity::Covariance,
+    )?;
+    if out_covariance.shape() != (m.value(), m.value()) {
+        *out_covariance = OMatrix::zeros_generic(m, m);
+    }
+    if out_mean.shape() != (m.value(), 1) {
+        *out_mean = OVector::zeros_generic(m, nalgebra::U1);
+    }
+    if let Some(cross) = cross
+        && cross.shape() != (n.value(), m.value())
+    {
+        *cross = OMatrix::zeros_generic(n, m);
+    }
+    Ok(())
+}
+
+/// Symmetrises the covariance and checks the results are finite.
+#[inline(always)]
+fn finish<T: Real, N: Dim, M: Dim>(
+    mean: &OVector<T, M>,
+    covariance: &mut OMatrix<T, M, M>,
+    cross: Option<&OMatrix<T, N, M>>,
+) -> Result<()>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    symmetrize(covariance);
+    let stage = Stage::Propagation;
+    ensure_finite(mean, stage, Quantity::Mean)?;
+    ensure_finite(covariance, stage, Quantity::Covariance)?;
+    if let Some(cross) = cross {
+        ensure_finite(cross, stage, Quantity::CrossCovariance)?;
+    }
+    Ok(())
+}
+
+/// Implements [`MomentPropagator`]'s two `_into` methods for a propagator with an inherent
+/// `moments_into(mean, covariance, g, out_mean, out_covariance, cross: Option<..>, workspace)`.
+macro_rules! impl_propagator_via_moments_into {
+    () => {
+        #[inline(always)]
+        fn propagate_into(
+            &self,
+            mean: &OVector<T, N>,
+            covariance: &OMatrix<T, N, N>,
+            g: &G,
+            out: &mut super::Moments<T, N, M>,
+            workspace: &mut super::Workspace<T, N, M>,
+        ) -> Result<()> {
+            let super::Moments {
+                mean: out_mean,
+                covariance: out_covariance,
+                cross_covariance,
+            } = out;
+            self.moments_into(
+                mean,
+                covariance,
+                g,
+                out_mean,
+                out_covariance,
+                Some(cross_covariance),
+                workspace,
+            )
+        }
+
+        #[inline(always)]
+        fn propagate_mean_covariance_into(
+            &self,
+            mean: &OVector<T, N>,
+            covariance: &OMatrix<T, N, N>,
+            g: &G,
+            out_mean: &mut OVector<T, M>,
+            out_covariance: &mut OMatrix<T, M, M>,
+            workspace: &mut super::Workspace<T, N, M>,
+        ) -> Result<()> {
+            self.moments_into(
+                mean,
+                covariance,
+                g,
+                out_mean,
+                out_covariance,
+                None,
+                workspace,
+            )
+        }
+    };
+}
+use impl_propagator_via_moments_into;

@@ -7,11 +7,13 @@ use estim_core::propagate::{
 };
 use estim_core::{
     AffineFunction, Alloc, Error, Gaussian, LinearMeasurementModel, LinearProcessModel,
-    MeasurementModel, Observation, ProcessModel, Quantity, Real, Stage, Transition, error::Result,
+    MeasurementModel, Observation, ProcessModel, Quantity, Real, Stage, Transition, VectorFunction,
+    error::Result,
 };
 
 use crate::correlated::Decorrelated;
 use crate::report::UpdateReport;
+use crate::scratch::{PredictScratch, ScratchCache, UpdateScratch};
 use crate::traits::{Estimator, Predict, PredictCorrelated, Update};
 use crate::update::{self, CovarianceUpdate, UpdateSettings};
 
@@ -27,8 +29,21 @@ use crate::update::{self, CovarianceUpdate, UpdateSettings};
 /// [`GaussianSecondOrderEkf`], [`Ukf`]. Each requires of the model exactly what its propagator
 /// requires of a function; a model lacking it is a compile error.
 ///
-/// Static sizes allocate nothing per step. Every step computes the new estimate aside and
-/// commits it only when all checks pass, so an error leaves the filter unchanged.
+/// Every step computes the new estimate aside and commits it only when all checks pass, so an
+/// error leaves the filter unchanged.
+///
+/// # Static or dynamic sizes
+///
+/// The same code runs on nalgebra's static sizes (`SVector<f64, 6>`, on the stack) and runtime
+/// sizes (`DVector<f64>`); switching is changing the types. Static sizes allocate nothing. With
+/// runtime sizes the heavy kernels (products, Cholesky, triangular solves) run on faer in
+/// buffers the filter keeps: the first prediction, and the first update with each measurement
+/// length, size them; after that a step allocates nothing, given models that implement the
+/// `_into` methods (as [`LinearProcess`](estim_core::LinearProcess) and
+/// [`LinearMeasurement`](estim_core::LinearMeasurement) do) and
+/// [`update_into`](Update::update_into) with a reused report. Which to pick, measured
+/// (BENCHMARKS.md, "Static or dynamic"): static sizes up to about n = 24; runtime sizes from
+/// about n = 32, where nalgebra's static matrices stop fitting the registers and caches well.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GaussianFilter<T: Real, N: Dim, Pr>
 where
@@ -38,6 +53,7 @@ where
     covariance: OMatrix<T, N, N>,
     propagator: Pr,
     settings: UpdateSettings<T>,
+    scratch: ScratchCache<T>,
 }
 
 /// The linear Kalman filter (Kalman 1960): exact for linear models and accepts only those
@@ -92,6 +108,7 @@ where
             covariance,
             propagator,
             settings: UpdateSettings::new(),
+            scratch: ScratchCache::default(),
         }
     }
 
@@ -138,44 +155,70 @@ where
     }
 
     fn reset(&mut self, prior: Gaussian<T, N>) {
+        let n = self.state.nrows();
         (self.state, self.covariance) = prior.into_parts();
+        if self.state.nrows() != n {
+            self.scratch.clear();
+        }
     }
 }
 
-/// Moments of `g` plus additive noise `q`: the predicted estimate, not yet committed.
+/// The predicted estimate through `g` plus additive noise: `fill_noise` writes Q into its
+/// buffer. The result is left in `scratch.state` and `scratch.covariance`, not yet committed.
 #[inline(always)]
 pub(crate) fn predicted<T, N, Pr, G>(
     propagator: &Pr,
     state: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
     g: &G,
-    q: OMatrix<T, N, N>,
-) -> Result<update::Estimate<T, N>>
+    fill_noise: impl FnOnce(&mut OMatrix<T, N, N>),
+    scratch: &mut PredictScratch<T, N>,
+) -> Result<()>
 where
     T: Real,
     N: Dim,
+    G: VectorFunction<T, N, N>,
     Pr: MomentPropagator<T, N, N, G>,
     DefaultAllocator: Alloc<N>,
 {
     let stage = Stage::Prediction;
     let n = state.nrows();
-    ensure_shape(&q, n, n, stage, Quantity::ProcessNoise)?;
+    let PredictScratch {
+        propagation,
+        state: mean,
+        covariance: p,
+        noise: q,
+    } = scratch;
+    fill_noise(q);
+    ensure_shape(q, n, n, stage, Quantity::ProcessNoise)?;
     // The propagator checks its own outputs; Q is checked through P⁻ = cov f + Q, and only on
     // failure is it examined to name the culprit.
-    let (mean, predicted_covariance) =
-        propagator.propagate_mean_covariance(state, covariance, g)?;
-    ensure_shape(&mean, n, 1, stage, Quantity::Mean)?;
-    let mut p = predicted_covariance + &q;
-    symmetrize(&mut p);
-    if !all_finite(&p) {
-        let quantity = if all_finite(&q) {
+    propagator.propagate_mean_covariance_into(state, covariance, g, mean, p, propagation)?;
+    *p += &*q;
+    symmetrize(p);
+    if !all_finite(p) {
+        let quantity = if all_finite(q) {
             Quantity::Covariance
         } else {
             Quantity::ProcessNoise
         };
         return Err(Error::NonFinite { stage, quantity });
     }
-    Ok((mean, p))
+    Ok(())
+}
+
+/// Makes `scratch`'s estimate the filter's, swapping buffers (no copy for runtime sizes).
+#[inline(always)]
+pub(crate) fn commit<T: Real, N: Dim>(
+    state: &mut OVector<T, N>,
+    covariance: &mut OMatrix<T, N, N>,
+    new_state: &mut OVector<T, N>,
+    new_covariance: &mut OMatrix<T, N, N>,
+) where
+    DefaultAllocator: Alloc<N>,
+{
+    core::mem::swap(state, new_state);
+    core::mem::swap(covariance, new_covariance);
 }
 
 #[inline(always)]
@@ -201,12 +244,25 @@ where
     #[inline(always)]
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
         ensure_time_step(dt)?;
-        let q = model.process_noise(&self.state, input, dt);
-        let map = Transition::new(model, input, dt);
-        let (x, p) = predicted(&self.propagator, &self.state, &self.covariance, &map, q)?;
-        self.state = x;
-        self.covariance = p;
-        Ok(())
+        let Self {
+            state,
+            covariance,
+            propagator,
+            scratch,
+            ..
+        } = self;
+        scratch.predict(state.shape_generic().0, |scratch| {
+            let map = Transition::new(model, input, dt);
+            let noise = |q: &mut OMatrix<T, N, N>| model.process_noise_into(state, input, dt, q);
+            predicted(propagator, state, covariance, &map, noise, scratch)?;
+            commit(
+                state,
+                covariance,
+                &mut scratch.state,
+                &mut scratch.covariance,
+            );
+            Ok(())
+        })
     }
 }
 
@@ -220,6 +276,8 @@ where
     Pr: for<'a> MomentPropagator<T, N, N, Decorrelated<'a, P, P::Input, H, T, N, M>>,
     DefaultAllocator: Alloc<N, M>,
 {
+    /// Runs through the same prediction code; building the decorrelated map allocates for
+    /// runtime sizes (it solves with R once per call).
     #[inline(always)]
     fn predict_correlated(
         &mut self,
@@ -231,23 +289,31 @@ where
         cross: &OMatrix<T, N, M>,
     ) -> Result<()> {
         ensure_time_step(dt)?;
-        let (map, q_star) =
-            Decorrelated::new(process, input, dt, measurement, z, cross, &self.state)?;
-        let (x, p) = predicted(
-            &self.propagator,
-            &self.state,
-            &self.covariance,
-            &map,
-            q_star,
-        )?;
-        self.state = x;
-        self.covariance = p;
-        Ok(())
+        let Self {
+            state,
+            covariance,
+            propagator,
+            scratch,
+            ..
+        } = self;
+        let (map, q_star) = Decorrelated::new(process, input, dt, measurement, z, cross, state)?;
+        scratch.predict(state.shape_generic().0, |scratch| {
+            let noise = |q: &mut OMatrix<T, N, N>| *q = q_star;
+            predicted(propagator, state, covariance, &map, noise, scratch)?;
+            commit(
+                state,
+                covariance,
+                &mut scratch.state,
+                &mut scratch.covariance,
+            );
+            Ok(())
+        })
     }
 }
 
 /// The measurement update of any filter whose predicted-measurement moments come from
-/// `propagator` at (`state`, `covariance`): returns the uncommitted posterior.
+/// `propagator` at (`state`, `covariance`): the report goes to `report`, the posterior to
+/// `scratch.state` and `scratch.covariance` (uncommitted); `Ok(false)` if gated.
 #[inline(always)]
 pub(crate) fn measurement_update<T, N, M, Pr, H>(
     propagator: &Pr,
@@ -256,7 +322,9 @@ pub(crate) fn measurement_update<T, N, M, Pr, H>(
     model: &H,
     z: &OVector<T, M>,
     settings: UpdateSettings<T>,
-) -> Result<update::Posterior<T, N, M>>
+    scratch: &mut UpdateScratch<T, N, M>,
+    report: &mut UpdateReport<T, M>,
+) -> Result<bool>
 where
     T: Real,
     N: Dim,
@@ -265,17 +333,44 @@ where
     Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
     DefaultAllocator: Alloc<N, M>,
 {
-    let predicted = propagator.propagate(state, covariance, &Observation::new(model))?;
-    ensure_shape(
-        z,
-        predicted.mean.nrows(),
-        1,
-        Stage::Update,
-        Quantity::Measurement,
-    )?;
-    let innovation = model.residual(z, &predicted.mean);
-    let noise = model.measurement_noise(state);
-    update::apply(state, covariance, predicted, noise, innovation, settings)
+    let m = z.nrows();
+    propagator
+        .propagate_into(
+            state,
+            covariance,
+            &Observation::new(model),
+            &mut scratch.predicted,
+            &mut scratch.propagation,
+        )
+        .map_err(|e| measurement_length_error(e, m))?;
+    report.fit(z.shape_generic().0);
+    model.residual_into(z, &scratch.predicted.mean, &mut report.innovation);
+    model.measurement_noise_into(state, &mut scratch.noise);
+    update::apply(state, covariance, scratch, report, settings)
+}
+
+/// The buffers are sized from z, so a model whose h(x) has another length fails in the
+/// propagation, whose first check is h(x̂)'s length: that is z having the wrong length for the
+/// model, and is reported so.
+fn measurement_length_error(e: Error, z_len: usize) -> Error {
+    match e {
+        Error::DimensionMismatch {
+            stage: Stage::Propagation,
+            quantity: Quantity::FunctionValue,
+            expected_rows,
+            found_rows,
+            found_cols: 1,
+            ..
+        } if expected_rows == z_len => Error::DimensionMismatch {
+            stage: Stage::Update,
+            quantity: Quantity::Measurement,
+            expected_rows: found_rows,
+            expected_cols: 1,
+            found_rows: z_len,
+            found_cols: 1,
+        },
+        e => e,
+    }
 }
 
 impl<T, N, M, Pr, H> Update<T, N, M, H> for GaussianFilter<T, N, Pr>
@@ -288,20 +383,34 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     #[inline(always)]
-    fn update(&mut self, model: &H, z: &OVector<T, M>) -> Result<UpdateReport<T, M>> {
-        let (posterior, report) = measurement_update(
-            &self.propagator,
-            &self.state,
-            &self.covariance,
-            model,
-            z,
-            self.settings,
-        )?;
-        if let Some((x, p)) = posterior {
-            self.state = x;
-            self.covariance = p;
-        }
-        Ok(report)
+    fn update_into(
+        &mut self,
+        model: &H,
+        z: &OVector<T, M>,
+        report: &mut UpdateReport<T, M>,
+    ) -> Result<()> {
+        let Self {
+            state,
+            covariance,
+            propagator,
+            settings,
+            scratch,
+        } = self;
+        let (n, m) = (state.shape_generic().0, z.shape_generic().0);
+        scratch.update(n, m, |scratch| {
+            let applied = measurement_update(
+                propagator, state, covariance, model, z, *settings, scratch, report,
+            )?;
+            if applied {
+                commit(
+                    state,
+                    covariance,
+                    &mut scratch.state,
+                    &mut scratch.covariance,
+                );
+            }
+            Ok(())
+        })
     }
 }
 

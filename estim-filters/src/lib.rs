@@ -56,6 +56,7 @@ pub mod monte_carlo;
 pub mod proptest_support;
 mod report;
 mod rls;
+mod scratch;
 mod traits;
 pub mod update;
 

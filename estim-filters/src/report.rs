@@ -36,6 +36,26 @@ impl<T: Real, M: Dim> UpdateReport<T, M>
 where
     DefaultAllocator: Allocator<M> + Allocator<M, M>,
 {
+    /// A report for `m` measurement components, all zero: a buffer for
+    /// [`Update::update_into`](crate::Update::update_into).
+    pub fn zeros(m: M) -> Self {
+        Self {
+            innovation: OVector::zeros_generic(m, estim_core::nalgebra::U1),
+            innovation_covariance: OMatrix::zeros_generic(m, m),
+            nis: T::zero(),
+            log_likelihood: T::zero(),
+            outcome: UpdateOutcome::Applied,
+        }
+    }
+
+    /// Gives the buffers `m` components (reallocating only if they have another size).
+    #[inline(always)]
+    pub(crate) fn fit(&mut self, m: M) {
+        if self.innovation.nrows() != m.value() || self.innovation_covariance.nrows() != m.value() {
+            *self = Self::zeros(m);
+        }
+    }
+
     /// `true` unless the update was gated.
     pub fn applied(&self) -> bool {
         self.outcome == UpdateOutcome::Applied

@@ -4,8 +4,9 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::Linearized;
 use estim_core::{Alloc, Error, Gaussian, MeasurementJacobian, Parameter, Real, error::Result};
 
-use crate::gaussian_filter::measurement_update;
+use crate::gaussian_filter::{commit, measurement_update};
 use crate::report::UpdateReport;
+use crate::scratch::ScratchCache;
 use crate::traits::{Estimator, Update};
 use crate::update::{CovarianceUpdate, UpdateSettings};
 
@@ -40,6 +41,7 @@ where
     covariance: OMatrix<T, N, N>,
     forgetting: T,
     settings: UpdateSettings<T>,
+    scratch: ScratchCache<T>,
 }
 
 impl<T: Real, N: Dim> FadingMemoryRls<T, N>
@@ -61,6 +63,7 @@ where
             covariance,
             forgetting,
             settings: UpdateSettings::new(),
+            scratch: ScratchCache::default(),
         })
     }
 
@@ -95,7 +98,11 @@ where
     }
 
     fn reset(&mut self, prior: Gaussian<T, N>) {
+        let n = self.state.nrows();
         (self.state, self.covariance) = prior.into_parts();
+        if self.state.nrows() != n {
+            self.scratch.clear();
+        }
     }
 }
 
@@ -108,14 +115,49 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     #[inline(always)]
-    fn update(&mut self, model: &H, z: &OVector<T, M>) -> Result<UpdateReport<T, M>> {
-        let inflated = &self.covariance / self.forgetting;
-        let (posterior, report) =
-            measurement_update(&Linearized, &self.state, &inflated, model, z, self.settings)?;
-        if let Some((x, p)) = posterior {
-            self.state = x;
-            self.covariance = p;
-        }
-        Ok(report)
+    fn update_into(
+        &mut self,
+        model: &H,
+        z: &OVector<T, M>,
+        report: &mut UpdateReport<T, M>,
+    ) -> Result<()> {
+        let Self {
+            state,
+            covariance,
+            forgetting,
+            settings,
+            scratch,
+        } = self;
+        let (n, m) = (state.shape_generic().0, z.shape_generic().0);
+        scratch.update(n, m, |scratch| {
+            // γ⁻¹P in its own buffer, taken out of the scratch while the update borrows it.
+            let mut inflated = scratch
+                .inflated
+                .take()
+                .filter(|p| p.shape() == covariance.shape())
+                .unwrap_or_else(|| covariance.clone());
+            inflated.copy_from(covariance);
+            inflated /= *forgetting;
+            let applied = measurement_update(
+                &Linearized,
+                state,
+                &inflated,
+                model,
+                z,
+                *settings,
+                scratch,
+                report,
+            );
+            scratch.inflated = Some(inflated);
+            if applied? {
+                commit(
+                    state,
+                    covariance,
+                    &mut scratch.state,
+                    &mut scratch.covariance,
+                );
+            }
+            Ok(())
+        })
     }
 }

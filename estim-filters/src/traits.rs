@@ -49,7 +49,26 @@ where
     /// Returns the update report (innovation, its covariance, NIS, log-likelihood); if a gate
     /// is set and the NIS exceeds it, the report says [`Gated`](crate::UpdateOutcome::Gated)
     /// and the estimate is unchanged. On error the filter is left exactly as it was.
-    fn update(&mut self, model: &H, z: &OVector<T, M>) -> Result<UpdateReport<T, M>>;
+    ///
+    /// The report is a new value each call; with runtime sizes that is the one allocation of
+    /// the step, which [`update_into`](Self::update_into) avoids.
+    #[inline(always)]
+    fn update(&mut self, model: &H, z: &OVector<T, M>) -> Result<UpdateReport<T, M>> {
+        let mut report = UpdateReport::zeros(z.shape_generic().0);
+        self.update_into(model, z, &mut report)?;
+        Ok(report)
+    }
+
+    /// [`update`](Self::update), writing the report into `report` and reusing its buffers
+    /// (resized if they do not have z's length; use one report per measurement size). With
+    /// runtime sizes and a model implementing the `_into` methods, a step then allocates
+    /// nothing. On error the filter is left exactly as it was and `report` is unspecified.
+    fn update_into(
+        &mut self,
+        model: &H,
+        z: &OVector<T, M>,
+        report: &mut UpdateReport<T, M>,
+    ) -> Result<()>;
 }
 
 /// The time update when the process noise wₖ of this step is correlated with the noise vₖ of

@@ -5,24 +5,28 @@
 //!
 //! ```text
 //! S  = cov(ẑ) + R                       (factorised by Cholesky, S = L Lᵀ; never inverted)
-//! K  = Pₓᵤ S⁻¹                          (solved: S Kᵀ = Pₓᵤᵀ)
+//! K  = Pₓᵤ S⁻¹                          (solved: Kᵀ = L⁻ᵀ L⁻¹ Pₓᵤᵀ)
 //! x⁺ = x + K ν
-//! P⁺ = P − K Pₓᵤᵀ − Pₓᵤ Kᵀ + K S Kᵀ     (Joseph)
-//! NIS = νᵀ S⁻¹ ν,   ln p(z) = −½ (NIS + 2 Σ ln Lᵢᵢ + m ln 2π)
+//! P⁺ = P − K Pₓᵤᵀ − Pₓᵤ Kᵀ + K S Kᵀ     (Joseph; computed as P + A Kᵀ + K Aᵀ, A = ½ K S − Pₓᵤ)
+//! NIS = |L⁻¹ ν|²,   ln p(z) = −½ (NIS + 2 Σ ln Lᵢᵢ + m ln 2π)
 //! ```
 //!
 //! For a linear(ised) model, Pₓᵤ = P Hᵀ and S = H P Hᵀ + R, and the Joseph line expands to the
 //! familiar (I − K H) P (I − K H)ᵀ + K R Kᵀ. Like it, it is insensitive to first-order errors
 //! in K: with K = K* + δK it equals P − K* S K*ᵀ + δK S δKᵀ. But it needs no H, so it serves
 //! the unscented filter too.
+//!
+//! The products, the factorisation and the solves go through [`estim_core::kernel`]: nalgebra
+//! on the stack for static sizes, faer in the filter's preallocated buffers for runtime sizes.
 
+use estim_core::kernel::{self, Accum};
 use estim_core::linalg::{all_finite, ensure_finite, ensure_shape, symmetrize};
-use estim_core::nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, OVector};
-use estim_core::propagate::Moments;
+use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::scalar::real;
 use estim_core::{Alloc, Error, Parameter, Quantity, Real, Stage, error::Result};
 
 use crate::report::{UpdateOutcome, UpdateReport};
+use crate::scratch::UpdateScratch;
 
 /// How the covariance is updated after a measurement.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -72,12 +76,6 @@ impl<T: Real> UpdateSettings<T> {
     }
 }
 
-/// A state estimate and its covariance, computed but not yet committed to a filter.
-pub(crate) type Estimate<T, N> = (OVector<T, N>, OMatrix<T, N, N>);
-
-/// The result of [`apply`]: the new estimate (`None` if gated) and the report.
-pub(crate) type Posterior<T, N, M> = (Option<Estimate<T, N>>, UpdateReport<T, M>);
-
 /// ln det S = 2 Σ ln Lᵢᵢ from the Cholesky factor: one logarithm of the product of the diagonal
 /// when that product is comfortably normal (the common case), else the sum of logarithms (no
 /// overflow or underflow for large or badly scaled S).
@@ -99,33 +97,51 @@ where
 
 /// The Kalman update shared by every filter: see the [module docs](self).
 ///
-/// `innovation` is z ⊖ ẑ (the caller applies the model's residual). Nothing is written to the
-/// filter here: the caller commits the returned estimate, so a failure leaves it untouched.
+/// On entry `scratch.predicted` holds the predicted measurement moments, `scratch.noise` R, and
+/// `report.innovation` ν = z ⊖ ẑ (the caller applies the model's residual). The posterior goes
+/// to `scratch.state` and `scratch.covariance`; nothing is written to the filter here, so the
+/// caller commits it (by swapping buffers) only on `Ok(true)`; `Ok(false)` means gated.
+///
+/// The gain is kept transposed, Kᵀ = L⁻ᵀ L⁻¹ Pₓᵤᵀ (two triangular solves in place), and the
+/// Joseph form is evaluated as P⁺ = P + A Kᵀ + K Aᵀ with A = ½ K S − Pₓᵤ: the same expression
+/// (expand it), with one n × n × m product instead of two, and symmetric by construction.
 #[inline(always)]
 pub(crate) fn apply<T: Real, N: Dim, M: Dim>(
     state: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
-    predicted: Moments<T, N, M>,
-    noise: OMatrix<T, M, M>,
-    innovation: OVector<T, M>,
+    scratch: &mut UpdateScratch<T, N, M>,
+    report: &mut UpdateReport<T, M>,
     settings: UpdateSettings<T>,
-) -> Result<Posterior<T, N, M>>
+) -> Result<bool>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     let stage = Stage::Update;
+    let UpdateScratch {
+        predicted,
+        noise,
+        factor,
+        whitened,
+        gain_t,
+        joseph_t,
+        product,
+        state: new_state,
+        covariance: new_covariance,
+        cholesky,
+        ..
+    } = scratch;
     let m = predicted.mean.nrows();
-    ensure_shape(&noise, m, m, stage, Quantity::MeasurementNoise)?;
-    ensure_shape(&innovation, m, 1, stage, Quantity::Measurement)?;
+    ensure_shape(noise, m, m, stage, Quantity::MeasurementNoise)?;
+    ensure_shape(&report.innovation, m, 1, stage, Quantity::Measurement)?;
     // Inputs are not scanned up front: a non-finite z or R makes the factorisation, the NIS or
     // the committed results non-finite, and only then are they examined to name the culprit.
-    let bad_input = |innovation: &OVector<T, M>| {
+    let bad_input = |innovation: &OVector<T, M>, noise: &OMatrix<T, M, M>| {
         if !all_finite(innovation) {
             Some(Error::NonFinite {
                 stage,
                 quantity: Quantity::Measurement,
             })
-        } else if !all_finite(&noise) {
+        } else if !all_finite(noise) {
             Some(Error::NonFinite {
                 stage,
                 quantity: Quantity::MeasurementNoise,
@@ -135,58 +151,83 @@ where
         }
     };
 
-    let mut s = &predicted.covariance + &noise;
-    symmetrize(&mut s);
-    let Some(chol) = Cholesky::new(s.clone()) else {
+    let s = &mut report.innovation_covariance;
+    s.copy_from(&predicted.covariance);
+    *s += &*noise;
+    symmetrize(s);
+    factor.copy_from(s);
+    if !kernel::cholesky_in_place(factor, cholesky) {
         return Err(
-            bad_input(&innovation).unwrap_or(Error::NotPositiveDefinite {
+            bad_input(&report.innovation, noise).unwrap_or(Error::NotPositiveDefinite {
                 stage,
                 quantity: Quantity::InnovationCovariance,
             }),
         );
-    };
-    let nis = innovation.dot(&chol.solve(&innovation));
+    }
+    whitened.copy_from(&report.innovation);
+    kernel::solve_lower_in_place(factor, whitened);
+    let nis = whitened.norm_squared();
     if !nis.is_finite() {
         // A bad measurement is an error, never a gated outlier. (With finite inputs an
         // overflowing NIS is gated if a gate is set, else it fails below.)
-        if let Some(e) = bad_input(&innovation) {
+        if let Some(e) = bad_input(&report.innovation, noise) {
             return Err(e);
         }
     }
-    let log_det = log_det_from_cholesky(chol.l_dirty());
-    let log_likelihood = -real::<T>(0.5)
+    let log_det = log_det_from_cholesky(factor);
+    report.nis = nis;
+    report.log_likelihood = -real::<T>(0.5)
         * (nis + log_det + real::<T>(m as f64 * (2.0 * core::f64::consts::PI).ln()));
-    let mut report = UpdateReport {
-        innovation,
-        innovation_covariance: s,
-        nis,
-        log_likelihood,
-        outcome: UpdateOutcome::Applied,
-    };
     if settings.gate.is_some_and(|g| !(nis <= g)) {
         report.outcome = UpdateOutcome::Gated;
-        return Ok((None, report));
+        return Ok(false);
     }
+    report.outcome = UpdateOutcome::Applied;
 
-    let cross = predicted.cross_covariance;
-    let gain = chol.solve(&cross.transpose()).transpose();
-    let new_state = state + &gain * &report.innovation;
-    let k_cross_t = &gain * cross.transpose();
-    let mut new_covariance = covariance - &k_cross_t;
+    // Kᵀ = S⁻¹ Pₓᵤᵀ, keeping −Pₓᵤᵀ for the covariance.
+    predicted.cross_covariance.transpose_to(gain_t);
+    joseph_t.copy_from(gain_t);
+    joseph_t.neg_mut();
+    kernel::solve_lower_in_place(factor, gain_t);
+    kernel::solve_lower_transpose_in_place(factor, gain_t);
+    // x⁺ = x + K ν
+    new_state.copy_from(state);
+    kernel::tr_mul(new_state, Accum::Add, T::one(), gain_t, &report.innovation);
     match settings.form {
         CovarianceUpdate::Joseph => {
-            // P − K Pₓᵤᵀ − Pₓᵤ Kᵀ + K S Kᵀ
-            new_covariance -= k_cross_t.transpose();
-            let ks = &gain * &report.innovation_covariance;
-            new_covariance += ks * gain.transpose();
-            symmetrize(&mut new_covariance);
+            // Aᵀ = ½ S Kᵀ − Pₓᵤᵀ; P⁺ = P + A Kᵀ + (A Kᵀ)ᵀ, symmetric by construction.
+            let half = real::<T>(0.5);
+            kernel::mul(
+                joseph_t,
+                Accum::Add,
+                half,
+                &report.innovation_covariance,
+                gain_t,
+            );
+            kernel::tr_mul(product, Accum::Replace, T::one(), joseph_t, gain_t);
+            let n = new_covariance.nrows();
+            for j in 0..n {
+                for i in j..n {
+                    let v = (covariance[(i, j)] + covariance[(j, i)]) * half
+                        + (product[(i, j)] + product[(j, i)]);
+                    new_covariance[(i, j)] = v;
+                    new_covariance[(j, i)] = v;
+                }
+            }
         }
-        CovarianceUpdate::Standard => {}
-        CovarianceUpdate::Symmetrized => symmetrize(&mut new_covariance),
+        CovarianceUpdate::Standard | CovarianceUpdate::Symmetrized => {
+            // P⁺ = P − K Pₓᵤᵀ
+            kernel::tr_mul(product, Accum::Replace, T::one(), gain_t, joseph_t);
+            new_covariance.copy_from(covariance);
+            *new_covariance += &*product;
+            if settings.form == CovarianceUpdate::Symmetrized {
+                symmetrize(new_covariance);
+            }
+        }
     }
     // A non-finite gain shows up in both of these.
-    ensure_finite(&new_state, stage, Quantity::Mean)
-        .and_then(|()| ensure_finite(&new_covariance, stage, Quantity::Covariance))
-        .map_err(|e| bad_input(&report.innovation).unwrap_or(e))?;
-    Ok((Some((new_state, new_covariance)), report))
+    ensure_finite(new_state, stage, Quantity::Mean)
+        .and_then(|()| ensure_finite(new_covariance, stage, Quantity::Covariance))
+        .map_err(|e| bad_input(&report.innovation, noise).unwrap_or(e))?;
+    Ok(true)
 }

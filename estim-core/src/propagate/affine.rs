@@ -2,8 +2,8 @@
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
-use super::linearized::linear_moments;
-use super::{MomentPropagator, Moments, finish};
+use super::linearized::linear_moments_into;
+use super::{MomentPropagator, Workspace, finish, impl_propagator_via_moments_into};
 use crate::alloc::Alloc;
 use crate::error::Result;
 use crate::function::AffineFunction;
@@ -16,6 +16,38 @@ use crate::scalar::Real;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Affine;
 
+impl Affine {
+    #[inline(always)]
+    fn moments_into<T, N, M, G>(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+        out_mean: &mut OVector<T, M>,
+        out_covariance: &mut OMatrix<T, M, M>,
+        mut cross: Option<&mut OMatrix<T, N, M>>,
+        workspace: &mut Workspace<T, N, M>,
+    ) -> Result<()>
+    where
+        T: Real,
+        N: Dim,
+        M: Dim,
+        G: AffineFunction<T, N, M> + ?Sized,
+        DefaultAllocator: Alloc<N, M>,
+    {
+        linear_moments_into(
+            mean,
+            covariance,
+            g,
+            out_mean,
+            out_covariance,
+            cross.as_deref_mut(),
+            workspace,
+        )?;
+        finish(out_mean, out_covariance, cross.as_deref())
+    }
+}
+
 impl<T, N, M, G> MomentPropagator<T, N, M, G> for Affine
 where
     T: Real,
@@ -24,13 +56,5 @@ where
     G: AffineFunction<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
-    fn propagate(
-        &self,
-        mean: &OVector<T, N>,
-        covariance: &OMatrix<T, N, N>,
-        g: &G,
-    ) -> Result<Moments<T, N, M>> {
-        finish(linear_moments(mean, covariance, g)?)
-    }
+    impl_propagator_via_moments_into!();
 }

@@ -2,10 +2,12 @@
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
-use super::{MomentPropagator, Moments, finish};
+use super::workspace::buffer;
+use super::{MomentPropagator, Workspace, check_inputs, finish, impl_propagator_via_moments_into};
 use crate::alloc::Alloc;
 use crate::error::{Quantity, Result, Stage};
 use crate::function::Differentiable;
+use crate::kernel::{Accum, mul, mul_tr};
 use crate::linalg::ensure_shape;
 use crate::scalar::Real;
 
@@ -15,13 +17,18 @@ use crate::scalar::Real;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Linearized;
 
-/// g(μ), J(μ), J C Jᵀ and C Jᵀ: the part every derivative-based propagator shares.
+/// g(μ), J(μ), J C Jᵀ and C Jᵀ (if `cross` is given): the part every derivative-based
+/// propagator shares. Not finished (symmetrised, checked) yet.
 #[inline(always)]
-pub(super) fn linear_moments<T, N, M, G>(
+pub(super) fn linear_moments_into<T, N, M, G>(
     mean: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
     g: &G,
-) -> Result<Moments<T, N, M>>
+    out_mean: &mut OVector<T, M>,
+    out_covariance: &mut OMatrix<T, M, M>,
+    mut cross: Option<&mut OMatrix<T, N, M>>,
+    workspace: &mut Workspace<T, N, M>,
+) -> Result<()>
 where
     T: Real,
     N: Dim,
@@ -29,19 +36,62 @@ where
     G: Differentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    let n = mean.nrows();
-    ensure_shape(covariance, n, n, Stage::Propagation, Quantity::Covariance)?;
-    let y = g.eval(mean);
-    let j = g.jacobian(mean);
-    ensure_shape(&j, y.nrows(), n, Stage::Propagation, Quantity::Jacobian)?;
-    let jc = &j * covariance;
-    let cov_y = &jc * j.transpose();
-    Ok(Moments {
-        mean: y,
-        covariance: cov_y,
+    check_inputs(
+        mean,
+        covariance,
+        out_mean,
+        out_covariance,
+        cross.as_deref_mut(),
+        workspace,
+    )?;
+    let (n, m) = (workspace.n, workspace.m);
+    let stage = Stage::Propagation;
+    g.eval_into(mean, out_mean);
+    ensure_shape(out_mean, m.value(), 1, stage, Quantity::FunctionValue)?;
+    let j = buffer(&mut workspace.jacobian, m, n);
+    g.jacobian_into(mean, j);
+    ensure_shape(j, m.value(), n.value(), stage, Quantity::Jacobian)?;
+    let jc = buffer(&mut workspace.jacobian_covariance, m, n);
+    mul(jc, Accum::Replace, T::one(), j, covariance);
+    mul_tr(out_covariance, Accum::Replace, T::one(), jc, j);
+    if let Some(cross) = cross {
         // C Jᵀ = (J C)ᵀ because C is symmetric.
-        cross_covariance: jc.transpose(),
-    })
+        jc.transpose_to(cross);
+    }
+    Ok(())
+}
+
+impl Linearized {
+    #[inline(always)]
+    fn moments_into<T, N, M, G>(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+        out_mean: &mut OVector<T, M>,
+        out_covariance: &mut OMatrix<T, M, M>,
+        cross: Option<&mut OMatrix<T, N, M>>,
+        workspace: &mut Workspace<T, N, M>,
+    ) -> Result<()>
+    where
+        T: Real,
+        N: Dim,
+        M: Dim,
+        G: Differentiable<T, N, M> + ?Sized,
+        DefaultAllocator: Alloc<N, M>,
+    {
+        let mut cross = cross;
+        linear_moments_into(
+            mean,
+            covariance,
+            g,
+            out_mean,
+            out_covariance,
+            cross.as_deref_mut(),
+            workspace,
+        )?;
+        finish(out_mean, out_covariance, cross.as_deref())
+    }
 }
 
 impl<T, N, M, G> MomentPropagator<T, N, M, G> for Linearized
@@ -52,13 +102,5 @@ where
     G: Differentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
-    fn propagate(
-        &self,
-        mean: &OVector<T, N>,
-        covariance: &OMatrix<T, N, N>,
-        g: &G,
-    ) -> Result<Moments<T, N, M>> {
-        finish(linear_moments(mean, covariance, g)?)
-    }
+    impl_propagator_via_moments_into!();
 }

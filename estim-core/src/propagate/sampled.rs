@@ -5,7 +5,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
 
-use super::{MomentPropagator, Moments, finish};
+use super::{MomentPropagator, Moments, Workspace, finish};
 use crate::alloc::Alloc;
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
 use crate::function::VectorFunction;
@@ -57,18 +57,23 @@ where
     G: VectorFunction<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    fn propagate(
+    /// The reference propagator allocates its accumulators on every call (it is for tests,
+    /// not for filter steps); the workspace only fixes the dimensions.
+    fn propagate_into(
         &self,
         mean: &OVector<T, N>,
         covariance: &OMatrix<T, N, N>,
         g: &G,
-    ) -> Result<Moments<T, N, M>> {
-        let n = mean.nrows();
+        out: &mut Moments<T, N, M>,
+        workspace: &mut Workspace<T, N, M>,
+    ) -> Result<()> {
+        let (n_dim, m_dim) = (workspace.n, workspace.m);
+        let (n, m) = (n_dim.value(), m_dim.value());
+        ensure_shape(mean, n, 1, Stage::Propagation, Quantity::Mean)?;
         ensure_shape(covariance, n, n, Stage::Propagation, Quantity::Covariance)?;
         let l = psd_factor(covariance, Stage::Propagation)?;
         let y0 = g.eval(mean);
-        let m = y0.nrows();
-        let (n_dim, m_dim) = (mean.shape_generic().0, y0.shape_generic().0);
+        ensure_shape(&y0, m, 1, Stage::Propagation, Quantity::FunctionValue)?;
 
         let mut rng = StdRng::seed_from_u64(self.seed);
         let mut z = OVector::<T, N>::zeros_generic(n_dim, U1);
@@ -104,10 +109,17 @@ where
         covariance_y.ger(-count * scale, &d_bar, &d_bar, T::one());
         let mut cross = sum_xd * scale;
         cross.ger(-count * scale, &dx_bar, &d_bar, T::one());
-        finish(Moments {
+        let mut moments = Moments {
             mean: y0 + d_bar,
             covariance: covariance_y,
             cross_covariance: cross,
-        })
+        };
+        finish(
+            &moments.mean,
+            &mut moments.covariance,
+            Some(&moments.cross_covariance),
+        )?;
+        *out = moments;
+        Ok(())
     }
 }

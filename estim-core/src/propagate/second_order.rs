@@ -3,11 +3,13 @@
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
-use super::linearized::linear_moments;
-use super::{MomentPropagator, Moments, finish};
+use super::linearized::linear_moments_into;
+use super::workspace::buffer;
+use super::{MomentPropagator, Workspace, finish, impl_propagator_via_moments_into};
 use crate::alloc::Alloc;
 use crate::error::{Quantity, Result, Stage};
 use crate::function::TwiceDifferentiable;
+use crate::kernel::{Accum, mul};
 use crate::linalg::ensure_shape;
 use crate::scalar::{Real, real};
 
@@ -35,14 +37,20 @@ pub struct SecondOrder;
 /// both exact for quadratic g when x is Gaussian. Cost on top of the Jacobian product: two
 /// n × n products per nonlinear component and O(m² n²) inner products; to stay allocation-free
 /// for static sizes, Hessians are re-evaluated per pair (m + m(m−1)/2 evaluations) rather than
-/// stored. Requirements on g:
+/// stored. With runtime sizes the products run on faer in the caller's [`Workspace`].
+/// Requirements on g:
 /// [`TwiceDifferentiable`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SecondOrderGaussian;
 
-/// The Hessian of component k, shape-checked.
+/// Writes Hₖ into `h` (shape-checked): `Ok(true)`, or `Ok(false)` if gₖ is affine.
 #[inline(always)]
-fn hessian<T, N, M, G>(g: &G, mean: &OVector<T, N>, k: usize) -> Result<Option<OMatrix<T, N, N>>>
+fn hessian_into<T, N, M, G>(
+    g: &G,
+    mean: &OVector<T, N>,
+    k: usize,
+    h: &mut OMatrix<T, N, N>,
+) -> Result<bool>
 where
     T: Real,
     N: Dim,
@@ -51,38 +59,54 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     let n = mean.nrows();
-    match g.hessian(mean, k) {
-        Some(h) => {
-            ensure_shape(&h, n, n, Stage::Propagation, Quantity::Hessian)?;
-            Ok(Some(h))
-        }
-        None => Ok(None),
+    if g.hessian_into(mean, k, h) {
+        ensure_shape(h, n, n, Stage::Propagation, Quantity::Hessian)?;
+        Ok(true)
+    } else {
+        Ok(false)
     }
 }
 
-/// Linear moments plus the ½ Σᵢⱼ (Hₖ ∘ C)ᵢⱼ mean correction.
-#[inline(always)]
-fn second_order_moments<T, N, M, G>(
-    mean: &OVector<T, N>,
-    covariance: &OMatrix<T, N, N>,
-    g: &G,
-) -> Result<Moments<T, N, M>>
-where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    G: TwiceDifferentiable<T, N, M> + ?Sized,
-    DefaultAllocator: Alloc<N, M>,
-{
-    let mut m = linear_moments(mean, covariance, g)?;
-    let half = real::<T>(0.5);
-    for k in 0..m.mean.nrows() {
-        if let Some(h) = hessian(g, mean, k)? {
-            // Σᵢⱼ (Hₖ ∘ C)ᵢⱼ is the Frobenius inner product ⟨Hₖ, C⟩.
-            m.mean[k] += half * h.dot(covariance);
+impl SecondOrder {
+    /// Linear moments plus the ½ Σᵢⱼ (Hₖ ∘ C)ᵢⱼ mean correction.
+    #[inline(always)]
+    fn moments_into<T, N, M, G>(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+        out_mean: &mut OVector<T, M>,
+        out_covariance: &mut OMatrix<T, M, M>,
+        mut cross: Option<&mut OMatrix<T, N, M>>,
+        workspace: &mut Workspace<T, N, M>,
+    ) -> Result<()>
+    where
+        T: Real,
+        N: Dim,
+        M: Dim,
+        G: TwiceDifferentiable<T, N, M> + ?Sized,
+        DefaultAllocator: Alloc<N, M>,
+    {
+        linear_moments_into(
+            mean,
+            covariance,
+            g,
+            out_mean,
+            out_covariance,
+            cross.as_deref_mut(),
+            workspace,
+        )?;
+        let half = real::<T>(0.5);
+        let n = workspace.n;
+        let h = buffer(&mut workspace.hessian, n, n);
+        for k in 0..out_mean.nrows() {
+            if hessian_into(g, mean, k, h)? {
+                // Σᵢⱼ (Hₖ ∘ C)ᵢⱼ is the Frobenius inner product ⟨Hₖ, C⟩.
+                out_mean[k] += half * h.dot(covariance);
+            }
         }
+        finish(out_mean, out_covariance, cross.as_deref())
     }
-    Ok(m)
 }
 
 impl<T, N, M, G> MomentPropagator<T, N, M, G> for SecondOrder
@@ -93,14 +117,63 @@ where
     G: TwiceDifferentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
+    impl_propagator_via_moments_into!();
+}
+
+impl SecondOrderGaussian {
     #[inline(always)]
-    fn propagate(
+    fn moments_into<T, N, M, G>(
         &self,
         mean: &OVector<T, N>,
         covariance: &OMatrix<T, N, N>,
         g: &G,
-    ) -> Result<Moments<T, N, M>> {
-        finish(second_order_moments(mean, covariance, g)?)
+        out_mean: &mut OVector<T, M>,
+        out_covariance: &mut OMatrix<T, M, M>,
+        mut cross: Option<&mut OMatrix<T, N, M>>,
+        workspace: &mut Workspace<T, N, M>,
+    ) -> Result<()>
+    where
+        T: Real,
+        N: Dim,
+        M: Dim,
+        G: TwiceDifferentiable<T, N, M> + ?Sized,
+        DefaultAllocator: Alloc<N, M>,
+    {
+        linear_moments_into(
+            mean,
+            covariance,
+            g,
+            out_mean,
+            out_covariance,
+            cross.as_deref_mut(),
+            workspace,
+        )?;
+        let half = real::<T>(0.5);
+        let n = workspace.n;
+        let hk = buffer(&mut workspace.hessian, n, n);
+        let hl = buffer(&mut workspace.other_hessian, n, n);
+        let product = buffer(&mut workspace.product, n, n);
+        let bk = buffer(&mut workspace.sandwich, n, n);
+        // tr(Hₖ C Hₗ C) = ⟨C Hₖ C, Hₗ⟩ (Frobenius, Hₗ symmetric): one O(n³) product pair per k,
+        // O(n²) per pair. Hessians of earlier components are re-evaluated rather than stored
+        // (m + m(m−1)/2 evaluations in all), so the workspace holds two n × n Hessians, not m.
+        for k in 0..out_mean.nrows() {
+            if !hessian_into(g, mean, k, hk)? {
+                continue;
+            }
+            out_mean[k] += half * hk.dot(covariance);
+            mul(product, Accum::Replace, T::one(), covariance, hk);
+            mul(bk, Accum::Replace, T::one(), product, covariance);
+            out_covariance[(k, k)] += half * bk.dot(hk);
+            for l in 0..k {
+                if hessian_into(g, mean, l, hl)? {
+                    let t = half * bk.dot(hl);
+                    out_covariance[(k, l)] += t;
+                    out_covariance[(l, k)] += t;
+                }
+            }
+        }
+        finish(out_mean, out_covariance, cross.as_deref())
     }
 }
 
@@ -112,33 +185,5 @@ where
     G: TwiceDifferentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
-    fn propagate(
-        &self,
-        mean: &OVector<T, N>,
-        covariance: &OMatrix<T, N, N>,
-        g: &G,
-    ) -> Result<Moments<T, N, M>> {
-        let mut m = linear_moments(mean, covariance, g)?;
-        let half = real::<T>(0.5);
-        // tr(Hₖ C Hₗ C) = ⟨C Hₖ C, Hₗ⟩ (Frobenius, Hₗ symmetric): one O(n³) product pair per k,
-        // O(n²) per pair. Hessians of earlier components are re-evaluated rather than stored,
-        // so static sizes stay off the heap: m + m(m−1)/2 Hessian evaluations in all.
-        for k in 0..m.mean.nrows() {
-            let Some(hk) = hessian(g, mean, k)? else {
-                continue;
-            };
-            m.mean[k] += half * hk.dot(covariance);
-            let bk = covariance * &hk * covariance;
-            m.covariance[(k, k)] += half * bk.dot(&hk);
-            for l in 0..k {
-                if let Some(hl) = hessian(g, mean, l)? {
-                    let t = half * bk.dot(&hl);
-                    m.covariance[(k, l)] += t;
-                    m.covariance[(l, k)] += t;
-                }
-            }
-        }
-        finish(m)
-    }
+    impl_propagator_via_moments_into!();
 }

@@ -1,12 +1,14 @@
 //! The scaled unscented transform.
 
-use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 
-use super::{MomentPropagator, Moments, finish};
+use super::workspace::buffer;
+use super::{MomentPropagator, Workspace, check_inputs, finish, impl_propagator_via_moments_into};
 use crate::alloc::Alloc;
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
 use crate::function::VectorFunction;
-use crate::linalg::{ensure_shape, psd_factor};
+use crate::kernel::{Accum, mul_tr};
+use crate::linalg::{ensure_shape, psd_factor_into};
 use crate::scalar::{Real, real};
 
 /// The scaled unscented transform (Julier 2002; Wan & van der Merwe 2000).
@@ -29,8 +31,11 @@ use crate::scalar::{Real, real};
 /// the order of ‖y‖ itself, so with `f32` use α ≳ 0.3 or [`Unscented::cubature`].
 /// Deviations go through the function's [`difference`](VectorFunction::difference), so
 /// wrapped outputs (angles) are handled. The factor L is a semi-definite square root
-/// ([`psd_factor`]), so directions with zero variance are allowed. Each sigma point is built,
-/// evaluated and accumulated on the fly: for static sizes nothing is allocated.
+/// ([`psd_factor`](crate::linalg::psd_factor); for runtime sizes faer's Cholesky first), so directions with zero variance
+/// are allowed. The deviations are collected as the columns of two m × n matrices and the sums
+/// are matrix products (faer for runtime sizes); all buffers live in the caller's
+/// [`Workspace`], so nothing is allocated for static sizes, nor for runtime sizes after the
+/// first call.
 ///
 /// Requirements on g: [`VectorFunction`] only.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -104,22 +109,39 @@ impl<T: Real> Default for Unscented<T> {
 }
 
 impl<T: Real> Unscented<T> {
-    /// The transform; the cross-covariance is accumulated only when `CROSS` (zero otherwise).
+    /// The transform, into the caller's buffers; the cross-covariance only if `cross` is given.
+    ///
+    /// The deviations are stored column by column in D₊ and D₋ (m × n, in the workspace), so
+    /// the sums are matrix products: cov(y) = w (D₊D₊ᵀ + D₋D₋ᵀ) + (β − α²) d̄ d̄ᵀ and, since
+    /// χ±ⱼ − μ = ±√c Lⱼ, cov(x, y) = w √c L (D₊ − D₋)ᵀ.
     #[inline(always)]
-    fn transform<N, M, G, const CROSS: bool>(
+    fn moments_into<N, M, G>(
         &self,
         mean: &OVector<T, N>,
         covariance: &OMatrix<T, N, N>,
         g: &G,
-    ) -> Result<Moments<T, N, M>>
+        out_mean: &mut OVector<T, M>,
+        out_covariance: &mut OMatrix<T, M, M>,
+        mut cross: Option<&mut OMatrix<T, N, M>>,
+        workspace: &mut Workspace<T, N, M>,
+    ) -> Result<()>
     where
         N: Dim,
         M: Dim,
         G: VectorFunction<T, N, M> + ?Sized,
         DefaultAllocator: Alloc<N, M>,
     {
-        let n = mean.nrows();
-        ensure_shape(covariance, n, n, Stage::Propagation, Quantity::Covariance)?;
+        check_inputs(
+            mean,
+            covariance,
+            out_mean,
+            out_covariance,
+            cross.as_deref_mut(),
+            workspace,
+        )?;
+        let (n_dim, m_dim) = (workspace.n, workspace.m);
+        let (n, m) = (n_dim.value(), m_dim.value());
+        let stage = Stage::Propagation;
         let c = self.alpha * self.alpha * (real::<T>(n as f64) + self.kappa);
         if !(c > T::zero()) {
             return Err(Error::InvalidParameter {
@@ -127,48 +149,47 @@ impl<T: Real> Unscented<T> {
                 value: nalgebra::try_convert::<T, f64>(self.kappa).unwrap_or(f64::NAN),
             });
         }
-        let mut l = psd_factor(covariance, Stage::Propagation)?;
-        l *= c.sqrt();
+        let l = buffer(&mut workspace.factor, n_dim, n_dim);
+        psd_factor_into(covariance, l, &mut workspace.cholesky, stage)?;
+        *l *= c.sqrt();
 
-        let y0 = g.eval(mean);
-        let m = y0.nrows();
-        let (n_dim, m_dim) = (mean.shape_generic().0, y0.shape_generic().0);
-        let mut sum_d = OVector::<T, M>::zeros_generic(m_dim, nalgebra::U1);
-        let mut sum_dd = OMatrix::<T, M, M>::zeros_generic(m_dim, m_dim);
-        let mut sum_xd = OMatrix::<T, N, M>::zeros_generic(n_dim, m_dim);
-        let mut x = mean.clone();
+        // ȳ is accumulated as g(μ) + d̄: out_mean holds g(μ) until the end.
+        g.eval_into(mean, out_mean);
+        ensure_shape(out_mean, m, 1, stage, Quantity::FunctionValue)?;
+        let x = buffer(&mut workspace.point, n_dim, U1);
+        let y = buffer(&mut workspace.value, m_dim, U1);
+        let d = buffer(&mut workspace.deviation, m_dim, U1);
+        let plus = buffer(&mut workspace.plus, m_dim, n_dim);
+        let minus = buffer(&mut workspace.minus, m_dim, n_dim);
         for j in 0..n {
-            for sign in [T::one(), -T::one()] {
-                let dx = l.column(j) * sign;
+            for (sign, deviations) in [(T::one(), &mut *plus), (-T::one(), &mut *minus)] {
                 x.copy_from(mean);
-                x += &dx;
-                let y = g.eval(&x);
-                ensure_shape(&y, m, 1, Stage::Propagation, Quantity::FunctionValue)?;
-                let d = g.difference(&y, &y0);
-                ensure_shape(&d, m, 1, Stage::Propagation, Quantity::FunctionValue)?;
-                sum_d += &d;
-                // Operator forms: for small static sizes they unroll, where nalgebra's generic
-                // `ger` loops column by column (measured: the filters bench).
-                sum_dd += &d * d.transpose();
-                if CROSS {
-                    sum_xd += &dx * d.transpose();
-                }
+                x.axpy(sign, &l.column(j), T::one());
+                g.eval_into(x, y);
+                ensure_shape(y, m, 1, stage, Quantity::FunctionValue)?;
+                g.difference_into(y, out_mean, d);
+                ensure_shape(d, m, 1, stage, Quantity::FunctionValue)?;
+                deviations.set_column(j, d);
             }
         }
         let w = T::one() / (real::<T>(2.0) * c);
-        let d_bar = sum_d * w;
-        let mut covariance_y = sum_dd * w;
-        covariance_y.ger(
-            self.beta - self.alpha * self.alpha,
-            &d_bar,
-            &d_bar,
-            T::one(),
-        );
-        finish(Moments {
-            mean: y0 + d_bar,
-            covariance: covariance_y,
-            cross_covariance: sum_xd * w,
-        })
+        let d_bar = buffer(&mut workspace.mean_deviation, m_dim, U1);
+        d_bar.fill(T::zero());
+        for j in 0..n {
+            d_bar.axpy(T::one(), &plus.column(j), T::one());
+            d_bar.axpy(T::one(), &minus.column(j), T::one());
+        }
+        *d_bar *= w;
+        mul_tr(out_covariance, Accum::Replace, w, plus, plus);
+        mul_tr(out_covariance, Accum::Add, w, minus, minus);
+        out_covariance.ger(self.beta - self.alpha * self.alpha, d_bar, d_bar, T::one());
+        if let Some(cross) = cross.as_deref_mut() {
+            // D₋ ← D₊ − D₋; l already carries the √c.
+            minus.zip_apply(plus, |dm, dp| *dm = dp - *dm);
+            mul_tr(cross, Accum::Replace, w, l, minus);
+        }
+        *out_mean += &*d_bar;
+        finish(out_mean, out_covariance, cross.as_deref())
     }
 }
 
@@ -180,24 +201,5 @@ where
     G: VectorFunction<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
-    fn propagate(
-        &self,
-        mean: &OVector<T, N>,
-        covariance: &OMatrix<T, N, N>,
-        g: &G,
-    ) -> Result<Moments<T, N, M>> {
-        self.transform::<N, M, G, true>(mean, covariance, g)
-    }
-
-    #[inline(always)]
-    fn propagate_mean_covariance(
-        &self,
-        mean: &OVector<T, N>,
-        covariance: &OMatrix<T, N, N>,
-        g: &G,
-    ) -> Result<super::MeanCovariance<T, M>> {
-        self.transform::<N, M, G, false>(mean, covariance, g)
-            .map(|m| (m.mean, m.covariance))
-    }
+    impl_propagator_via_moments_into!();
 }

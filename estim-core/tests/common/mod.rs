@@ -1338,6 +1338,7 @@ pub fn propagate<T, P, G, N: Dim, M: Dim>(
 ) -> Moments<T, N, M>
 where
     T: Real,
+    G: estim_core::VectorFunction<T, N, M>,
     P: estim_core::MomentPropagator<T, N, M, G>,
     DefaultAllocator: Alloc<N, M>,
 {

@@ -1,0 +1,454 @@
+//! The heavy dense kernels behind every filter step: products into a destination, Cholesky
+//! factorisation in place, triangular solves.
+//!
+//! Each kernel takes nalgebra matrices and picks its backend from the types:
+//!
+//! - **static sizes** (every dimension a `Const<N>`): nalgebra, on the stack. Nothing is faster
+//!   for small matrices, and nothing allocates.
+//! - **runtime sizes** (any dimension `Dyn`) with `f32` or `f64`: faer, over zero-copy views of
+//!   the same column-major storage, writing into the destination. Nothing allocates (the
+//!   Cholesky kernel's scratch lives in a [`CholeskyScratch`] the caller keeps).
+//! - runtime sizes with another scalar type: nalgebra (which may allocate temporaries).
+//!
+//! The choice is made per call from the types (a `TypeId` comparison the compiler folds), so
+//! static-size code compiles to pure nalgebra. faer runs single-threaded (`Par::Seq`) unless the
+//! `parallel` feature is on *and* the product is at least [`PARALLEL_THRESHOLD`] on its
+//! smallest side (see that constant for the measurement that chose it).
+//!
+//! All shapes must agree (the callers check model outputs first); a mismatch here is a
+//! programmer error and panics.
+
+use core::any::Any;
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{
+    LltRegularization, cholesky_in_place as faer_cholesky, cholesky_in_place_scratch,
+};
+use faer::linalg::matmul::matmul;
+use faer::linalg::triangular_solve::{
+    solve_lower_triangular_in_place, solve_upper_triangular_in_place,
+};
+use faer::{MatMut, MatRef, Par};
+use nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, Scalar, allocator::Allocator};
+
+use crate::scalar::Real;
+
+/// Whether a product overwrites its destination or adds to it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Accum {
+    /// dst ← α op(a) op(b).
+    Replace,
+    /// dst ← dst + α op(a) op(b).
+    Add,
+}
+
+/// With the `parallel` feature, faer's threads are used for a kernel whose smallest dimension
+/// is at least this. Below it, thread start-up costs more than it saves.
+///
+/// Chosen from `cargo bench -p estim-filters --features parallel --bench dynamic` against the
+/// same bench without the feature on this project's 2-core reference machine; see
+/// BENCHMARKS.md ("Parallel threshold").
+pub const PARALLEL_THRESHOLD: usize = 256;
+
+/// `true` when `D` is a compile-time dimension.
+#[inline(always)]
+pub fn is_static<D: Dim>() -> bool {
+    D::try_to_usize().is_some()
+}
+
+/// faer's parallelism for a kernel whose smallest dimension is `size`.
+#[inline(always)]
+fn par(size: usize) -> Par {
+    #[cfg(feature = "parallel")]
+    if size >= PARALLEL_THRESHOLD {
+        return Par::rayon(0);
+    }
+    let _ = size;
+    Par::Seq
+}
+
+/// `m` as the matrix type with scalar `U`, if `T` is `U`.
+#[inline(always)]
+fn cast<T: Scalar, U: Scalar, R: Dim, C: Dim>(m: &OMatrix<T, R, C>) -> Option<&OMatrix<U, R, C>>
+where
+    DefaultAllocator: Allocator<R, C>,
+{
+    (m as &dyn Any).downcast_ref()
+}
+
+/// `m` as the matrix type with scalar `U`, if `T` is `U`.
+#[inline(always)]
+fn cast_mut<T: Scalar, U: Scalar, R: Dim, C: Dim>(
+    m: &mut OMatrix<T, R, C>,
+) -> Option<&mut OMatrix<U, R, C>>
+where
+    DefaultAllocator: Allocator<R, C>,
+{
+    (m as &mut dyn Any).downcast_mut()
+}
+
+/// A faer view of the column-major storage of `m`.
+#[inline(always)]
+fn view<U: Scalar, R: Dim, C: Dim>(m: &OMatrix<U, R, C>) -> MatRef<'_, U>
+where
+    DefaultAllocator: Allocator<R, C>,
+{
+    MatRef::from_column_major_slice(m.as_slice(), m.nrows(), m.ncols())
+}
+
+/// A mutable faer view of the column-major storage of `m`.
+#[inline(always)]
+fn view_mut<U: Scalar, R: Dim, C: Dim>(m: &mut OMatrix<U, R, C>) -> MatMut<'_, U>
+where
+    DefaultAllocator: Allocator<R, C>,
+{
+    let (r, c) = m.shape();
+    MatMut::from_column_major_slice_mut(m.as_mut_slice(), r, c)
+}
+
+/// The scalar types faer computes in.
+trait FaerScalar: Real + faer::traits::ComplexField {}
+impl FaerScalar for f32 {}
+impl FaerScalar for f64 {}
+
+/// dst (+)= α op(a) op(b) on faer if `T` is `U`; `false` (nothing done) otherwise.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn faer_product<U, T, R, C, RA, CA, RB, CB>(
+    dst: &mut OMatrix<T, R, C>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, RA, CA>,
+    transpose_a: bool,
+    b: &OMatrix<T, RB, CB>,
+    transpose_b: bool,
+) -> bool
+where
+    U: FaerScalar,
+    T: Real,
+    R: Dim,
+    C: Dim,
+    RA: Dim,
+    CA: Dim,
+    RB: Dim,
+    CB: Dim,
+    DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RB, CB>,
+{
+    let (Some(dst), Some(a), Some(b), Some(&alpha)) = (
+        cast_mut::<T, U, R, C>(dst),
+        cast::<T, U, RA, CA>(a),
+        cast::<T, U, RB, CB>(b),
+        (&alpha as &dyn Any).downcast_ref::<U>(),
+    ) else {
+        return false;
+    };
+    let (a, b) = (view(a), view(b));
+    let a = if transpose_a { a.transpose() } else { a };
+    let b = if transpose_b { b.transpose() } else { b };
+    let size = dst.nrows().min(dst.ncols()).min(a.ncols());
+    let accum = match accum {
+        Accum::Replace => faer::Accum::Replace,
+        Accum::Add => faer::Accum::Add,
+    };
+    matmul(view_mut(dst), accum, a, b, alpha, par(size));
+    true
+}
+
+/// `true` if the product was done on faer (runtime sizes, `f32`/`f64`).
+macro_rules! on_faer {
+    ($dims:expr, $dst:expr, $accum:expr, $alpha:expr, $a:expr, $ta:expr, $b:expr, $tb:expr) => {
+        $dims
+            && (faer_product::<f64, _, _, _, _, _, _, _>($dst, $accum, $alpha, $a, $ta, $b, $tb)
+                || faer_product::<f32, _, _, _, _, _, _, _>($dst, $accum, $alpha, $a, $ta, $b, $tb))
+    };
+}
+
+/// Writes or adds `value` (already scaled) into `dst`.
+#[inline(always)]
+fn store<T: Real, R: Dim, C: Dim>(dst: &mut OMatrix<T, R, C>, accum: Accum, value: OMatrix<T, R, C>)
+where
+    DefaultAllocator: Allocator<R, C>,
+{
+    match accum {
+        Accum::Replace => *dst = value,
+        Accum::Add => *dst += value,
+    }
+}
+
+/// α · `value`, skipping the multiplication when α = 1.
+#[inline(always)]
+fn scaled<T: Real, R: Dim, C: Dim>(alpha: T, value: OMatrix<T, R, C>) -> OMatrix<T, R, C>
+where
+    DefaultAllocator: Allocator<R, C>,
+{
+    if alpha == T::one() {
+        value
+    } else {
+        value * alpha
+    }
+}
+
+/// dst (+)= α a b.
+#[inline(always)]
+pub fn mul<T, R, K, C>(
+    dst: &mut OMatrix<T, R, C>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, R, K>,
+    b: &OMatrix<T, K, C>,
+) where
+    T: Real,
+    R: Dim,
+    K: Dim,
+    C: Dim,
+    DefaultAllocator: Allocator<R, C> + Allocator<R, K> + Allocator<K, C>,
+{
+    let dynamic = !(is_static::<R>() && is_static::<K>() && is_static::<C>());
+    if !on_faer!(dynamic, dst, accum, alpha, a, false, b, false) {
+        store(dst, accum, scaled(alpha, a * b));
+    }
+}
+
+/// dst (+)= α a bᵀ.
+#[inline(always)]
+pub fn mul_tr<T, R, K, C>(
+    dst: &mut OMatrix<T, R, C>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, R, K>,
+    b: &OMatrix<T, C, K>,
+) where
+    T: Real,
+    R: Dim,
+    K: Dim,
+    C: Dim,
+    DefaultAllocator: Allocator<R, C> + Allocator<R, K> + Allocator<C, K> + Allocator<K, C>,
+{
+    let dynamic = !(is_static::<R>() && is_static::<K>() && is_static::<C>());
+    if !on_faer!(dynamic, dst, accum, alpha, a, false, b, true) {
+        // The operator form: for small static sizes it unrolls, where nalgebra's generic
+        // `gemm` loops column by column (measured: the filters bench).
+        store(dst, accum, scaled(alpha, a * b.transpose()));
+    }
+}
+
+/// dst (+)= α aᵀ b.
+#[inline(always)]
+pub fn tr_mul<T, R, K, C>(
+    dst: &mut OMatrix<T, R, C>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, K, R>,
+    b: &OMatrix<T, K, C>,
+) where
+    T: Real,
+    R: Dim,
+    K: Dim,
+    C: Dim,
+    DefaultAllocator: Allocator<R, C> + Allocator<K, R> + Allocator<K, C>,
+{
+    let dynamic = !(is_static::<R>() && is_static::<K>() && is_static::<C>());
+    if !on_faer!(dynamic, dst, accum, alpha, a, true, b, false) {
+        store(dst, accum, scaled(alpha, a.tr_mul(b)));
+    }
+}
+
+/// Scratch memory for [`cholesky_in_place`] on runtime sizes, grown on first use for a
+/// dimension and reused after (static sizes never touch it).
+#[derive(Default)]
+pub struct CholeskyScratch {
+    buffer: Option<MemBuffer>,
+    capacity: usize,
+}
+
+impl core::fmt::Debug for CholeskyScratch {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("CholeskyScratch")
+            .field("capacity", &self.capacity)
+            .finish()
+    }
+}
+
+impl CholeskyScratch {
+    /// Room for factorising `dim × dim` matrices of `U`.
+    fn stack<U: FaerScalar>(&mut self, dim: usize, par: Par) -> &mut MemStack {
+        let req = cholesky_in_place_scratch::<U>(dim, par, Default::default());
+        let bytes = req.size_bytes();
+        if self.capacity < bytes {
+            self.buffer = None;
+            self.capacity = bytes;
+        }
+        MemStack::new(self.buffer.get_or_insert_with(|| MemBuffer::new(req)))
+    }
+}
+
+/// The faer Cholesky factorisation if `T` is `U`: `Some(success)`, or `None` if `T` is not `U`.
+#[inline(always)]
+fn faer_cholesky_in_place<U: FaerScalar, T: Real, D: Dim>(
+    a: &mut OMatrix<T, D, D>,
+    scratch: &mut CholeskyScratch,
+) -> Option<bool>
+where
+    DefaultAllocator: Allocator<D, D>,
+{
+    let a = cast_mut::<T, U, D, D>(a)?;
+    let n = a.nrows();
+    let par = par(n);
+    let stack = scratch.stack::<U>(n, par);
+    let ok = faer_cholesky(
+        view_mut(a),
+        LltRegularization::default(),
+        par,
+        stack,
+        Default::default(),
+    )
+    .is_ok();
+    // faer leaves NaN pivots unreported on some paths; a factor must be finite to be used.
+    Some(ok && (0..n).all(|i| nalgebra::ComplexField::is_finite(&a[(i, i)])))
+}
+
+/// Replaces the lower triangle of the symmetric positive definite `a` by its Cholesky factor L
+/// (a = L Lᵀ); the strict upper triangle is left unspecified. `false` if `a` is not
+/// (numerically) positive definite or not finite, and then `a` is unspecified.
+#[inline(always)]
+pub fn cholesky_in_place<T: Real, D: Dim>(
+    a: &mut OMatrix<T, D, D>,
+    scratch: &mut CholeskyScratch,
+) -> bool
+where
+    DefaultAllocator: Allocator<D, D>,
+{
+    if !is_static::<D>()
+        && let Some(ok) = faer_cholesky_in_place::<f64, T, D>(a, scratch)
+            .or_else(|| faer_cholesky_in_place::<f32, T, D>(a, scratch))
+    {
+        return ok;
+    }
+    match Cholesky::new(a.clone_owned()) {
+        Some(chol) => {
+            *a = chol.unpack_dirty();
+            true
+        }
+        None => false,
+    }
+}
+
+/// Solves L X = B in place (`b` ← L⁻¹ b) with L the lower triangle of `l` (its diagonal nonzero,
+/// as after a successful [`cholesky_in_place`]).
+#[inline(always)]
+pub fn solve_lower_in_place<T: Real, D: Dim, C: Dim>(l: &OMatrix<T, D, D>, b: &mut OMatrix<T, D, C>)
+where
+    DefaultAllocator: Allocator<D, D> + Allocator<D, C>,
+{
+    if !(is_static::<D>() && is_static::<C>())
+        && (faer_solve::<f64, _, _, _>(l, b, false) || faer_solve::<f32, _, _, _>(l, b, false))
+    {
+        return;
+    }
+    l.solve_lower_triangular_unchecked_mut(b);
+}
+
+/// Solves Lᵀ X = B in place (`b` ← L⁻ᵀ b) with L the lower triangle of `l`.
+#[inline(always)]
+pub fn solve_lower_transpose_in_place<T: Real, D: Dim, C: Dim>(
+    l: &OMatrix<T, D, D>,
+    b: &mut OMatrix<T, D, C>,
+) where
+    DefaultAllocator: Allocator<D, D> + Allocator<D, C>,
+{
+    if !(is_static::<D>() && is_static::<C>())
+        && (faer_solve::<f64, _, _, _>(l, b, true) || faer_solve::<f32, _, _, _>(l, b, true))
+    {
+        return;
+    }
+    l.tr_solve_lower_triangular_unchecked_mut(b);
+}
+
+/// The faer triangular solve with L (`transpose`: Lᵀ) if `T` is `U`.
+#[inline(always)]
+fn faer_solve<U: FaerScalar, T: Real, D: Dim, C: Dim>(
+    l: &OMatrix<T, D, D>,
+    b: &mut OMatrix<T, D, C>,
+    transpose: bool,
+) -> bool
+where
+    DefaultAllocator: Allocator<D, D> + Allocator<D, C>,
+{
+    let (Some(l), Some(b)) = (cast::<T, U, D, D>(l), cast_mut::<T, U, D, C>(b)) else {
+        return false;
+    };
+    let par = par(l.nrows().min(b.ncols()));
+    if transpose {
+        solve_upper_triangular_in_place(view(l).transpose(), view_mut(b), par);
+    } else {
+        solve_lower_triangular_in_place(view(l), view_mut(b), par);
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, Matrix3, Matrix3x2};
+
+    fn spd(n: usize) -> DMatrix<f64> {
+        let g = DMatrix::from_fn(n, n, |i, j| ((i * 7 + j * 3) % 5) as f64 - 2.0);
+        &g * g.transpose() + DMatrix::identity(n, n)
+    }
+
+    #[test]
+    fn dynamic_products_match_nalgebra() {
+        let a = DMatrix::from_fn(4, 3, |i, j| (i as f64) - 0.5 * j as f64);
+        let b = DMatrix::from_fn(3, 5, |i, j| 1.0 + (i * j) as f64);
+        let mut dst = DMatrix::from_element(4, 5, 1.0);
+        mul(&mut dst, Accum::Add, 2.0, &a, &b);
+        let expected = DMatrix::from_element(4, 5, 1.0) + 2.0 * &a * &b;
+        assert!((dst - expected).amax() < 1e-12);
+
+        let bt = b.transpose();
+        let mut dst = DMatrix::zeros(4, 5);
+        mul_tr(&mut dst, Accum::Replace, 1.0, &a, &bt);
+        assert!((dst - &a * &b).amax() < 1e-12);
+
+        let at = a.transpose();
+        let mut dst = DMatrix::zeros(4, 5);
+        tr_mul(&mut dst, Accum::Replace, -1.0, &at, &b);
+        assert!((dst + &a * &b).amax() < 1e-12);
+    }
+
+    #[test]
+    fn cholesky_and_solves_agree_static_and_dynamic() {
+        let s = spd(3);
+        let b = DMatrix::from_fn(3, 2, |i, j| (i + 2 * j) as f64);
+        let mut scratch = CholeskyScratch::default();
+
+        let mut l = s.clone();
+        assert!(cholesky_in_place(&mut l, &mut scratch));
+        let mut x = b.clone();
+        solve_lower_in_place(&l, &mut x);
+        solve_lower_transpose_in_place(&l, &mut x);
+        assert!((&s * &x - &b).amax() < 1e-10);
+
+        let mut ls = Matrix3::from_iterator(s.iter().copied());
+        assert!(cholesky_in_place(&mut ls, &mut scratch));
+        let mut xs = Matrix3x2::from_iterator(b.iter().copied());
+        solve_lower_in_place(&ls, &mut xs);
+        solve_lower_transpose_in_place(&ls, &mut xs);
+        for i in 0..3 {
+            for j in 0..2 {
+                assert!((xs[(i, j)] - x[(i, j)]).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn cholesky_rejects_indefinite_and_non_finite() {
+        let mut scratch = CholeskyScratch::default();
+        let mut a = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 1.0]);
+        assert!(!cholesky_in_place(&mut a, &mut scratch));
+        let mut a = DMatrix::from_row_slice(2, 2, &[f64::NAN, 0.0, 0.0, 1.0]);
+        assert!(!cholesky_in_place(&mut a, &mut scratch));
+        let mut a = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, f64::NAN]);
+        assert!(!cholesky_in_place(&mut a, &mut scratch));
+    }
+}
