@@ -1,12 +1,10 @@
 //! Static sizes allocate nothing per step: predict and update of every filter on 6-state,
 //! 4-measurement static models are run under a counting global allocator.
-// A `#[global_allocator]` must implement the unsafe `GlobalAlloc` trait; the workspace denies
-// `unsafe_code`, and this test binary is the one place that needs it. The implementation only
-// forwards to `System` and bumps a thread-local counter.
+// The counting `#[global_allocator]` (tests/counting) must implement the unsafe `GlobalAlloc`
+// trait; the workspace denies `unsafe_code`, and the allocation tests are the one place that
+// needs it. The implementation only forwards to `System` and bumps a thread-local counter.
 #![allow(unsafe_code)]
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::hint::black_box;
 
 use estim_core::nalgebra::{
@@ -23,46 +21,8 @@ use estim_filters::{
     PredictCorrelated, SecondOrderEkf, Ukf, Update,
 };
 
-struct Counting;
-
-thread_local! {
-    // Const-initialised and without a destructor: accessing it never allocates, and it is
-    // usable at any point of the thread's life.
-    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
-}
-
-fn bump() {
-    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
-}
-
-// SAFETY: every method forwards to `System` with the caller's arguments unchanged.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        bump();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        bump();
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        bump();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
-/// Allocations made by this thread while running `f` (other test threads do not count).
-fn allocations_during(f: impl FnOnce()) -> usize {
-    let start = ALLOCATIONS.with(Cell::get);
-    f();
-    ALLOCATIONS.with(Cell::get) - start
-}
+mod counting;
+use counting::allocations_during;
 
 /// A nonlinear 6-state process with analytic Hessians: two coupled pendulum-like axes plus a
 /// quadratic drag term, x = (θ₁, θ₂, ω₁, ω₂, a, b).

@@ -1,0 +1,346 @@
+//! Runtime sizes allocate nothing per step once the filter's workspace is sized: every filter
+//! runs predict + `update_into` on `Dyn` models that implement the `_into` methods, under a
+//! counting global allocator. The first prediction and the first update with each measurement
+//! length size the workspace (they allocate); every later step must not.
+// See tests/counting: the counting allocator implements the unsafe `GlobalAlloc` trait.
+#![allow(unsafe_code)]
+
+mod counting;
+use counting::allocations_during;
+
+use std::hint::black_box;
+
+use estim_core::nalgebra::{DMatrix, DVector, Dyn};
+use estim_core::propagate::Unscented;
+use estim_core::{
+    Gaussian, LinearMeasurement, LinearProcess, MeasurementHessian, MeasurementJacobian,
+    MeasurementModel, ProcessHessian, ProcessJacobian, ProcessModel,
+};
+use estim_filters::{
+    Ekf, FadingMemoryRls, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, Predict,
+    SecondOrderEkf, Ukf, Update, UpdateReport,
+};
+
+const DT: f64 = 0.1;
+
+/// A chain of n damped pendulums, each pulled by the next:
+/// fᵢ(x) = xᵢ + Δt (x₍ᵢ₊₁₎ − sin xᵢ) (the last without the pull). Every `_into` method writes
+/// in place.
+struct Chain;
+
+impl ProcessModel<f64, Dyn> for Chain {
+    type Input = ();
+    fn transition(&self, x: &DVector<f64>, u: &(), dt: f64) -> DVector<f64> {
+        let mut out = x.clone();
+        self.transition_into(x, u, dt, &mut out);
+        out
+    }
+    fn process_noise(&self, x: &DVector<f64>, _: &(), dt: f64) -> DMatrix<f64> {
+        DMatrix::identity(x.nrows(), x.nrows()) * (0.01 * dt)
+    }
+    fn transition_into(&self, x: &DVector<f64>, _: &(), dt: f64, out: &mut DVector<f64>) {
+        let n = x.nrows();
+        for i in 0..n {
+            let pull = if i + 1 < n { x[i + 1] } else { 0.0 };
+            out[i] = x[i] + dt * (pull - x[i].sin());
+        }
+    }
+    fn process_noise_into(&self, _: &DVector<f64>, _: &(), dt: f64, out: &mut DMatrix<f64>) {
+        out.fill_with_identity();
+        *out *= 0.01 * dt;
+    }
+}
+
+impl ProcessJacobian<f64, Dyn> for Chain {
+    fn transition_jacobian(&self, x: &DVector<f64>, u: &(), dt: f64) -> DMatrix<f64> {
+        let mut out = DMatrix::zeros(x.nrows(), x.nrows());
+        self.transition_jacobian_into(x, u, dt, &mut out);
+        out
+    }
+    fn transition_jacobian_into(&self, x: &DVector<f64>, _: &(), dt: f64, out: &mut DMatrix<f64>) {
+        let n = x.nrows();
+        out.fill(0.0);
+        for i in 0..n {
+            out[(i, i)] = 1.0 - dt * x[i].cos();
+            if i + 1 < n {
+                out[(i, i + 1)] = dt;
+            }
+        }
+    }
+}
+
+impl ProcessHessian<f64, Dyn> for Chain {
+    fn transition_hessian(
+        &self,
+        x: &DVector<f64>,
+        u: &(),
+        dt: f64,
+        k: usize,
+    ) -> Option<DMatrix<f64>> {
+        let mut out = DMatrix::zeros(x.nrows(), x.nrows());
+        self.transition_hessian_into(x, u, dt, k, &mut out)
+            .then_some(out)
+    }
+    fn transition_hessian_into(
+        &self,
+        x: &DVector<f64>,
+        _: &(),
+        dt: f64,
+        k: usize,
+        out: &mut DMatrix<f64>,
+    ) -> bool {
+        out.fill(0.0);
+        out[(k, k)] = dt * x[k].sin();
+        true
+    }
+}
+
+/// Every other state, with a quadratic term: hⱼ(x) = x₂ⱼ + 0.1 x₂ⱼ², m = n/2.
+struct EveryOther;
+
+impl MeasurementModel<f64, Dyn, Dyn> for EveryOther {
+    fn measure(&self, x: &DVector<f64>) -> DVector<f64> {
+        let mut out = DVector::zeros(x.nrows() / 2);
+        self.measure_into(x, &mut out);
+        out
+    }
+    fn measurement_noise(&self, x: &DVector<f64>) -> DMatrix<f64> {
+        DMatrix::identity(x.nrows() / 2, x.nrows() / 2) * 0.05
+    }
+    fn measure_into(&self, x: &DVector<f64>, out: &mut DVector<f64>) {
+        for j in 0..out.nrows() {
+            let v = x[2 * j];
+            out[j] = v + 0.1 * v * v;
+        }
+    }
+    fn measurement_noise_into(&self, _: &DVector<f64>, out: &mut DMatrix<f64>) {
+        out.fill_with_identity();
+        *out *= 0.05;
+    }
+    fn residual_into(&self, a: &DVector<f64>, b: &DVector<f64>, out: &mut DVector<f64>) {
+        out.copy_from(a);
+        *out -= b;
+    }
+}
+
+impl MeasurementJacobian<f64, Dyn, Dyn> for EveryOther {
+    fn measurement_jacobian(&self, x: &DVector<f64>) -> DMatrix<f64> {
+        let mut out = DMatrix::zeros(x.nrows() / 2, x.nrows());
+        self.measurement_jacobian_into(x, &mut out);
+        out
+    }
+    fn measurement_jacobian_into(&self, x: &DVector<f64>, out: &mut DMatrix<f64>) {
+        out.fill(0.0);
+        for j in 0..out.nrows() {
+            out[(j, 2 * j)] = 1.0 + 0.2 * x[2 * j];
+        }
+    }
+}
+
+impl MeasurementHessian<f64, Dyn, Dyn> for EveryOther {
+    fn measurement_hessian(&self, x: &DVector<f64>, k: usize) -> Option<DMatrix<f64>> {
+        let mut out = DMatrix::zeros(x.nrows(), x.nrows());
+        self.measurement_hessian_into(x, k, &mut out).then_some(out)
+    }
+    fn measurement_hessian_into(&self, _: &DVector<f64>, k: usize, out: &mut DMatrix<f64>) -> bool {
+        out.fill(0.0);
+        out[(2 * k, 2 * k)] = 0.2;
+        true
+    }
+}
+
+fn prior(n: usize) -> Gaussian<f64, Dyn> {
+    let mean = DVector::from_fn(n, |i, _| 0.1 * (i as f64).sin());
+    Gaussian::new(mean, DMatrix::identity(n, n) * 0.2).unwrap()
+}
+
+fn linear_models(
+    n: usize,
+) -> (
+    LinearProcess<f64, Dyn, Dyn>,
+    LinearMeasurement<f64, Dyn, Dyn>,
+) {
+    let m = n / 2;
+    let mut f = DMatrix::identity(n, n) * 0.95;
+    for i in 0..n - 1 {
+        f[(i, i + 1)] = 0.1;
+    }
+    let h = DMatrix::from_fn(m, n, |j, i| {
+        if i == 2 * j {
+            1.0
+        } else if i == 2 * j + 1 {
+            0.5
+        } else {
+            0.0
+        }
+    });
+    (
+        LinearProcess {
+            transition: f,
+            input: DMatrix::zeros(n, 0),
+            noise: DMatrix::identity(n, n) * 0.01,
+        },
+        LinearMeasurement {
+            observation: h,
+            noise: DMatrix::identity(m, m) * 0.1,
+        },
+    )
+}
+
+const STEPS: usize = 10;
+
+fn readings(m: usize) -> Vec<DVector<f64>> {
+    (0..STEPS)
+        .map(|k| DVector::from_fn(m, |j, _| (0.3 * k as f64 + j as f64).sin() * 0.2))
+        .collect()
+}
+
+/// One warm-up step, then allocations over `STEPS` predict + update_into steps.
+fn count_nonlinear<F>(mut filter: F, n: usize) -> usize
+where
+    F: Predict<f64, Dyn, Chain> + Update<f64, Dyn, Dyn, EveryOther>,
+{
+    let zs = readings(n / 2);
+    let mut report = UpdateReport::zeros(Dyn(n / 2));
+    filter.predict(&Chain, &(), DT).unwrap();
+    filter
+        .update_into(&EveryOther, &zs[0], &mut report)
+        .unwrap();
+    allocations_during(|| {
+        for z in &zs {
+            filter.predict(&Chain, &(), DT).unwrap();
+            filter.update_into(&EveryOther, z, &mut report).unwrap();
+            black_box(&report);
+        }
+        black_box(&filter);
+    })
+}
+
+type Process = LinearProcess<f64, Dyn, Dyn>;
+type Measurement = LinearMeasurement<f64, Dyn, Dyn>;
+
+/// The same on the linear models, which every filter accepts.
+fn count_linear<F>(mut filter: F, n: usize) -> usize
+where
+    F: Predict<f64, Dyn, Process> + Update<f64, Dyn, Dyn, Measurement>,
+{
+    let (process, measurement) = linear_models(n);
+    let zs = readings(n / 2);
+    let none = DVector::zeros(0);
+    let mut report = UpdateReport::zeros(Dyn(n / 2));
+    filter.predict(&process, &none, DT).unwrap();
+    filter
+        .update_into(&measurement, &zs[0], &mut report)
+        .unwrap();
+    allocations_during(|| {
+        for z in &zs {
+            filter.predict(&process, &none, DT).unwrap();
+            filter.update_into(&measurement, z, &mut report).unwrap();
+            black_box(&report);
+        }
+        black_box(&filter);
+    })
+}
+
+/// Sizes: small, and large enough for faer's blocked kernels.
+const SIZES: [usize; 2] = [8, 100];
+
+#[test]
+fn chain_models_have_correct_derivatives() {
+    let x = DVector::from_fn(6, |i, _| 0.3 - 0.1 * i as f64);
+    let report = estim_core::derivative::check_process_model(&Chain, &x, &(), DT).unwrap();
+    assert!(report.is_accurate(1e-7), "{report}");
+    let report = estim_core::derivative::check_measurement_model(&EveryOther, &x).unwrap();
+    assert!(report.is_accurate(1e-7), "{report}");
+}
+
+#[test]
+fn warm_up_allocates_and_is_counted() {
+    // Positive control: the first step sizes the workspace, and the counter sees it.
+    let (process, _) = linear_models(8);
+    let mut kf = KalmanFilter::new(prior(8));
+    let first = allocations_during(|| kf.predict(&process, &DVector::zeros(0), DT).unwrap());
+    assert!(first > 0);
+}
+
+#[test]
+fn kalman_filter_does_not_allocate_per_dynamic_step() {
+    for n in SIZES {
+        assert_eq!(count_linear(KalmanFilter::new(prior(n)), n), 0, "n = {n}");
+    }
+}
+
+#[test]
+fn ekfs_do_not_allocate_per_dynamic_step() {
+    for n in SIZES {
+        assert_eq!(count_linear(Ekf::new(prior(n)), n), 0, "Ekf linear n = {n}");
+        assert_eq!(count_nonlinear(Ekf::new(prior(n)), n), 0, "Ekf n = {n}");
+        assert_eq!(
+            count_nonlinear(SecondOrderEkf::new(prior(n)), n),
+            0,
+            "SecondOrderEkf n = {n}"
+        );
+    }
+    // Hessian pairs make this O(m² n²): the small size only.
+    assert_eq!(count_nonlinear(GaussianSecondOrderEkf::new(prior(8)), 8), 0);
+}
+
+#[test]
+fn ukfs_do_not_allocate_per_dynamic_step() {
+    for n in SIZES {
+        assert_eq!(count_linear(Ukf::new(prior(n)), n), 0, "Ukf linear n = {n}");
+        assert_eq!(count_nonlinear(Ukf::new(prior(n)), n), 0, "Ukf n = {n}");
+        let cubature = GaussianFilter::with_propagator(prior(n), Unscented::cubature());
+        assert_eq!(count_nonlinear(cubature, n), 0, "cubature n = {n}");
+    }
+}
+
+#[test]
+fn fading_memory_rls_does_not_allocate_per_dynamic_step() {
+    for n in SIZES {
+        let (_, measurement) = linear_models(n);
+        let zs = readings(n / 2);
+        let mut rls = FadingMemoryRls::new(prior(n), 0.95).unwrap();
+        let mut report = UpdateReport::zeros(Dyn(n / 2));
+        rls.update_into(&measurement, &zs[0], &mut report).unwrap();
+        let count = allocations_during(|| {
+            for z in &zs {
+                rls.update_into(&measurement, z, &mut report).unwrap();
+            }
+        });
+        assert_eq!(count, 0, "n = {n}");
+    }
+}
+
+#[test]
+fn two_sensors_and_gated_updates_do_not_allocate_once_sized() {
+    // One filter, two measurement lengths: each sizes its own workspace once.
+    let n = 12;
+    let (process, wide) = linear_models(n);
+    let narrow = LinearMeasurement {
+        observation: wide.observation.rows(0, 2).into_owned(),
+        noise: DMatrix::identity(2, 2) * 0.1,
+    };
+    let none = DVector::zeros(0);
+    let (z_wide, z_narrow) = (
+        DVector::from_element(n / 2, 0.1),
+        DVector::from_element(2, 0.1),
+    );
+    let (mut r_wide, mut r_narrow) = (UpdateReport::zeros(Dyn(n / 2)), UpdateReport::zeros(Dyn(2)));
+    let mut kf = KalmanFilter::new(prior(n)).with_gate(1e6).unwrap();
+    kf.predict(&process, &none, DT).unwrap();
+    kf.update_into(&wide, &z_wide, &mut r_wide).unwrap();
+    kf.update_into(&narrow, &z_narrow, &mut r_narrow).unwrap();
+    let far = DVector::from_element(2, 1e9);
+    let count = allocations_during(|| {
+        for _ in 0..5 {
+            kf.predict(&process, &none, DT).unwrap();
+            kf.update_into(&wide, &z_wide, &mut r_wide).unwrap();
+            kf.update_into(&narrow, &z_narrow, &mut r_narrow).unwrap();
+            // Gated: reported, not applied, and still no allocation.
+            kf.update_into(&narrow, &far, &mut r_narrow).unwrap();
+            assert!(!r_narrow.applied());
+        }
+    });
+    assert_eq!(count, 0);
+}
