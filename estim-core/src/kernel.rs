@@ -33,6 +33,19 @@ use nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, Scalar, allocator::Allo
 
 use crate::scalar::Real;
 
+/// dst ← src, one `memcpy` of the contiguous storage (nalgebra's `copy_from` copies element by
+/// element through generic indexing, measurably slower on the small static filter steps).
+/// The shapes must agree.
+#[inline(always)]
+#[track_caller]
+pub fn copy<T: Real, R: Dim, C: Dim>(dst: &mut OMatrix<T, R, C>, src: &OMatrix<T, R, C>)
+where
+    DefaultAllocator: Allocator<R, C>,
+{
+    assert_eq!(dst.shape(), src.shape(), "kernel::copy: shapes differ");
+    dst.as_mut_slice().copy_from_slice(src.as_slice());
+}
+
 /// Whether a product overwrites its destination or adds to it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Accum {

@@ -10,7 +10,7 @@ use nalgebra::{
 };
 
 use crate::error::{Error, Quantity, Result, Stage};
-use crate::kernel::{CholeskyScratch, cholesky_in_place, is_static};
+use crate::kernel::{CholeskyScratch, cholesky_in_place, copy, is_static};
 use crate::scalar::{Real, real};
 
 /// Whether every entry of `m` is finite. A branch-free scan of the contiguous storage (it
@@ -124,7 +124,7 @@ where
     DefaultAllocator: Allocator<D> + Allocator<D, D>,
 {
     if !is_static::<D>() && out.shape() == c.shape() {
-        out.copy_from(c);
+        copy(out, c);
         if cholesky_in_place(out, scratch) {
             out.fill_upper_triangle(T::zero(), 1);
             return Ok(());

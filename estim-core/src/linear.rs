@@ -87,7 +87,7 @@ where
     DefaultAllocator: nalgebra::allocator::Allocator<R, C>,
 {
     if out.shape() == value.shape() {
-        out.copy_from(value);
+        crate::kernel::copy(out, value);
     } else {
         *out = value.clone();
     }

@@ -196,7 +196,7 @@ where
 
     /// [`residual`](Self::residual) into `out`. The default stores `residual(a, b)`; a model
     /// that keeps the default subtraction can make it allocation-free for `Dyn` sizes with
-    /// `out.copy_from(a); *out -= b;`.
+    /// `crate::kernel::copy(out, a); *out -= b;`.
     #[inline(always)]
     fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
         *out = self.residual(a, b);
@@ -314,7 +314,7 @@ pub(crate) fn subtract_into<T: Real, D: Dim>(
     DefaultAllocator: Alloc<D>,
 {
     if out.shape() == a.shape() {
-        out.copy_from(a);
+        crate::kernel::copy(out, a);
     } else {
         *out = a.clone();
     }

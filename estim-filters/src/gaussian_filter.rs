@@ -251,18 +251,24 @@ where
             scratch,
             ..
         } = self;
-        scratch.predict(state.shape_generic().0, |scratch| {
-            let map = Transition::new(model, input, dt);
-            let noise = |q: &mut OMatrix<T, N, N>| model.process_noise_into(state, input, dt, q);
-            predicted(propagator, state, covariance, &map, noise, scratch)?;
-            commit(
-                state,
-                covariance,
-                &mut scratch.state,
-                &mut scratch.covariance,
-            );
-            Ok(())
-        })
+        let n = state.shape_generic().0;
+        let mut local;
+        let (work, cached) = match scratch.predict(n) {
+            Some(work) => (work, true),
+            None => {
+                local = PredictScratch::new(n);
+                (&mut local, false)
+            }
+        };
+        let map = Transition::new(model, input, dt);
+        let noise = |q: &mut OMatrix<T, N, N>| model.process_noise_into(state, input, dt, q);
+        let result = predicted(propagator, state, covariance, &map, noise, work);
+        if result.is_ok() {
+            commit(state, covariance, &mut work.state, &mut work.covariance);
+        } else if cached {
+            scratch.discard_predict();
+        }
+        result
     }
 }
 
@@ -297,17 +303,23 @@ where
             ..
         } = self;
         let (map, q_star) = Decorrelated::new(process, input, dt, measurement, z, cross, state)?;
-        scratch.predict(state.shape_generic().0, |scratch| {
-            let noise = |q: &mut OMatrix<T, N, N>| *q = q_star;
-            predicted(propagator, state, covariance, &map, noise, scratch)?;
-            commit(
-                state,
-                covariance,
-                &mut scratch.state,
-                &mut scratch.covariance,
-            );
-            Ok(())
-        })
+        let n = state.shape_generic().0;
+        let mut local;
+        let (work, cached) = match scratch.predict(n) {
+            Some(work) => (work, true),
+            None => {
+                local = PredictScratch::new(n);
+                (&mut local, false)
+            }
+        };
+        let noise = |q: &mut OMatrix<T, N, N>| *q = q_star;
+        let result = predicted(propagator, state, covariance, &map, noise, work);
+        if result.is_ok() {
+            commit(state, covariance, &mut work.state, &mut work.covariance);
+        } else if cached {
+            scratch.discard_predict();
+        }
+        result
     }
 }
 
@@ -397,20 +409,27 @@ where
             scratch,
         } = self;
         let (n, m) = (state.shape_generic().0, z.shape_generic().0);
-        scratch.update(n, m, |scratch| {
-            let applied = measurement_update(
-                propagator, state, covariance, model, z, *settings, scratch, report,
-            )?;
-            if applied {
-                commit(
-                    state,
-                    covariance,
-                    &mut scratch.state,
-                    &mut scratch.covariance,
-                );
+        let mut local;
+        let (work, slot) = match scratch.update(n, m) {
+            Some((work, slot)) => (work, Some(slot)),
+            None => {
+                local = UpdateScratch::new(n, m);
+                (&mut local, None)
             }
-            Ok(())
-        })
+        };
+        let result = measurement_update(
+            propagator, state, covariance, model, z, *settings, work, report,
+        );
+        match result {
+            Ok(true) => commit(state, covariance, &mut work.state, &mut work.covariance),
+            Ok(false) => {}
+            Err(_) => {
+                if let Some(slot) = slot {
+                    scratch.discard_update(slot);
+                }
+            }
+        }
+        result.map(|_| ())
     }
 }
 

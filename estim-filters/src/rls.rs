@@ -6,7 +6,7 @@ use estim_core::{Alloc, Error, Gaussian, MeasurementJacobian, Parameter, Real, e
 
 use crate::gaussian_filter::{commit, measurement_update};
 use crate::report::UpdateReport;
-use crate::scratch::ScratchCache;
+use crate::scratch::{ScratchCache, UpdateScratch};
 use crate::traits::{Estimator, Update};
 use crate::update::{CovarianceUpdate, UpdateSettings};
 
@@ -129,35 +129,42 @@ where
             scratch,
         } = self;
         let (n, m) = (state.shape_generic().0, z.shape_generic().0);
-        scratch.update(n, m, |scratch| {
-            // γ⁻¹P in its own buffer, taken out of the scratch while the update borrows it.
-            let mut inflated = scratch
-                .inflated
-                .take()
-                .filter(|p| p.shape() == covariance.shape())
-                .unwrap_or_else(|| covariance.clone());
-            inflated.copy_from(covariance);
-            inflated /= *forgetting;
-            let applied = measurement_update(
-                &Linearized,
-                state,
-                &inflated,
-                model,
-                z,
-                *settings,
-                scratch,
-                report,
-            );
-            scratch.inflated = Some(inflated);
-            if applied? {
-                commit(
-                    state,
-                    covariance,
-                    &mut scratch.state,
-                    &mut scratch.covariance,
-                );
+        let mut local;
+        let (work, slot) = match scratch.update(n, m) {
+            Some((work, slot)) => (work, Some(slot)),
+            None => {
+                local = UpdateScratch::new(n, m);
+                (&mut local, None)
             }
-            Ok(())
-        })
+        };
+        // γ⁻¹P in its own buffer, taken out of the scratch while the update borrows it.
+        let mut inflated = work
+            .inflated
+            .take()
+            .filter(|p| p.shape() == covariance.shape())
+            .unwrap_or_else(|| covariance.clone());
+        estim_core::kernel::copy(&mut inflated, covariance);
+        inflated /= *forgetting;
+        let result = measurement_update(
+            &Linearized,
+            state,
+            &inflated,
+            model,
+            z,
+            *settings,
+            work,
+            report,
+        );
+        work.inflated = Some(inflated);
+        match result {
+            Ok(true) => commit(state, covariance, &mut work.state, &mut work.covariance),
+            Ok(false) => {}
+            Err(_) => {
+                if let Some(slot) = slot {
+                    scratch.discard_update(slot);
+                }
+            }
+        }
+        result.map(|_| ())
     }
 }

@@ -5,10 +5,11 @@
 //! it is created on the first step with each (n, m) and kept in the filter's [`ScratchCache`],
 //! so every later step allocates nothing.
 
-use core::any::{Any, TypeId};
+use core::any::Any;
 
+use estim_core::kernel::is_static;
 use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
-use estim_core::{Alloc, Real, Workspace, error::Result};
+use estim_core::{Alloc, Real, Workspace};
 
 /// Buffers of one prediction over an `N`-dimensional state.
 pub(crate) struct PredictScratch<T: Real, N: Dim>
@@ -52,14 +53,13 @@ where
     pub(crate) whitened: OVector<T, M>,
     /// Kᵀ (m × n): Pₓᵤᵀ, then solved in place.
     pub(crate) gain_t: OMatrix<T, M, N>,
-    /// Aᵀ = ½ S Kᵀ − Pₓᵤᵀ (m × n) for the Joseph form (−Pₓᵤᵀ for the others).
+    /// −Pₓᵤᵀ (m × n), then S Kᵀ for the Joseph form.
     pub(crate) joseph_t: OMatrix<T, M, N>,
-    /// A Kᵀ (n × n).
-    pub(crate) product: OMatrix<T, N, N>,
+    /// −K Pₓᵤᵀ (n × n), turned into the posterior covariance in place; after the commit, the
+    /// committed covariance's old buffer.
+    pub(crate) covariance: OMatrix<T, N, N>,
     /// The posterior state, then the committed state's old buffer.
     pub(crate) state: OVector<T, N>,
-    /// The posterior covariance, then the committed covariance's old buffer.
-    pub(crate) covariance: OMatrix<T, N, N>,
     /// P/γ for the fading-memory filter (created on first use).
     pub(crate) inflated: Option<OMatrix<T, N, N>>,
     pub(crate) cholesky: estim_core::kernel::CholeskyScratch,
@@ -79,9 +79,8 @@ where
             whitened: OVector::zeros_generic(m, U1),
             gain_t: OMatrix::zeros_generic(m, n),
             joseph_t: OMatrix::zeros_generic(m, n),
-            product: OMatrix::zeros_generic(n, n),
-            state: OVector::zeros_generic(n, U1),
             covariance: OMatrix::zeros_generic(n, n),
+            state: OVector::zeros_generic(n, U1),
             inflated: None,
             cholesky: Default::default(),
         }
@@ -132,32 +131,23 @@ impl<T: Real> core::fmt::Debug for ScratchCache<T> {
     }
 }
 
-/// `true` when `D` is `Dyn`.
-#[inline(always)]
-fn is_dyn<D: Dim>() -> bool {
-    TypeId::of::<D>() == TypeId::of::<Dyn>()
-}
-
 impl<T: Real> ScratchCache<T> {
     /// Drops every scratch (after the state dimension changed).
     pub(crate) fn clear(&mut self) {
         *self = Self::default();
     }
 
-    /// Runs a prediction step over `n` states in its scratch: a local for static sizes, the
-    /// cached one for `Dyn`. A failed step drops the cached scratch, because a model's default
-    /// `_into` method may have reshaped a buffer.
+    /// The cached prediction scratch for `n` states if `N` is `Dyn` (made on first use), or
+    /// `None` for a static size: then the caller uses a local, which the compiler keeps in
+    /// registers. (Returning the choice rather than taking a closure keeps the whole static
+    /// step in one function, where that optimisation can see it.)
     #[inline(always)]
-    pub(crate) fn predict<N: Dim, R>(
-        &mut self,
-        n: N,
-        step: impl FnOnce(&mut PredictScratch<T, N>) -> Result<R>,
-    ) -> Result<R>
+    pub(crate) fn predict<N: Dim>(&mut self, n: N) -> Option<&mut PredictScratch<T, N>>
     where
         DefaultAllocator: Alloc<N>,
     {
-        if !is_dyn::<N>() {
-            return step(&mut PredictScratch::new(n));
+        if is_static::<N>() {
+            return None;
         }
         if self
             .predict
@@ -169,31 +159,28 @@ impl<T: Real> ScratchCache<T> {
         let cached = self
             .predict
             .get_or_insert_with(|| PredictScratch::<T, Dyn>::new(Dyn(n.value())));
-        let Some(scratch) = (cached as &mut dyn Any).downcast_mut::<PredictScratch<T, N>>() else {
-            // Unreachable: N is Dyn.
-            return step(&mut PredictScratch::new(n));
-        };
-        let result = step(scratch);
-        if result.is_err() {
-            self.predict = None;
-        }
-        result
+        (cached as &mut dyn Any).downcast_mut()
     }
 
-    /// Runs an update step over `n` states with `m` measurement components in its scratch: a
-    /// local unless both are `Dyn`, else the cached one for (n, m), dropped if the step fails.
+    /// Drops the cached prediction scratch, after a failed step: a model's default `_into`
+    /// method may have reshaped a buffer.
+    pub(crate) fn discard_predict(&mut self) {
+        self.predict = None;
+    }
+
+    /// The cached update scratch for `n` states and `m` measurement components and its slot,
+    /// if both are `Dyn` (made on first use); `None` otherwise (the caller uses a local).
     #[inline(always)]
-    pub(crate) fn update<N: Dim, M: Dim, R>(
+    pub(crate) fn update<N: Dim, M: Dim>(
         &mut self,
         n: N,
         m: M,
-        step: impl FnOnce(&mut UpdateScratch<T, N, M>) -> Result<R>,
-    ) -> Result<R>
+    ) -> Option<(&mut UpdateScratch<T, N, M>, usize)>
     where
         DefaultAllocator: Alloc<N, M>,
     {
-        if !(is_dyn::<N>() && is_dyn::<M>()) {
-            return step(&mut UpdateScratch::new(n, m));
+        if is_static::<N>() || is_static::<M>() {
+            return None;
         }
         let dims = (n.value(), m.value());
         let index = match self.update.iter().position(|s| s.dimensions() == dims) {
@@ -205,15 +192,13 @@ impl<T: Real> ScratchCache<T> {
             }
         };
         let cached = &mut self.update[index];
-        let Some(scratch) = (cached as &mut dyn Any).downcast_mut::<UpdateScratch<T, N, M>>()
-        else {
-            // Unreachable: N and M are Dyn.
-            return step(&mut UpdateScratch::new(n, m));
-        };
-        let result = step(scratch);
-        if result.is_err() {
-            self.update.swap_remove(index);
-        }
-        result
+        (cached as &mut dyn Any)
+            .downcast_mut()
+            .map(|scratch| (scratch, index))
+    }
+
+    /// Drops the cached update scratch in `slot`, after a failed step.
+    pub(crate) fn discard_update(&mut self, slot: usize) {
+        self.update.swap_remove(slot);
     }
 }

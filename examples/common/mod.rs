@@ -10,6 +10,7 @@ pub mod boje_lambda;
 pub mod boje_moments;
 pub mod boje_rate;
 pub mod consistency;
+pub mod large_state;
 pub mod lee_huang;
 pub mod lu_calibration;
 pub mod lv2_fusion;

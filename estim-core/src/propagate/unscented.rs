@@ -161,23 +161,31 @@ impl<T: Real> Unscented<T> {
         let d = buffer(&mut workspace.deviation, m_dim, U1);
         let plus = buffer(&mut workspace.plus, m_dim, n_dim);
         let minus = buffer(&mut workspace.minus, m_dim, n_dim);
+        // Columns of column-major storage are contiguous slices: plain slice loops here, where
+        // nalgebra's generic column views cost measurably on small static sizes.
         for j in 0..n {
+            let column = &l.as_slice()[j * n..(j + 1) * n];
             for (sign, deviations) in [(T::one(), &mut *plus), (-T::one(), &mut *minus)] {
-                x.copy_from(mean);
-                x.axpy(sign, &l.column(j), T::one());
+                for ((xi, &mi), &li) in x.as_mut_slice().iter_mut().zip(mean.as_slice()).zip(column)
+                {
+                    *xi = mi + sign * li;
+                }
                 g.eval_into(x, y);
                 ensure_shape(y, m, 1, stage, Quantity::FunctionValue)?;
                 g.difference_into(y, out_mean, d);
                 ensure_shape(d, m, 1, stage, Quantity::FunctionValue)?;
-                deviations.set_column(j, d);
+                deviations.as_mut_slice()[j * m..(j + 1) * m].copy_from_slice(d.as_slice());
             }
         }
         let w = T::one() / (real::<T>(2.0) * c);
         let d_bar = buffer(&mut workspace.mean_deviation, m_dim, U1);
         d_bar.fill(T::zero());
-        for j in 0..n {
-            d_bar.axpy(T::one(), &plus.column(j), T::one());
-            d_bar.axpy(T::one(), &minus.column(j), T::one());
+        for deviations in [&*plus, &*minus] {
+            for column in deviations.as_slice().chunks_exact(m.max(1)) {
+                for (s, &v) in d_bar.as_mut_slice().iter_mut().zip(column) {
+                    *s += v;
+                }
+            }
         }
         *d_bar *= w;
         mul_tr(out_covariance, Accum::Replace, w, plus, plus);
