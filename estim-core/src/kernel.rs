@@ -58,9 +58,10 @@ pub enum Accum {
 /// With the `parallel` feature, faer's threads are used for a kernel whose smallest dimension
 /// is at least this. Below it, thread start-up costs more than it saves.
 ///
-/// Chosen from `cargo bench -p estim-filters --features parallel --bench dynamic` against the
-/// same bench without the feature on this project's 2-core reference machine; see
-/// BENCHMARKS.md ("Parallel threshold").
+/// Chosen from `cargo bench -p estim-filters --features parallel --bench dynamic` (threshold
+/// set to 0) against the sequential build, 2 threads on the 2-core reference machine: threads
+/// made the KF step 2.2× slower at n = 50, 1.2× at 100 and broke even at 200, so every size up
+/// to 200 stays single-threaded. See BENCHMARKS.md ("Parallel threshold").
 pub const PARALLEL_THRESHOLD: usize = 256;
 
 /// `true` when `D` is a compile-time dimension.
