@@ -1,5 +1,6 @@
 //! The Kalman family as one filter parameterised by its moment propagator.
 
+use estim_core::kernel;
 use estim_core::linalg::{all_finite, ensure_shape, symmetrize};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{
@@ -164,15 +165,54 @@ where
     }
 }
 
-/// The predicted estimate through `g` plus additive noise: `fill_noise` writes Q into its
-/// buffer. The result is left in `scratch.state` and `scratch.covariance`, not yet committed.
+/// One prediction through `g` plus additive noise (`fill_noise` writes Q(x̂) into its buffer),
+/// computed in the step's scratch (a local for static sizes, the filter's cached one for `Dyn`)
+/// and committed only if every check passes.
 #[inline(always)]
-pub(crate) fn predicted<T, N, Pr, G>(
+fn predict_step<T, N, Pr, G>(
+    propagator: &Pr,
+    cache: &mut ScratchCache<T>,
+    state: &mut OVector<T, N>,
+    covariance: &mut OMatrix<T, N, N>,
+    g: &G,
+    fill_noise: impl FnOnce(&OVector<T, N>, &mut OMatrix<T, N, N>),
+) -> Result<()>
+where
+    T: Real,
+    N: Dim,
+    G: VectorFunction<T, N, N>,
+    Pr: MomentPropagator<T, N, N, G>,
+    DefaultAllocator: Alloc<N>,
+{
+    let n = state.shape_generic().0;
+    // Chosen here rather than through a closure over the whole step: a local the compiler
+    // sees whole stays in registers for small static sizes (BENCHMARKS.md, issue #6).
+    let mut local;
+    let (work, cached) = match cache.predict(n) {
+        Some(work) => (work, true),
+        None => {
+            local = PredictScratch::new(n);
+            (&mut local, false)
+        }
+    };
+    fill_noise(state, &mut work.noise);
+    let result = predicted(propagator, state, covariance, g, work);
+    match result {
+        Ok(()) => commit(state, covariance, &mut work.state, &mut work.covariance),
+        Err(_) if cached => cache.discard_predict(),
+        Err(_) => {}
+    }
+    result
+}
+
+/// The predicted estimate into `scratch.state` and `scratch.covariance`, with Q already in
+/// `scratch.noise`.
+#[inline(always)]
+fn predicted<T, N, Pr, G>(
     propagator: &Pr,
     state: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
     g: &G,
-    fill_noise: impl FnOnce(&mut OMatrix<T, N, N>),
     scratch: &mut PredictScratch<T, N>,
 ) -> Result<()>
 where
@@ -190,7 +230,6 @@ where
         covariance: p,
         noise: q,
     } = scratch;
-    fill_noise(q);
     ensure_shape(q, n, n, stage, Quantity::ProcessNoise)?;
     // The propagator checks its own outputs; Q is checked through P⁻ = cov f + Q, and only on
     // failure is it examined to name the culprit.
@@ -252,24 +291,10 @@ where
             scratch,
             ..
         } = self;
-        let n = state.shape_generic().0;
-        let mut local;
-        let (work, cached) = match scratch.predict(n) {
-            Some(work) => (work, true),
-            None => {
-                local = PredictScratch::new(n);
-                (&mut local, false)
-            }
-        };
         let map = Transition::new(model, input, dt);
-        let noise = |q: &mut OMatrix<T, N, N>| model.process_noise_into(state, input, dt, q);
-        let result = predicted(propagator, state, covariance, &map, noise, work);
-        if result.is_ok() {
-            commit(state, covariance, &mut work.state, &mut work.covariance);
-        } else if cached {
-            scratch.discard_predict();
-        }
-        result
+        let noise =
+            |x: &OVector<T, N>, q: &mut OMatrix<T, N, N>| model.process_noise_into(x, input, dt, q);
+        predict_step(propagator, scratch, state, covariance, &map, noise)
     }
 }
 
@@ -304,23 +329,8 @@ where
             ..
         } = self;
         let (map, q_star) = Decorrelated::new(process, input, dt, measurement, z, cross, state)?;
-        let n = state.shape_generic().0;
-        let mut local;
-        let (work, cached) = match scratch.predict(n) {
-            Some(work) => (work, true),
-            None => {
-                local = PredictScratch::new(n);
-                (&mut local, false)
-            }
-        };
-        let noise = |q: &mut OMatrix<T, N, N>| *q = q_star;
-        let result = predicted(propagator, state, covariance, &map, noise, work);
-        if result.is_ok() {
-            commit(state, covariance, &mut work.state, &mut work.covariance);
-        } else if cached {
-            scratch.discard_predict();
-        }
-        result
+        let noise = |_: &OVector<T, N>, q: &mut OMatrix<T, N, N>| *q = q_star;
+        predict_step(propagator, scratch, state, covariance, &map, noise)
     }
 }
 
@@ -409,29 +419,75 @@ where
             settings,
             scratch,
         } = self;
-        let (n, m) = (state.shape_generic().0, z.shape_generic().0);
-        let mut local;
-        let (work, slot) = match scratch.update(n, m) {
-            Some((work, slot)) => (work, Some(slot)),
-            None => {
-                local = UpdateScratch::new(n, m);
-                (&mut local, None)
-            }
-        };
-        let result = measurement_update(
-            propagator, state, covariance, model, z, *settings, work, report,
-        );
-        match result {
-            Ok(true) => commit(state, covariance, &mut work.state, &mut work.covariance),
-            Ok(false) => {}
-            Err(_) => {
-                if let Some(slot) = slot {
-                    scratch.discard_update(slot);
+        update_step(
+            propagator, scratch, state, covariance, None, model, z, *settings, report,
+        )
+    }
+}
+
+/// One measurement update, computed in the step's scratch (a local for static sizes, the
+/// filter's cached one for `Dyn`) and committed only if applied. With `forgetting` = Some(γ)
+/// the prior covariance is γ⁻¹P (the fading-memory filter).
+#[inline(always)]
+pub(crate) fn update_step<T, N, M, Pr, H>(
+    propagator: &Pr,
+    cache: &mut ScratchCache<T>,
+    state: &mut OVector<T, N>,
+    covariance: &mut OMatrix<T, N, N>,
+    forgetting: Option<T>,
+    model: &H,
+    z: &OVector<T, M>,
+    settings: UpdateSettings<T>,
+    report: &mut UpdateReport<T, M>,
+) -> Result<()>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: MeasurementModel<T, N, M>,
+    Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    let (n, m) = (state.shape_generic().0, z.shape_generic().0);
+    let mut local;
+    let (work, slot) = match cache.update(n, m) {
+        Some((work, slot)) => (work, Some(slot)),
+        None => {
+            local = UpdateScratch::new(n, m);
+            (&mut local, None)
+        }
+    };
+    let result = match forgetting {
+        None => measurement_update(
+            propagator, state, covariance, model, z, settings, work, report,
+        ),
+        Some(gamma) => {
+            // γ⁻¹P in its own buffer, taken out of the scratch while the update borrows it.
+            let mut inflated = match work.inflated.take() {
+                Some(mut p) if p.shape() == covariance.shape() => {
+                    kernel::copy(&mut p, covariance);
+                    p
                 }
+                _ => covariance.clone(),
+            };
+            inflated /= gamma;
+            let result = measurement_update(
+                propagator, state, &inflated, model, z, settings, work, report,
+            );
+            work.inflated = Some(inflated);
+            result
+        }
+    };
+    match result {
+        Ok(true) => commit(state, covariance, &mut work.state, &mut work.covariance),
+        Ok(false) => {}
+        Err(_) => {
+            if let Some(slot) = slot {
+                cache.discard_update(slot);
             }
         }
-        result.map(|_| ())
     }
+    result.map(|_| ())
 }
 
 impl<P, H, T, N, M> AffineFunction<T, N, N> for Decorrelated<'_, P, P::Input, H, T, N, M>

@@ -4,9 +4,9 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::Linearized;
 use estim_core::{Alloc, Error, Gaussian, MeasurementJacobian, Parameter, Real, error::Result};
 
-use crate::gaussian_filter::{commit, measurement_update};
+use crate::gaussian_filter::update_step;
 use crate::report::UpdateReport;
-use crate::scratch::{ScratchCache, UpdateScratch};
+use crate::scratch::ScratchCache;
 use crate::traits::{Estimator, Update};
 use crate::update::{CovarianceUpdate, UpdateSettings};
 
@@ -128,43 +128,16 @@ where
             settings,
             scratch,
         } = self;
-        let (n, m) = (state.shape_generic().0, z.shape_generic().0);
-        let mut local;
-        let (work, slot) = match scratch.update(n, m) {
-            Some((work, slot)) => (work, Some(slot)),
-            None => {
-                local = UpdateScratch::new(n, m);
-                (&mut local, None)
-            }
-        };
-        // γ⁻¹P in its own buffer, taken out of the scratch while the update borrows it.
-        let mut inflated = work
-            .inflated
-            .take()
-            .filter(|p| p.shape() == covariance.shape())
-            .unwrap_or_else(|| covariance.clone());
-        estim_core::kernel::copy(&mut inflated, covariance);
-        inflated /= *forgetting;
-        let result = measurement_update(
+        update_step(
             &Linearized,
+            scratch,
             state,
-            &inflated,
+            covariance,
+            Some(*forgetting),
             model,
             z,
             *settings,
-            work,
             report,
-        );
-        work.inflated = Some(inflated);
-        match result {
-            Ok(true) => commit(state, covariance, &mut work.state, &mut work.covariance),
-            Ok(false) => {}
-            Err(_) => {
-                if let Some(slot) = slot {
-                    scratch.discard_update(slot);
-                }
-            }
-        }
-        result.map(|_| ())
+        )
     }
 }

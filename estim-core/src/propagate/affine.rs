@@ -2,8 +2,7 @@
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
-use super::linearized::linear_moments_into;
-use super::{MomentPropagator, Workspace, finish, impl_propagator_via_moments_into};
+use super::{Linearized, MomentPropagator, Workspace, impl_propagator_via_moments_into};
 use crate::alloc::Alloc;
 use crate::error::Result;
 use crate::function::AffineFunction;
@@ -25,7 +24,7 @@ impl Affine {
         g: &G,
         out_mean: &mut OVector<T, M>,
         out_covariance: &mut OMatrix<T, M, M>,
-        mut cross: Option<&mut OMatrix<T, N, M>>,
+        cross: Option<&mut OMatrix<T, N, M>>,
         workspace: &mut Workspace<T, N, M>,
     ) -> Result<()>
     where
@@ -35,16 +34,16 @@ impl Affine {
         G: AffineFunction<T, N, M> + ?Sized,
         DefaultAllocator: Alloc<N, M>,
     {
-        linear_moments_into(
+        // Linearisation is exact here: the same arithmetic, restricted to affine g.
+        Linearized.moments_into(
             mean,
             covariance,
             g,
             out_mean,
             out_covariance,
-            cross.as_deref_mut(),
+            cross,
             workspace,
-        )?;
-        finish(out_mean, out_covariance, cross.as_deref())
+        )
     }
 }
 

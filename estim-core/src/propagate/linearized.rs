@@ -63,7 +63,7 @@ where
 
 impl Linearized {
     #[inline(always)]
-    fn moments_into<T, N, M, G>(
+    pub(super) fn moments_into<T, N, M, G>(
         &self,
         mean: &OVector<T, N>,
         covariance: &OMatrix<T, N, N>,
