@@ -25,6 +25,7 @@ use faer::linalg::cholesky::llt::factor::{
     LltRegularization, cholesky_in_place as faer_cholesky, cholesky_in_place_scratch,
 };
 use faer::linalg::matmul::matmul;
+use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::triangular_solve::{
     solve_lower_triangular_in_place, solve_upper_triangular_in_place,
 };
@@ -136,6 +137,7 @@ fn faer_product<U, T, R, C, RA, CA, RB, CB>(
     transpose_a: bool,
     b: &OMatrix<T, RB, CB>,
     transpose_b: bool,
+    lower: bool,
 ) -> bool
 where
     U: FaerScalar,
@@ -164,16 +166,38 @@ where
         Accum::Replace => faer::Accum::Replace,
         Accum::Add => faer::Accum::Add,
     };
-    matmul(view_mut(dst), accum, a, b, alpha, par(size));
+    if lower {
+        triangular::matmul(
+            view_mut(dst),
+            BlockStructure::TriangularLower,
+            accum,
+            a,
+            BlockStructure::Rectangular,
+            b,
+            BlockStructure::Rectangular,
+            alpha,
+            par(size),
+        );
+    } else {
+        matmul(view_mut(dst), accum, a, b, alpha, par(size));
+    }
     true
 }
 
 /// `true` if the product was done on faer (runtime sizes, `f32`/`f64`).
+/// `$lower`: only the lower triangle of the (square) destination is computed.
 macro_rules! on_faer {
     ($dims:expr, $dst:expr, $accum:expr, $alpha:expr, $a:expr, $ta:expr, $b:expr, $tb:expr) => {
+        on_faer!($dims, $dst, $accum, $alpha, $a, $ta, $b, $tb, false)
+    };
+    ($dims:expr, $dst:expr, $accum:expr, $alpha:expr, $a:expr, $ta:expr, $b:expr, $tb:expr,
+     $lower:expr) => {
         $dims
-            && (faer_product::<f64, _, _, _, _, _, _, _>($dst, $accum, $alpha, $a, $ta, $b, $tb)
-                || faer_product::<f32, _, _, _, _, _, _, _>($dst, $accum, $alpha, $a, $ta, $b, $tb))
+            && (faer_product::<f64, _, _, _, _, _, _, _>(
+                $dst, $accum, $alpha, $a, $ta, $b, $tb, $lower,
+            ) || faer_product::<f32, _, _, _, _, _, _, _>(
+                $dst, $accum, $alpha, $a, $ta, $b, $tb, $lower,
+            ))
     };
 }
 
@@ -264,6 +288,52 @@ pub fn tr_mul<T, R, K, C>(
     let dynamic = !(is_static::<R>() && is_static::<K>() && is_static::<C>());
     if !on_faer!(dynamic, dst, accum, alpha, a, true, b, false) {
         store(dst, accum, scaled(alpha, a.tr_mul(b)));
+    }
+}
+
+/// The lower triangle (diagonal included) of dst (+)= α a b, for a product known to be
+/// symmetric (such as J (C Jᵀ)): on runtime sizes only that triangle is computed, about half
+/// the work. The strict upper triangle of `dst` is unspecified afterwards (static sizes compute
+/// the whole product, which is cheaper than selecting a triangle there); mirror the lower
+/// triangle ([`crate::linalg::mirror_lower_checked`]) before using it.
+#[inline(always)]
+#[track_caller]
+pub fn mul_lower<T, D, K>(
+    dst: &mut OMatrix<T, D, D>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, D, K>,
+    b: &OMatrix<T, K, D>,
+) where
+    T: Real,
+    D: Dim,
+    K: Dim,
+    DefaultAllocator: Allocator<D, D> + Allocator<D, K> + Allocator<K, D>,
+{
+    let dynamic = !(is_static::<D>() && is_static::<K>());
+    if !on_faer!(dynamic, dst, accum, alpha, a, false, b, false, true) {
+        store(dst, accum, scaled(alpha, a * b));
+    }
+}
+
+/// The lower triangle of dst (+)= α a bᵀ (see [`mul_lower`]; e.g. w D Dᵀ or (K S) Kᵀ).
+#[inline(always)]
+#[track_caller]
+pub fn mul_tr_lower<T, D, K>(
+    dst: &mut OMatrix<T, D, D>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, D, K>,
+    b: &OMatrix<T, D, K>,
+) where
+    T: Real,
+    D: Dim,
+    K: Dim,
+    DefaultAllocator: Allocator<D, D> + Allocator<D, K> + Allocator<K, D>,
+{
+    let dynamic = !(is_static::<D>() && is_static::<K>());
+    if !on_faer!(dynamic, dst, accum, alpha, a, false, b, true, true) {
+        store(dst, accum, scaled(alpha, a * b.transpose()));
     }
 }
 
@@ -378,6 +448,103 @@ pub fn solve_lower_transpose_in_place<T: Real, D: Dim, C: Dim>(
     l.tr_solve_lower_triangular_unchecked_mut(b);
 }
 
+/// Solves X Lᵀ = B in place (`b` ← B L⁻ᵀ) with L the lower triangle of `l`: the first half of
+/// a gain K = Pₓᵤ S⁻¹ = Pₓᵤ L⁻ᵀ L⁻¹, solved in K's own n × m storage (no transposed copy).
+#[inline(always)]
+pub fn solve_right_lower_transpose_in_place<T: Real, R: Dim, D: Dim>(
+    l: &OMatrix<T, D, D>,
+    b: &mut OMatrix<T, R, D>,
+) where
+    DefaultAllocator: Allocator<D, D> + Allocator<R, D>,
+{
+    if !(is_static::<D>() && is_static::<R>())
+        && (faer_solve_right::<f64, _, _, _>(l, b, true)
+            || faer_solve_right::<f32, _, _, _>(l, b, true))
+    {
+        return;
+    }
+    // Column j of X Lᵀ = B: Σₖ≤ⱼ Lⱼₖ X[:, k] = B[:, j], forward over the columns.
+    let (rows, n) = b.shape();
+    let b = b.as_mut_slice();
+    for j in 0..n {
+        let (done, rest) = b.split_at_mut(j * rows);
+        let column = &mut rest[..rows];
+        for k in 0..j {
+            axpy(column, -l[(j, k)], &done[k * rows..(k + 1) * rows]);
+        }
+        scale(column, T::one() / l[(j, j)]);
+    }
+}
+
+/// y ← y + a x over two columns.
+#[inline(always)]
+fn axpy<T: Real>(y: &mut [T], a: T, x: &[T]) {
+    for (yi, &xi) in y.iter_mut().zip(x) {
+        *yi += a * xi;
+    }
+}
+
+/// y ← a y.
+#[inline(always)]
+fn scale<T: Real>(y: &mut [T], a: T) {
+    for yi in y {
+        *yi *= a;
+    }
+}
+
+/// Solves X L = B in place (`b` ← B L⁻¹) with L the lower triangle of `l` (the second half of
+/// the gain, see [`solve_right_lower_transpose_in_place`]).
+#[inline(always)]
+pub fn solve_right_lower_in_place<T: Real, R: Dim, D: Dim>(
+    l: &OMatrix<T, D, D>,
+    b: &mut OMatrix<T, R, D>,
+) where
+    DefaultAllocator: Allocator<D, D> + Allocator<R, D>,
+{
+    if !(is_static::<D>() && is_static::<R>())
+        && (faer_solve_right::<f64, _, _, _>(l, b, false)
+            || faer_solve_right::<f32, _, _, _>(l, b, false))
+    {
+        return;
+    }
+    // Column j of X L = B: Σₖ≥ⱼ Lₖⱼ X[:, k] = B[:, j], backward over the columns.
+    let (rows, n) = b.shape();
+    let b = b.as_mut_slice();
+    for j in (0..n).rev() {
+        let (head, done) = b.split_at_mut((j + 1) * rows);
+        let column = &mut head[j * rows..];
+        for k in (j + 1)..n {
+            let offset = (k - j - 1) * rows;
+            axpy(column, -l[(k, j)], &done[offset..offset + rows]);
+        }
+        scale(column, T::one() / l[(j, j)]);
+    }
+}
+
+/// B L⁻ᵀ (`transpose`) or B L⁻¹ on faer if `T` is `U`, as the left solve on the transposed
+/// view of `b`: (B L⁻ᵀ)ᵀ = L⁻¹ Bᵀ and (B L⁻¹)ᵀ = L⁻ᵀ Bᵀ.
+#[inline(always)]
+fn faer_solve_right<U: FaerScalar, T: Real, R: Dim, D: Dim>(
+    l: &OMatrix<T, D, D>,
+    b: &mut OMatrix<T, R, D>,
+    transpose: bool,
+) -> bool
+where
+    DefaultAllocator: Allocator<D, D> + Allocator<R, D>,
+{
+    let (Some(l), Some(b)) = (cast::<T, U, D, D>(l), cast_mut::<T, U, R, D>(b)) else {
+        return false;
+    };
+    let par = par(l.nrows().min(b.nrows()));
+    let bt = view_mut(b).transpose_mut();
+    if transpose {
+        solve_lower_triangular_in_place(view(l), bt, par);
+    } else {
+        solve_upper_triangular_in_place(view(l).transpose(), bt, par);
+    }
+    true
+}
+
 /// The faer triangular solve with L (`transpose`: Lᵀ) if `T` is `U`.
 #[inline(always)]
 fn faer_solve<U: FaerScalar, T: Real, D: Dim, C: Dim>(
@@ -450,6 +617,58 @@ mod tests {
         solve_lower_transpose_in_place(&ls, &mut xs);
         for i in 0..3 {
             for j in 0..2 {
+                assert!((xs[(i, j)] - x[(i, j)]).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn lower_products_match_the_full_product_on_the_lower_triangle() {
+        let a = DMatrix::from_fn(5, 3, |i, j| (i as f64) - 0.7 * j as f64 + 0.1);
+        let b = DMatrix::from_fn(3, 5, |i, j| 1.0 + (i * j) as f64 - 0.3 * i as f64);
+        let full = &a * &b;
+        for accum in [Accum::Replace, Accum::Add] {
+            let start = DMatrix::from_fn(5, 5, |i, j| (i + 2 * j) as f64);
+            let expected = match accum {
+                Accum::Replace => 2.0 * &full,
+                Accum::Add => &start + 2.0 * &full,
+            };
+            let mut dst = start.clone();
+            mul_lower(&mut dst, accum, 2.0, &a, &b);
+            let mut dst_tr = start.clone();
+            mul_tr_lower(&mut dst_tr, accum, 2.0, &a, &b.transpose());
+            for j in 0..5 {
+                for i in j..5 {
+                    assert!((dst[(i, j)] - expected[(i, j)]).abs() < 1e-12);
+                    assert!((dst_tr[(i, j)] - expected[(i, j)]).abs() < 1e-12);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn right_solves_agree_static_and_dynamic() {
+        let s = spd(4);
+        let b = DMatrix::from_fn(3, 4, |i, j| (i + 2 * j) as f64 - 1.5);
+        let mut scratch = CholeskyScratch::default();
+        let mut l = s.clone();
+        assert!(cholesky_in_place(&mut l, &mut scratch));
+        // B S⁻¹ = B L⁻ᵀ L⁻¹.
+        let mut x = b.clone();
+        solve_right_lower_transpose_in_place(&l, &mut x);
+        solve_right_lower_in_place(&l, &mut x);
+        assert!((&x * &s - &b).amax() < 1e-10);
+
+        let ls = nalgebra::Matrix4::from_iterator(l.iter().copied());
+        let mut xs = nalgebra::Matrix3x4::from_iterator(b.iter().copied());
+        solve_right_lower_transpose_in_place(&ls, &mut xs);
+        let mut half = b.clone();
+        solve_right_lower_transpose_in_place(&l, &mut half);
+        let lower = l.lower_triangle();
+        assert!((&half * lower.transpose() - &b).amax() < 1e-10);
+        solve_right_lower_in_place(&ls, &mut xs);
+        for i in 0..3 {
+            for j in 0..4 {
                 assert!((xs[(i, j)] - x[(i, j)]).abs() < 1e-12);
             }
         }

@@ -25,7 +25,7 @@ use crate::alloc::Alloc;
 use crate::error::{Quantity, Result, Stage};
 use crate::function::VectorFunction;
 use crate::gaussian::Gaussian;
-use crate::linalg::{ensure_finite, ensure_shape, symmetrize};
+use crate::linalg::{ensure_finite, ensure_shape, mirror_lower_checked};
 use crate::scalar::Real;
 
 mod affine;
@@ -215,7 +215,9 @@ where
     Ok(())
 }
 
-/// Symmetrises the covariance and checks the results are finite.
+/// Makes the covariance symmetric from its lower triangle (the propagators compute only that
+/// triangle of their symmetric products: [`crate::kernel::mul_lower`]) and checks the results
+/// are finite.
 #[inline(always)]
 fn finish<T: Real, N: Dim, M: Dim>(
     mean: &OVector<T, M>,
@@ -225,10 +227,14 @@ fn finish<T: Real, N: Dim, M: Dim>(
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    symmetrize(covariance);
     let stage = Stage::Propagation;
     ensure_finite(mean, stage, Quantity::Mean)?;
-    ensure_finite(covariance, stage, Quantity::Covariance)?;
+    if !mirror_lower_checked(covariance) {
+        return Err(crate::Error::NonFinite {
+            stage,
+            quantity: Quantity::Covariance,
+        });
+    }
     if let Some(cross) = cross {
         ensure_finite(cross, stage, Quantity::CrossCovariance)?;
     }

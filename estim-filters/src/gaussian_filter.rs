@@ -1,7 +1,7 @@
 //! The Kalman family as one filter parameterised by its moment propagator.
 
 use estim_core::kernel;
-use estim_core::linalg::{all_finite, ensure_shape, symmetrize};
+use estim_core::linalg::{all_finite, ensure_shape, symmetrize_add_checked};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{
     Affine, Linearized, MomentPropagator, SecondOrder, SecondOrderGaussian, Unscented,
@@ -234,9 +234,7 @@ where
     // The propagator checks its own outputs; Q is checked through P⁻ = cov f + Q, and only on
     // failure is it examined to name the culprit.
     propagator.propagate_mean_covariance_into(state, covariance, g, mean, p, propagation)?;
-    *p += &*q;
-    symmetrize(p);
-    if !all_finite(p) {
+    if !symmetrize_add_checked(p, q) {
         let quantity = if all_finite(q) {
             Quantity::Covariance
         } else {

@@ -51,10 +51,12 @@ where
     pub(crate) factor: OMatrix<T, M, M>,
     /// L⁻¹ ν.
     pub(crate) whitened: OVector<T, M>,
-    /// Kᵀ (m × n): Pₓᵤᵀ, then solved in place.
-    pub(crate) gain_t: OMatrix<T, M, N>,
-    /// −Pₓᵤᵀ (m × n), then S Kᵀ for the Joseph form.
-    pub(crate) joseph_t: OMatrix<T, M, N>,
+    /// K (n × m): Pₓᵤ, then solved in place.
+    pub(crate) gain: OMatrix<T, N, M>,
+    /// K S (n × m), for the Joseph form.
+    pub(crate) gain_s: OMatrix<T, N, M>,
+    /// K S Kᵀ (n × n), for the Joseph form.
+    pub(crate) gain_s_gain: OMatrix<T, N, N>,
     /// −K Pₓᵤᵀ (n × n), turned into the posterior covariance in place; after the commit, the
     /// committed covariance's old buffer.
     pub(crate) covariance: OMatrix<T, N, N>,
@@ -77,8 +79,9 @@ where
             noise: OMatrix::zeros_generic(m, m),
             factor: OMatrix::zeros_generic(m, m),
             whitened: OVector::zeros_generic(m, U1),
-            gain_t: OMatrix::zeros_generic(m, n),
-            joseph_t: OMatrix::zeros_generic(m, n),
+            gain: OMatrix::zeros_generic(n, m),
+            gain_s: OMatrix::zeros_generic(n, m),
+            gain_s_gain: OMatrix::zeros_generic(n, n),
             covariance: OMatrix::zeros_generic(n, n),
             state: OVector::zeros_generic(n, U1),
             inflated: None,

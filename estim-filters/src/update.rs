@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! S  = cov(ẑ) + R                       (factorised by Cholesky, S = L Lᵀ; never inverted)
-//! K  = Pₓᵤ S⁻¹                          (solved: Kᵀ = L⁻ᵀ L⁻¹ Pₓᵤᵀ)
+//! K  = Pₓᵤ S⁻¹                          (solved from the right: K = Pₓᵤ L⁻ᵀ L⁻¹)
 //! x⁺ = x + K ν
 //! P⁺ = P − K Pₓᵤᵀ − Pₓᵤ Kᵀ + K S Kᵀ     (Joseph)
 //! NIS = |L⁻¹ ν|²,   ln p(z) = −½ (NIS + 2 Σ ln Lᵢᵢ + m ln 2π)
@@ -20,7 +20,10 @@
 //! on the stack for static sizes, faer in the filter's preallocated buffers for runtime sizes.
 
 use estim_core::kernel::{self, Accum};
-use estim_core::linalg::{all_finite, ensure_finite, ensure_shape, symmetrize};
+use estim_core::linalg::{
+    all_finite, ensure_finite, ensure_shape, for_each_symmetric_pair, symmetric_sum_into_checked,
+    symmetrize_add_checked,
+};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::scalar::real;
 use estim_core::{Alloc, Error, Parameter, Quantity, Real, Stage, error::Result};
@@ -102,7 +105,7 @@ where
 /// to `scratch.state` and `scratch.covariance`; nothing is written to the filter here, so the
 /// caller commits it (by swapping buffers) only on `Ok(true)`; `Ok(false)` means gated.
 ///
-/// The gain is kept transposed, Kᵀ = L⁻ᵀ L⁻¹ Pₓᵤᵀ (two triangular solves in place).
+/// The gain is solved in place from the right, K = Pₓᵤ L⁻ᵀ L⁻¹ (two triangular solves).
 #[inline(always)]
 pub(crate) fn apply<T: Real, N: Dim, M: Dim>(
     state: &OVector<T, N>,
@@ -120,8 +123,9 @@ where
         noise,
         factor,
         whitened,
-        gain_t,
-        joseph_t,
+        gain,
+        gain_s,
+        gain_s_gain,
         state: new_state,
         covariance: new_covariance,
         cholesky,
@@ -148,10 +152,9 @@ where
         }
     };
 
+    // S = sym(cov ẑ + R), one pass. A non-finite S fails the factorisation below.
     let s = &mut report.innovation_covariance;
-    kernel::copy(s, &predicted.covariance);
-    *s += &*noise;
-    symmetrize(s);
+    symmetric_sum_into_checked(s, &predicted.covariance, noise);
     kernel::copy(factor, s);
     if !kernel::cholesky_in_place(factor, cholesky) {
         return Err(
@@ -181,55 +184,62 @@ where
     }
     report.outcome = UpdateOutcome::Applied;
 
-    // Kᵀ = S⁻¹ Pₓᵤᵀ, keeping −Pₓᵤᵀ for the covariance.
-    predicted.cross_covariance.transpose_to(gain_t);
-    kernel::copy(joseph_t, gain_t);
-    joseph_t.neg_mut();
-    kernel::solve_lower_in_place(factor, gain_t);
-    kernel::solve_lower_transpose_in_place(factor, gain_t);
+    // K = Pₓᵤ L⁻ᵀ L⁻¹, solved from the right in K's own storage.
+    let cross = &predicted.cross_covariance;
+    kernel::copy(gain, cross);
+    kernel::solve_right_lower_transpose_in_place(factor, gain);
+    kernel::solve_right_lower_in_place(factor, gain);
     // x⁺ = x + K ν
     kernel::copy(new_state, state);
-    kernel::tr_mul(new_state, Accum::Add, T::one(), gain_t, &report.innovation);
-    match settings.form {
+    kernel::mul(new_state, Accum::Add, T::one(), gain, &report.innovation);
+    // X = −K Pₓᵤᵀ (n × n, in the posterior's buffer).
+    kernel::mul_tr(new_covariance, Accum::Replace, -T::one(), gain, cross);
+    let n = new_covariance.nrows();
+    let finite = match settings.form {
         CovarianceUpdate::Joseph => {
-            // X = −K Pₓᵤᵀ; P⁺ = ((P + X) + Xᵀ) + K S Kᵀ, in that order: when K ≈ Pₓᵤ S⁻¹
-            // nearly cancels P (a state measured almost exactly), P + X is a subtraction of
-            // nearby numbers and exact, and the small posterior keeps its relative accuracy.
-            // Grouping as P + (X + Xᵀ), or the cheaper P + A Kᵀ + K Aᵀ (A = ½ K S − Pₓᵤ), loses
-            // that: measured as a 3000-fold larger position error in Lee & Huang's noise-free
-            // run (estim-models/tests/lee_huang_section_iv.rs, bias_alone_gives_half_b_t_squared).
-            kernel::tr_mul(new_covariance, Accum::Replace, T::one(), gain_t, joseph_t);
-            let n = new_covariance.nrows();
-            for j in 0..n {
-                for i in j..n {
-                    let (x_ij, x_ji) = (new_covariance[(i, j)], new_covariance[(j, i)]);
-                    new_covariance[(i, j)] = covariance[(i, j)] + x_ij + x_ji;
-                    new_covariance[(j, i)] = covariance[(j, i)] + x_ji + x_ij;
-                }
-            }
-            // S Kᵀ reuses the −Pₓᵤᵀ buffer; then + K S Kᵀ = (S Kᵀ)ᵀ Kᵀ.
+            // G = K S Kᵀ = (K S) Kᵀ, both triangles (see below).
             kernel::mul(
-                joseph_t,
+                gain_s,
                 Accum::Replace,
                 T::one(),
+                gain,
                 &report.innovation_covariance,
-                gain_t,
             );
-            kernel::tr_mul(new_covariance, Accum::Add, T::one(), joseph_t, gain_t);
-            symmetrize(new_covariance);
+            kernel::mul_tr(gain_s_gain, Accum::Replace, T::one(), gain_s, gain);
+            // P⁺ = ((P + X) + Xᵀ) + G, in that order, then symmetrised by averaging the two
+            // triangles, in one pass that also checks finiteness: when K ≈ Pₓᵤ S⁻¹ nearly
+            // cancels P (a state measured almost exactly), P + X is a subtraction of nearby
+            // numbers and exact, and the small posterior keeps its relative accuracy. Every
+            // shortcut measured worse in Lee & Huang's noise-free run
+            // (estim-models/tests/lee_huang_section_iv.rs, bias_alone_gives_half_b_t_squared,
+            // worst position error 7.2e-10 m with this form): grouping as P + (X + Xᵀ), or the
+            // cheaper P + A Kᵀ + K Aᵀ (A = ½ K S − Pₓᵤ), 3000× larger; taking the lower
+            // triangle of each term instead of averaging both (which would let G be computed
+            // on one triangle only, half its product), 2.2e-6 m; the upper triangle alone, a
+            // non-positive-definite S a few steps later.
+            let half = real::<T>(0.5);
+            let (p, g) = (covariance.as_slice(), gain_s_gain.as_slice());
+            for_each_symmetric_pair(n, new_covariance.as_mut_slice(), |x, ij, ji| {
+                let lower = ((p[ij] + x[ij]) + x[ji]) + g[ij];
+                let upper = ((p[ji] + x[ji]) + x[ij]) + g[ji];
+                (lower + upper) * half
+            })
         }
-        CovarianceUpdate::Standard | CovarianceUpdate::Symmetrized => {
-            // P⁺ = P − K Pₓᵤᵀ
-            kernel::tr_mul(new_covariance, Accum::Replace, T::one(), gain_t, joseph_t);
+        CovarianceUpdate::Standard => {
+            // P⁺ = P − K Pₓᵤᵀ, as computed.
             *new_covariance += covariance;
-            if settings.form == CovarianceUpdate::Symmetrized {
-                symmetrize(new_covariance);
-            }
+            all_finite(new_covariance)
         }
-    }
-    // A non-finite gain shows up in both of these.
+        CovarianceUpdate::Symmetrized => symmetrize_add_checked(new_covariance, covariance),
+    };
+    // A non-finite gain shows up in both the state and the covariance.
     ensure_finite(new_state, stage, Quantity::Mean)
-        .and_then(|()| ensure_finite(new_covariance, stage, Quantity::Covariance))
+        .and_then(|()| {
+            finite.then_some(()).ok_or(Error::NonFinite {
+                stage,
+                quantity: Quantity::Covariance,
+            })
+        })
         .map_err(|e| bad_input(&report.innovation, noise).unwrap_or(e))?;
     Ok(true)
 }

@@ -7,7 +7,7 @@ use super::{MomentPropagator, Workspace, check_inputs, finish, impl_propagator_v
 use crate::alloc::Alloc;
 use crate::error::{Quantity, Result, Stage};
 use crate::function::Differentiable;
-use crate::kernel::{Accum, mul, mul_tr};
+use crate::kernel::{Accum, mul, mul_lower, mul_tr, mul_tr_lower};
 use crate::linalg::ensure_shape;
 use crate::scalar::Real;
 
@@ -18,7 +18,8 @@ use crate::scalar::Real;
 pub struct Linearized;
 
 /// g(μ), J(μ), J C Jᵀ and C Jᵀ (if `cross` is given): the part every derivative-based
-/// propagator shares. Not finished (symmetrised, checked) yet.
+/// propagator shares. Only the lower triangle of J C Jᵀ is written; not finished (mirrored,
+/// checked) yet.
 #[inline(always)]
 pub(super) fn linear_moments_into<T, N, M, G>(
     mean: &OVector<T, N>,
@@ -51,12 +52,14 @@ where
     let j = buffer(&mut workspace.jacobian, m, n);
     g.jacobian_into(mean, j);
     ensure_shape(j, m.value(), n.value(), stage, Quantity::Jacobian)?;
-    let jc = buffer(&mut workspace.jacobian_covariance, m, n);
-    mul(jc, Accum::Replace, T::one(), j, covariance);
-    mul_tr(out_covariance, Accum::Replace, T::one(), jc, j);
+    // Only the lower triangle of the symmetric J C Jᵀ is computed ([`finish`] mirrors it).
     if let Some(cross) = cross {
-        // C Jᵀ = (J C)ᵀ because C is symmetric.
-        jc.transpose_to(cross);
+        mul_tr(cross, Accum::Replace, T::one(), covariance, j);
+        mul_lower(out_covariance, Accum::Replace, T::one(), j, cross);
+    } else {
+        let jc = buffer(&mut workspace.jacobian_covariance, m, n);
+        mul(jc, Accum::Replace, T::one(), j, covariance);
+        mul_tr_lower(out_covariance, Accum::Replace, T::one(), jc, j);
     }
     Ok(())
 }

@@ -9,7 +9,7 @@ use super::{MomentPropagator, Moments, Workspace, finish};
 use crate::alloc::Alloc;
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
 use crate::function::VectorFunction;
-use crate::linalg::{ensure_shape, psd_factor};
+use crate::linalg::{ensure_shape, psd_factor, symmetrize};
 use crate::scalar::{Real, real};
 
 /// Seeded Monte Carlo: draws `samples` points xᵢ = μ + L zᵢ (L Lᵀ = C, zᵢ ~ N(0, I)) and
@@ -114,6 +114,9 @@ where
             covariance: covariance_y,
             cross_covariance: cross,
         };
+        // Σ d dᵀ is symmetric only up to round-off: average the triangles before `finish`
+        // takes the lower one.
+        symmetrize(&mut moments.covariance);
         finish(
             &moments.mean,
             &mut moments.covariance,

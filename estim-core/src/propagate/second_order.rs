@@ -165,11 +165,10 @@ impl SecondOrderGaussian {
             mul(product, Accum::Replace, T::one(), covariance, hk);
             mul(bk, Accum::Replace, T::one(), product, covariance);
             out_covariance[(k, k)] += half * bk.dot(hk);
+            // The lower triangle only (k > l): `finish` mirrors it.
             for l in 0..k {
                 if hessian_into(g, mean, l, hl)? {
-                    let t = half * bk.dot(hl);
-                    out_covariance[(k, l)] += t;
-                    out_covariance[(l, k)] += t;
+                    out_covariance[(k, l)] += half * bk.dot(hl);
                 }
             }
         }

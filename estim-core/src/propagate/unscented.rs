@@ -7,7 +7,7 @@ use super::{MomentPropagator, Workspace, check_inputs, finish, impl_propagator_v
 use crate::alloc::Alloc;
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
 use crate::function::VectorFunction;
-use crate::kernel::{Accum, mul_tr};
+use crate::kernel::{Accum, mul_tr, mul_tr_lower};
 use crate::linalg::{ensure_shape, psd_factor_into};
 use crate::scalar::{Real, real};
 
@@ -188,9 +188,16 @@ impl<T: Real> Unscented<T> {
             }
         }
         *d_bar *= w;
-        mul_tr(out_covariance, Accum::Replace, w, plus, plus);
-        mul_tr(out_covariance, Accum::Add, w, minus, minus);
-        out_covariance.ger(self.beta - self.alpha * self.alpha, d_bar, d_bar, T::one());
+        // The lower triangle of the symmetric sums only ([`finish`] mirrors it).
+        mul_tr_lower(out_covariance, Accum::Replace, w, plus, plus);
+        mul_tr_lower(out_covariance, Accum::Add, w, minus, minus);
+        let centre = self.beta - self.alpha * self.alpha;
+        for j in 0..m {
+            let dj = centre * d_bar[j];
+            for i in j..m {
+                out_covariance[(i, j)] += d_bar[i] * dj;
+            }
+        }
         if let Some(cross) = cross.as_deref_mut() {
             // D₋ ← D₊ − D₋; l already carries the √c.
             minus.zip_apply(plus, |dm, dp| *dm = dp - *dm);
