@@ -13,7 +13,7 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
-use crate::kernel::is_static;
+use crate::kernel::{self, Accum, is_static};
 use crate::model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementJacobian, MeasurementModel,
     ProcessJacobian, ProcessModel,
@@ -61,8 +61,11 @@ where
         // Static sizes: the operator form unrolls and allocates nothing anyway.
         let dynamic = !(is_static::<N>() && is_static::<U>());
         if dynamic && fits {
-            out.gemv(T::one(), f, x, T::zero());
-            out.gemv(T::one(), b, u, T::one());
+            // kernel::mul, not nalgebra's gemv: for runtime sizes it runs faer's kernels,
+            // dispatched on the CPU's vector width at run time, where nalgebra's gemv is
+            // compiled for the baseline target (a UKF evaluates F x 2n + 1 times a step).
+            kernel::mul(out, Accum::Replace, T::one(), f, x);
+            kernel::mul(out, Accum::Add, T::one(), b, u);
         } else {
             *out = f * x + b * u;
         }
@@ -152,7 +155,7 @@ where
         let h = &self.observation;
         let dynamic = !(is_static::<N>() && is_static::<M>());
         if dynamic && h.shape() == (out.nrows(), x.nrows()) {
-            out.gemv(T::one(), h, x, T::zero());
+            kernel::mul(out, Accum::Replace, T::one(), h, x);
         } else {
             *out = h * x;
         }

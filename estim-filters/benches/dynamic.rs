@@ -303,8 +303,10 @@ where
     }
 }
 
-/// out ← A x, without allocating for runtime sizes (as the library's linear models do it;
-/// static sizes keep the operator form, which unrolls).
+/// out ← A x, without allocating for runtime sizes, through `estim_core::kernel::mul` as the
+/// library's linear models do it (faer's runtime-dispatched kernels for `Dyn`; the faer
+/// baseline's models use the same faer product); static sizes keep the operator form, which
+/// unrolls.
 fn product_into<R: Dim, C: Dim>(
     out: &mut OVector<f64, R>,
     a: &OMatrix<f64, R, C>,
@@ -314,7 +316,7 @@ fn product_into<R: Dim, C: Dim>(
 {
     let dynamic = !(is_static::<R>() && is_static::<C>());
     if dynamic && a.shape() == (out.nrows(), x.nrows()) {
-        out.gemv(1.0, a, x, 0.0);
+        kernel::mul(out, kernel::Accum::Replace, 1.0, a, x);
     } else {
         *out = a * x;
     }
