@@ -38,9 +38,10 @@ use crate::update::{self, CovarianceUpdate, UpdateSettings};
 /// The same code runs on nalgebra's static sizes (`SVector<f64, 6>`, on the stack) and runtime
 /// sizes (`DVector<f64>`); switching is changing the types. Static sizes allocate nothing. With
 /// runtime sizes the heavy kernels (products, Cholesky, triangular solves) run on faer in
-/// buffers the filter keeps: the first prediction, and the first update with each measurement
-/// length, size them; after that a step allocates nothing, given models that implement the
-/// `_into` methods (as [`LinearProcess`](estim_core::LinearProcess) and
+/// buffers the filter keeps, sized by [`prepare_predict`](Predict::prepare_predict) and
+/// [`prepare_update`](Update::prepare_update) (once per sensor) right after construction, or
+/// else by the first prediction and the first update with each measurement length; after that
+/// no step allocates, given models that implement the `_into` methods (as [`LinearProcess`](estim_core::LinearProcess) and
 /// [`LinearMeasurement`](estim_core::LinearMeasurement) do) and
 /// [`update_into`](Update::update_into) with a reused report. Which to pick, measured
 /// (BENCHMARKS.md, "Static or dynamic"): static sizes for small states (they tie with runtime
@@ -176,6 +177,7 @@ fn predict_step<T, N, Pr, G>(
     covariance: &mut OMatrix<T, N, N>,
     g: &G,
     fill_noise: impl FnOnce(&OVector<T, N>, &mut OMatrix<T, N, N>),
+    step: Step,
 ) -> Result<()>
 where
     T: Real,
@@ -198,11 +200,23 @@ where
     fill_noise(state, &mut work.noise);
     let result = predicted(propagator, state, covariance, g, work);
     match result {
-        Ok(()) => commit(state, covariance, &mut work.state, &mut work.covariance),
+        Ok(()) if step == Step::Apply => {
+            commit(state, covariance, &mut work.state, &mut work.covariance)
+        }
+        Ok(()) => {}
         Err(_) if cached => cache.discard_predict(),
         Err(_) => {}
     }
     result
+}
+
+/// Whether a step commits its result or only sizes the buffers it works in (`prepare_*`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Step {
+    /// Commit the new estimate (if every check passes).
+    Apply,
+    /// Compute it and discard it.
+    Prepare,
 }
 
 /// The predicted estimate into `scratch.state` and `scratch.covariance`, with Q already in
@@ -292,7 +306,38 @@ where
         let map = Transition::new(model, input, dt);
         let noise =
             |x: &OVector<T, N>, q: &mut OMatrix<T, N, N>| model.process_noise_into(x, input, dt, q);
-        predict_step(propagator, scratch, state, covariance, &map, noise)
+        predict_step(
+            propagator,
+            scratch,
+            state,
+            covariance,
+            &map,
+            noise,
+            Step::Apply,
+        )
+    }
+
+    fn prepare_predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
+        ensure_time_step(dt)?;
+        let Self {
+            state,
+            covariance,
+            propagator,
+            scratch,
+            ..
+        } = self;
+        let map = Transition::new(model, input, dt);
+        let noise =
+            |x: &OVector<T, N>, q: &mut OMatrix<T, N, N>| model.process_noise_into(x, input, dt, q);
+        predict_step(
+            propagator,
+            scratch,
+            state,
+            covariance,
+            &map,
+            noise,
+            Step::Prepare,
+        )
     }
 }
 
@@ -328,7 +373,15 @@ where
         } = self;
         let (map, q_star) = Decorrelated::new(process, input, dt, measurement, z, cross, state)?;
         let noise = |_: &OVector<T, N>, q: &mut OMatrix<T, N, N>| *q = q_star;
-        predict_step(propagator, scratch, state, covariance, &map, noise)
+        predict_step(
+            propagator,
+            scratch,
+            state,
+            covariance,
+            &map,
+            noise,
+            Step::Apply,
+        )
     }
 }
 
@@ -418,7 +471,39 @@ where
             scratch,
         } = self;
         update_step(
-            propagator, scratch, state, covariance, None, model, z, *settings, report,
+            propagator,
+            scratch,
+            state,
+            covariance,
+            None,
+            model,
+            z,
+            *settings,
+            report,
+            Step::Apply,
+        )
+    }
+
+    fn prepare_update(&mut self, model: &H, report: &mut UpdateReport<T, M>) -> Result<()> {
+        let z = model.measure(&self.state);
+        let Self {
+            state,
+            covariance,
+            propagator,
+            settings,
+            scratch,
+        } = self;
+        update_step(
+            propagator,
+            scratch,
+            state,
+            covariance,
+            None,
+            model,
+            &z,
+            *settings,
+            report,
+            Step::Prepare,
         )
     }
 }
@@ -437,6 +522,7 @@ pub(crate) fn update_step<T, N, M, Pr, H>(
     z: &OVector<T, M>,
     settings: UpdateSettings<T>,
     report: &mut UpdateReport<T, M>,
+    step: Step,
 ) -> Result<()>
 where
     T: Real,
@@ -477,8 +563,10 @@ where
         }
     };
     match result {
-        Ok(true) => commit(state, covariance, &mut work.state, &mut work.covariance),
-        Ok(false) => {}
+        Ok(true) if step == Step::Apply => {
+            commit(state, covariance, &mut work.state, &mut work.covariance)
+        }
+        Ok(_) => {}
         Err(_) => {
             if let Some(slot) = slot {
                 cache.discard_update(slot);

@@ -4,7 +4,7 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::Linearized;
 use estim_core::{Alloc, Error, Gaussian, MeasurementJacobian, Parameter, Real, error::Result};
 
-use crate::gaussian_filter::update_step;
+use crate::gaussian_filter::{Step, update_step};
 use crate::report::UpdateReport;
 use crate::scratch::ScratchCache;
 use crate::traits::{Estimator, Update};
@@ -121,6 +121,33 @@ where
         z: &OVector<T, M>,
         report: &mut UpdateReport<T, M>,
     ) -> Result<()> {
+        self.step(model, z, report, Step::Apply)
+    }
+
+    fn prepare_update(&mut self, model: &H, report: &mut UpdateReport<T, M>) -> Result<()> {
+        let z = model.measure(&self.state);
+        self.step(model, &z, report, Step::Prepare)
+    }
+}
+
+impl<T: Real, N: Dim> FadingMemoryRls<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// One update (or its preparation), through the shared update step with γ⁻¹P.
+    #[inline(always)]
+    fn step<M, H>(
+        &mut self,
+        model: &H,
+        z: &OVector<T, M>,
+        report: &mut UpdateReport<T, M>,
+        step: Step,
+    ) -> Result<()>
+    where
+        M: Dim,
+        H: MeasurementJacobian<T, N, M>,
+        DefaultAllocator: Alloc<N, M>,
+    {
         let Self {
             state,
             covariance,
@@ -138,6 +165,7 @@ where
             z,
             *settings,
             report,
+            step,
         )
     }
 }

@@ -2,7 +2,7 @@
 //!
 //! A step computes its new estimate aside (so a failure changes nothing) in a scratch of
 //! nalgebra matrices. For static sizes the scratch is a local on the stack. For runtime sizes
-//! it is created on the first step with each (n, m) and kept in the filter's [`ScratchCache`],
+//! it is created by `prepare_*` or the first step with each (n, m) and kept in the filter's [`ScratchCache`],
 //! so every later step allocates nothing.
 
 use core::any::Any;

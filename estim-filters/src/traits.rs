@@ -35,6 +35,18 @@ where
     ///
     /// On error the filter is left exactly as it was.
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()>;
+
+    /// Sizes ahead of time every buffer that [`predict`](Self::predict) with this model needs,
+    /// by computing one prediction at the current estimate and discarding it: the estimate is
+    /// unchanged. With runtime sizes (and models that implement the `_into` methods) every
+    /// later prediction allocates nothing, the first one included; call it once after
+    /// construction (and after a [`reset`](Estimator::reset) to another dimension). Static
+    /// sizes need no preparation, and filters without runtime buffers do nothing (the
+    /// default). Fails as `predict` would, leaving the filter unchanged.
+    fn prepare_predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
+        let _ = (model, input, dt);
+        Ok(())
+    }
 }
 
 /// The measurement update with a measurement model `H` of `M` components. Each filter bounds
@@ -69,6 +81,19 @@ where
         z: &OVector<T, M>,
         report: &mut UpdateReport<T, M>,
     ) -> Result<()>;
+
+    /// Sizes ahead of time every buffer that [`update_into`](Self::update_into) with this
+    /// model needs, and `report` for its measurement length, by computing one update at the
+    /// current estimate with z = h(x̂) and discarding it: the estimate is unchanged (this call
+    /// itself allocates). With runtime sizes (and models that implement the `_into` methods)
+    /// every later `update_into` with this model's measurement length allocates nothing, the
+    /// first one included; prepare once per sensor. Static sizes need no preparation, and
+    /// filters without runtime buffers do nothing (the default). Fails as an update would,
+    /// leaving the filter unchanged.
+    fn prepare_update(&mut self, model: &H, report: &mut UpdateReport<T, M>) -> Result<()> {
+        let _ = (model, report);
+        Ok(())
+    }
 }
 
 /// The time update when the process noise wₖ of this step is correlated with the noise vₖ of

@@ -1,7 +1,9 @@
 //! Runtime sizes allocate nothing per step once the filter's workspace is sized: every filter
 //! runs predict + `update_into` on `Dyn` models that implement the `_into` methods, under a
-//! counting global allocator. The first prediction and the first update with each measurement
-//! length size the workspace (they allocate); every later step must not.
+//! counting global allocator. `prepare_predict` and `prepare_update` (once per sensor) size
+//! the workspace right after construction; from then on no step allocates, the first one
+//! included. Without them, the first prediction and the first update with each measurement
+//! length size it instead (a positive control below shows the counter sees that).
 // See tests/counting: the counting allocator implements the unsafe `GlobalAlloc` trait.
 #![allow(unsafe_code)]
 
@@ -17,7 +19,7 @@ use estim_core::{
     MeasurementModel, ProcessHessian, ProcessJacobian, ProcessModel,
 };
 use estim_filters::{
-    Ekf, FadingMemoryRls, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, Predict,
+    Ekf, Estimator, FadingMemoryRls, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, Predict,
     SecondOrderEkf, Ukf, Update, UpdateReport,
 };
 
@@ -195,17 +197,37 @@ fn readings(m: usize) -> Vec<DVector<f64>> {
         .collect()
 }
 
-/// One warm-up step, then allocations over `STEPS` predict + update_into steps.
+/// Asserts `filter`'s estimate is bit for bit (x, P).
+fn assert_unchanged<F: Estimator<f64, Dyn>>(filter: &F, x: &DVector<f64>, p: &DMatrix<f64>) {
+    assert!(
+        filter
+            .state()
+            .iter()
+            .zip(x)
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+    );
+    assert!(
+        filter
+            .covariance()
+            .iter()
+            .zip(p)
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+    );
+}
+
+/// Prepared right after construction (which must not change the estimate), then allocations
+/// over `STEPS` predict + update_into steps, the first one included.
 fn count_nonlinear<F>(mut filter: F, n: usize) -> usize
 where
     F: Predict<f64, Dyn, Chain> + Update<f64, Dyn, Dyn, EveryOther>,
 {
     let zs = readings(n / 2);
-    let mut report = UpdateReport::zeros(Dyn(n / 2));
-    filter.predict(&Chain, &(), DT).unwrap();
-    filter
-        .update_into(&EveryOther, &zs[0], &mut report)
-        .unwrap();
+    let mut report = UpdateReport::zeros(Dyn(0));
+    let (x, p) = (filter.state().clone(), filter.covariance().clone());
+    filter.prepare_predict(&Chain, &(), DT).unwrap();
+    filter.prepare_update(&EveryOther, &mut report).unwrap();
+    assert_unchanged(&filter, &x, &p);
+    assert_eq!(report.innovation.nrows(), n / 2, "the report is sized too");
     allocations_during(|| {
         for z in &zs {
             filter.predict(&Chain, &(), DT).unwrap();
@@ -228,10 +250,10 @@ where
     let zs = readings(n / 2);
     let none = DVector::zeros(0);
     let mut report = UpdateReport::zeros(Dyn(n / 2));
-    filter.predict(&process, &none, DT).unwrap();
-    filter
-        .update_into(&measurement, &zs[0], &mut report)
-        .unwrap();
+    let (x, p) = (filter.state().clone(), filter.covariance().clone());
+    filter.prepare_predict(&process, &none, DT).unwrap();
+    filter.prepare_update(&measurement, &mut report).unwrap();
+    assert_unchanged(&filter, &x, &p);
     allocations_during(|| {
         for z in &zs {
             filter.predict(&process, &none, DT).unwrap();
@@ -256,11 +278,52 @@ fn chain_models_have_correct_derivatives() {
 
 #[test]
 fn warm_up_allocates_and_is_counted() {
-    // Positive control: the first step sizes the workspace, and the counter sees it.
-    let (process, _) = linear_models(8);
+    // Positive control: without preparation the first steps size the workspace, and the
+    // counter sees it; the second ones do not.
+    let (process, measurement) = linear_models(8);
     let mut kf = KalmanFilter::new(prior(8));
-    let first = allocations_during(|| kf.predict(&process, &DVector::zeros(0), DT).unwrap());
+    let none = DVector::zeros(0);
+    let mut report = UpdateReport::zeros(Dyn(4));
+    let z = DVector::from_element(4, 0.1);
+    let first = allocations_during(|| {
+        kf.predict(&process, &none, DT).unwrap();
+        kf.update_into(&measurement, &z, &mut report).unwrap();
+    });
     assert!(first > 0);
+    let second = allocations_during(|| {
+        kf.predict(&process, &none, DT).unwrap();
+        kf.update_into(&measurement, &z, &mut report).unwrap();
+    });
+    assert_eq!(second, 0);
+}
+
+#[test]
+fn preparation_changes_nothing_and_fails_atomically() {
+    let n = 8;
+    let (process, measurement) = linear_models(n);
+    let mut kf = KalmanFilter::new(prior(n));
+    let mut report = UpdateReport::zeros(Dyn(0));
+    kf.prepare_predict(&process, &DVector::zeros(0), DT)
+        .unwrap();
+    kf.prepare_update(&measurement, &mut report).unwrap();
+    assert_unchanged(
+        &kf,
+        &prior(n).mean().clone(),
+        &prior(n).covariance().clone(),
+    );
+    // A non-finite time step fails in preparation as in predict, and changes nothing.
+    assert!(
+        kf.prepare_predict(&process, &DVector::zeros(0), f64::NAN)
+            .is_err()
+    );
+    // A prepared filter then steps exactly as an unprepared one.
+    let mut fresh = KalmanFilter::new(prior(n));
+    let z = DVector::from_element(n / 2, 0.3);
+    for f in [&mut kf, &mut fresh] {
+        f.predict(&process, &DVector::zeros(0), DT).unwrap();
+        f.update_into(&measurement, &z, &mut report).unwrap();
+    }
+    assert_unchanged(&kf, fresh.state(), fresh.covariance());
 }
 
 #[test]
@@ -302,7 +365,12 @@ fn fading_memory_rls_does_not_allocate_per_dynamic_step() {
         let zs = readings(n / 2);
         let mut rls = FadingMemoryRls::new(prior(n), 0.95).unwrap();
         let mut report = UpdateReport::zeros(Dyn(n / 2));
-        rls.update_into(&measurement, &zs[0], &mut report).unwrap();
+        rls.prepare_update(&measurement, &mut report).unwrap();
+        assert_unchanged(
+            &rls,
+            &prior(n).mean().clone(),
+            &prior(n).covariance().clone(),
+        );
         let count = allocations_during(|| {
             for z in &zs {
                 rls.update_into(&measurement, z, &mut report).unwrap();
@@ -328,9 +396,9 @@ fn two_sensors_and_gated_updates_do_not_allocate_once_sized() {
     );
     let (mut r_wide, mut r_narrow) = (UpdateReport::zeros(Dyn(n / 2)), UpdateReport::zeros(Dyn(2)));
     let mut kf = KalmanFilter::new(prior(n)).with_gate(1e6).unwrap();
-    kf.predict(&process, &none, DT).unwrap();
-    kf.update_into(&wide, &z_wide, &mut r_wide).unwrap();
-    kf.update_into(&narrow, &z_narrow, &mut r_narrow).unwrap();
+    kf.prepare_predict(&process, &none, DT).unwrap();
+    kf.prepare_update(&wide, &mut r_wide).unwrap();
+    kf.prepare_update(&narrow, &mut r_narrow).unwrap();
     let far = DVector::from_element(2, 1e9);
     let count = allocations_during(|| {
         for _ in 0..5 {
