@@ -271,39 +271,183 @@ where
     }
 }
 
-/// Visits every pair (i, j), i ≥ j, of an n × n column-major matrix once: `f(data, ij, ji)`
-/// gets the two storage indices (equal on the diagonal), may read `data` at those two indices
-/// only, and returns the symmetric value written to both. The result is true if every written
-/// value is finite. One pass where a symmetrisation, an addition and a finiteness scan would
-/// otherwise each sweep the matrix (measured: those sweeps were a quarter of a runtime-size
-/// filter step at n = 50, the strided symmetrisation the largest).
+/// Side of the square tiles [`symmetric_map`] works in: 8 `f64` are one 64-byte cache line.
+const TILE: usize = 8;
+
+/// One symmetric pass over n × n column-major matrices: for every i ≥ j,
 ///
-/// The pairs are visited in 8 × 8 tiles (a tile and its mirror image): the strided half of
-/// each pair then touches 8 cache lines per tile and uses them whole, instead of one line per
-/// element (measured: `perf record` on the n = 50 KF step of `benches/dynamic.rs` had the
-/// strided stores of the untiled loop at ~15 % of the step).
+/// ```text
+/// dst[i,j] = dst[j,i] = f(dst[i,j], (srcₖ[i,j])ₖ, dst[j,i], (srcₖ[j,i])ₖ)
+/// ```
+///
+/// with the old values of `dst` read before any is written; true if every written value is
+/// finite. One pass where a symmetrisation, an addition and a finiteness scan would otherwise
+/// each sweep the matrix (a separate scan measured 2× slower in the n = 50 KF step); e.g.
+/// `f = |d, [a], dt, [at]| ((d + a) + (dt + at)) / 2` is `dst += a` then
+/// `dst ← (dst + dstᵀ)/2`.
+///
+/// The pairs are visited in 8 × 8 tiles and a tile's mirror image: both are loaded into local
+/// arrays (each tile column is one contiguous run of the column-major storage), combined there,
+/// and stored back, so the strided half of every pair costs no more than the contiguous half.
+/// (Measured with `perf record` on the n = 50 KF step of `benches/dynamic.rs`: an element-wise
+/// pair loop with a finiteness flag per element was ~40 % of the step; see BENCHMARKS.md.)
 #[inline(always)]
-pub fn for_each_symmetric_pair<T: Real>(
+#[track_caller]
+pub fn symmetric_map<T: Real, const K: usize>(
     n: usize,
-    data: &mut [T],
-    mut f: impl FnMut(&[T], usize, usize) -> T,
+    dst: &mut [T],
+    sources: [&[T]; K],
+    f: impl Fn(T, [T; K], T, [T; K]) -> T,
 ) -> bool {
-    const TILE: usize = 8;
-    assert_eq!(data.len(), n * n, "for_each_symmetric_pair: not n × n");
+    assert_eq!(dst.len(), n * n, "symmetric_map: dst is not n × n");
+    assert!(
+        sources.iter().all(|s| s.len() == n * n),
+        "symmetric_map: a source is not n × n"
+    );
     let mut finite = true;
     for jb in (0..n).step_by(TILE) {
-        let j_end = (jb + TILE).min(n);
-        for ib in (jb..n).step_by(TILE) {
-            let i_end = (ib + TILE).min(n);
-            for j in jb..j_end {
-                for i in ib.max(j)..i_end {
-                    let (ij, ji) = (i + j * n, j + i * n);
-                    let v = f(data, ij, ji);
-                    data[ij] = v;
-                    data[ji] = v;
-                    finite &= v.is_finite();
-                }
+        let jw = TILE.min(n - jb);
+        finite &= if jw == TILE {
+            diagonal_tile::<T, K, TILE>(n, jb, dst, &sources, &f)
+        } else {
+            tile_pair_partial(n, jb, jb, jw, jw, dst, &sources, &f)
+        };
+        // The tiles below it and their mirror images to its right.
+        for ib in (jb + jw..n).step_by(TILE) {
+            let iw = TILE.min(n - ib);
+            finite &= if iw == TILE && jw == TILE {
+                tile_pair::<T, K, TILE, TILE>(n, ib, jb, dst, &sources, &f)
+            } else {
+                tile_pair_partial(n, ib, jb, iw, jw, dst, &sources, &f)
+            };
+        }
+    }
+    finite
+}
+
+/// The W × W diagonal tile at (jb, jb), through local arrays like [`tile_pair`].
+#[inline(always)]
+fn diagonal_tile<T: Real, const K: usize, const W: usize>(
+    n: usize,
+    jb: usize,
+    dst: &mut [T],
+    sources: &[&[T]; K],
+    f: &impl Fn(T, [T; K], T, [T; K]) -> T,
+) -> bool {
+    let mut finite = true;
+    // d[c][r] = M[jb + r, jb + c].
+    let mut d = [[T::zero(); W]; W];
+    let mut s = [[[T::zero(); W]; W]; K];
+    for c in 0..W {
+        let at = (jb + c) * n + jb;
+        d[c].copy_from_slice(&dst[at..at + W]);
+        for k in 0..K {
+            s[k][c].copy_from_slice(&sources[k][at..at + W]);
+        }
+    }
+    for c in 0..W {
+        for r in c..W {
+            let (mut lower, mut upper) = ([T::zero(); K], [T::zero(); K]);
+            for k in 0..K {
+                lower[k] = s[k][c][r];
+                upper[k] = s[k][r][c];
             }
+            let v = f(d[c][r], lower, d[r][c], upper);
+            d[c][r] = v;
+            d[r][c] = v;
+            finite &= v.is_finite();
+        }
+    }
+    for c in 0..W {
+        let at = (jb + c) * n + jb;
+        dst[at..at + W].copy_from_slice(&d[c]);
+    }
+    finite
+}
+
+/// The off-diagonal tile rows ib..ib+IW × columns jb..jb+JW (ib ≥ jb + JW) and its mirror
+/// image, with compile-time tile sizes (the common case: the compiler unrolls and vectorises).
+#[inline(always)]
+fn tile_pair<T: Real, const K: usize, const IW: usize, const JW: usize>(
+    n: usize,
+    ib: usize,
+    jb: usize,
+    dst: &mut [T],
+    sources: &[&[T]; K],
+    f: &impl Fn(T, [T; K], T, [T; K]) -> T,
+) -> bool {
+    let mut finite = true;
+    // lower[c][r] = M[ib + r, jb + c] (column runs); upper[r][c] = M[jb + c, ib + r] (the
+    // mirror image's column runs).
+    let mut d_lower = [[T::zero(); IW]; JW];
+    let mut d_upper = [[T::zero(); JW]; IW];
+    let mut s_lower = [[[T::zero(); IW]; JW]; K];
+    let mut s_upper = [[[T::zero(); JW]; IW]; K];
+    for c in 0..JW {
+        let at = (jb + c) * n + ib;
+        d_lower[c].copy_from_slice(&dst[at..at + IW]);
+        for k in 0..K {
+            s_lower[k][c].copy_from_slice(&sources[k][at..at + IW]);
+        }
+    }
+    for r in 0..IW {
+        let at = (ib + r) * n + jb;
+        d_upper[r].copy_from_slice(&dst[at..at + JW]);
+        for k in 0..K {
+            s_upper[k][r].copy_from_slice(&sources[k][at..at + JW]);
+        }
+    }
+    for c in 0..JW {
+        for r in 0..IW {
+            let (mut lower, mut upper) = ([T::zero(); K], [T::zero(); K]);
+            for k in 0..K {
+                lower[k] = s_lower[k][c][r];
+                upper[k] = s_upper[k][r][c];
+            }
+            let v = f(d_lower[c][r], lower, d_upper[r][c], upper);
+            d_lower[c][r] = v;
+            d_upper[r][c] = v;
+            finite &= v.is_finite();
+        }
+    }
+    for c in 0..JW {
+        let at = (jb + c) * n + ib;
+        dst[at..at + IW].copy_from_slice(&d_lower[c]);
+    }
+    for r in 0..IW {
+        let at = (ib + r) * n + jb;
+        dst[at..at + JW].copy_from_slice(&d_upper[r]);
+    }
+    finite
+}
+
+/// [`tile_pair`] (or, with `ib == jb`, [`diagonal_tile`]) for a tile cut short by the matrix
+/// edge (`iw` × `jw`), pair by pair.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn tile_pair_partial<T: Real, const K: usize>(
+    n: usize,
+    ib: usize,
+    jb: usize,
+    iw: usize,
+    jw: usize,
+    dst: &mut [T],
+    sources: &[&[T]; K],
+    f: &impl Fn(T, [T; K], T, [T; K]) -> T,
+) -> bool {
+    let mut finite = true;
+    for j in jb..jb + jw {
+        for i in ib.max(j)..ib + iw {
+            let (ij, ji) = (i + j * n, j + i * n);
+            let v = f(
+                dst[ij],
+                sources.map(|s| s[ij]),
+                dst[ji],
+                sources.map(|s| s[ji]),
+            );
+            dst[ij] = v;
+            dst[ji] = v;
+            finite &= v.is_finite();
         }
     }
     finite
@@ -317,7 +461,7 @@ where
     DefaultAllocator: Allocator<D, D>,
 {
     let n = m.nrows();
-    for_each_symmetric_pair(n, m.as_mut_slice(), |d, ij, _| d[ij])
+    symmetric_map(n, m.as_mut_slice(), [], |lower, [], _, []| lower)
 }
 
 /// m ← ((m + a) + (m + a)ᵀ)/2 in one pass (the same arithmetic as `m += a` then
@@ -338,10 +482,12 @@ where
     );
     let half = real::<T>(0.5);
     let n = m.nrows();
-    let a = a.as_slice();
-    for_each_symmetric_pair(n, m.as_mut_slice(), |d, ij, ji| {
-        ((d[ij] + a[ij]) + (d[ji] + a[ji])) * half
-    })
+    symmetric_map(
+        n,
+        m.as_mut_slice(),
+        [a.as_slice()],
+        |m_ij, [a_ij], m_ji, [a_ji]| ((m_ij + a_ij) + (m_ji + a_ji)) * half,
+    )
 }
 
 /// dst ← ((a + b) + (a + b)ᵀ)/2 in one pass; true if the result is finite.
@@ -361,10 +507,12 @@ where
     );
     let half = real::<T>(0.5);
     let n = dst.nrows();
-    let (a, b) = (a.as_slice(), b.as_slice());
-    for_each_symmetric_pair(n, dst.as_mut_slice(), |_, ij, ji| {
-        ((a[ij] + b[ij]) + (a[ji] + b[ji])) * half
-    })
+    symmetric_map(
+        n,
+        dst.as_mut_slice(),
+        [a.as_slice(), b.as_slice()],
+        |_, [a_ij, b_ij], _, [a_ji, b_ji]| ((a_ij + b_ij) + (a_ji + b_ji)) * half,
+    )
 }
 
 /// `Ok(())` if `m` is symmetric within `√ε · max|mᵢⱼ|`, else [`Error::NotSymmetric`] naming
@@ -413,4 +561,60 @@ where
     psd_factor(m, stage)
         .map(|_| ())
         .map_err(|_| Error::NotPositiveSemiDefinite { stage, quantity })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DMatrix;
+
+    /// Deterministic, distinct, non-symmetric entries.
+    fn matrix(n: usize, salt: f64) -> DMatrix<f64> {
+        DMatrix::from_fn(n, n, |i, j| ((i * 31 + j * 17) as f64 * 0.37 + salt).sin())
+    }
+
+    /// The tiled pass against the plain pair loop, bit for bit, on sizes around the tile
+    /// (partial tiles on both edges, a single partial tile, n = 0).
+    #[test]
+    fn symmetric_map_matches_the_pair_loop() {
+        for n in [0, 1, 3, 7, 8, 9, 15, 16, 17, 24, 50] {
+            let (a, b) = (matrix(n, 0.1), matrix(n, 0.7));
+            let f = |d: f64, [x, y]: [f64; 2], dt: f64, [xt, yt]: [f64; 2]| {
+                ((d + x) * y + dt) - (xt * 0.5 + yt)
+            };
+            let mut tiled = matrix(n, 0.3);
+            let mut expected = tiled.clone();
+            for j in 0..n {
+                for i in j..n {
+                    let (old, old_t) = (expected[(i, j)], expected[(j, i)]);
+                    let v = f(old, [a[(i, j)], b[(i, j)]], old_t, [a[(j, i)], b[(j, i)]]);
+                    expected[(i, j)] = v;
+                    expected[(j, i)] = v;
+                }
+            }
+            assert!(symmetric_map(
+                n,
+                tiled.as_mut_slice(),
+                [a.as_slice(), b.as_slice()],
+                f
+            ));
+            for (x, y) in tiled.iter().zip(expected.iter()) {
+                assert_eq!(x.to_bits(), y.to_bits(), "n = {n}");
+            }
+        }
+    }
+
+    #[test]
+    fn symmetric_map_reports_non_finite_values_anywhere() {
+        for (i, j) in [(0, 0), (12, 3), (3, 12), (16, 16), (17, 0)] {
+            let mut m = matrix(18, 0.2);
+            m[(i, j)] = f64::INFINITY;
+            assert!(
+                !mirror_lower_checked(&mut m.clone()) || i < j,
+                "({i}, {j}) mirrored"
+            );
+            let zeros = DMatrix::zeros(18, 18);
+            assert!(!symmetrize_add_checked(&mut m, &zeros), "({i}, {j})");
+        }
+    }
 }

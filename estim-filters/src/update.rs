@@ -21,7 +21,7 @@
 
 use estim_core::kernel::{self, Accum};
 use estim_core::linalg::{
-    all_finite, ensure_finite, ensure_shape, for_each_symmetric_pair, symmetric_sum_into_checked,
+    all_finite, ensure_finite, ensure_shape, symmetric_map, symmetric_sum_into_checked,
     symmetrize_add_checked,
 };
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
@@ -218,12 +218,17 @@ where
             // on one triangle only, half its product), 2.2e-6 m; the upper triangle alone, a
             // non-positive-definite S a few steps later.
             let half = real::<T>(0.5);
-            let (p, g) = (covariance.as_slice(), gain_s_gain.as_slice());
-            for_each_symmetric_pair(n, new_covariance.as_mut_slice(), |x, ij, ji| {
-                let lower = ((p[ij] + x[ij]) + x[ji]) + g[ij];
-                let upper = ((p[ji] + x[ji]) + x[ij]) + g[ji];
-                (lower + upper) * half
-            })
+            let sources = [covariance.as_slice(), gain_s_gain.as_slice()];
+            symmetric_map(
+                n,
+                new_covariance.as_mut_slice(),
+                sources,
+                |x_ij, [p_ij, g_ij], x_ji, [p_ji, g_ji]| {
+                    let lower = ((p_ij + x_ij) + x_ji) + g_ij;
+                    let upper = ((p_ji + x_ji) + x_ij) + g_ji;
+                    (lower + upper) * half
+                },
+            )
         }
         CovarianceUpdate::Standard => {
             // P⁺ = P − K Pₓᵤᵀ, as computed.
