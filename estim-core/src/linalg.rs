@@ -355,9 +355,9 @@ fn diagonal_tile<T: Real, const K: usize, const W: usize>(
             let v = f(d[c][r], lower, d[r][c], upper);
             d[c][r] = v;
             d[r][c] = v;
-            finite &= v.is_finite();
         }
     }
+    finite &= d.iter().flatten().fold(true, |ok, v| ok & v.is_finite());
     for c in 0..W {
         let at = (jb + c) * n + jb;
         dst[at..at + W].copy_from_slice(&d[c]);
@@ -407,9 +407,12 @@ fn tile_pair<T: Real, const K: usize, const IW: usize, const JW: usize>(
             let v = f(d_lower[c][r], lower, d_upper[r][c], upper);
             d_lower[c][r] = v;
             d_upper[r][c] = v;
-            finite &= v.is_finite();
         }
     }
+    finite &= d_lower
+        .iter()
+        .flatten()
+        .fold(true, |ok, v| ok & v.is_finite());
     for c in 0..JW {
         let at = (jb + c) * n + ib;
         dst[at..at + IW].copy_from_slice(&d_lower[c]);
