@@ -631,11 +631,18 @@ mod tests {
 
     #[test]
     fn lower_products_match_the_full_product_on_the_lower_triangle() {
-        let a = DMatrix::from_fn(5, 3, |i, j| (i as f64) - 0.7 * j as f64 + 0.1);
-        let b = DMatrix::from_fn(3, 5, |i, j| 1.0 + (i * j) as f64 - 0.3 * i as f64);
+        // Below and above LOWER_TRIANGLE_MIN: full small-matrix product, triangular kernel.
+        for n in [5, LOWER_TRIANGLE_MIN + 7] {
+            lower_products_match_at(n);
+        }
+    }
+
+    fn lower_products_match_at(n: usize) {
+        let a = DMatrix::from_fn(n, 3, |i, j| (i as f64) - 0.7 * j as f64 + 0.1);
+        let b = DMatrix::from_fn(3, n, |i, j| 1.0 + (i * j) as f64 - 0.3 * i as f64);
         let full = &a * &b;
         for accum in [Accum::Replace, Accum::Add] {
-            let start = DMatrix::from_fn(5, 5, |i, j| (i + 2 * j) as f64);
+            let start = DMatrix::from_fn(n, n, |i, j| (i + 2 * j) as f64);
             let expected = match accum {
                 Accum::Replace => 2.0 * &full,
                 Accum::Add => &start + 2.0 * &full,
@@ -644,10 +651,18 @@ mod tests {
             mul_lower(&mut dst, accum, 2.0, &a, &b);
             let mut dst_tr = start.clone();
             mul_tr_lower(&mut dst_tr, accum, 2.0, &a, &b.transpose());
-            for j in 0..5 {
-                for i in j..5 {
-                    assert!((dst[(i, j)] - expected[(i, j)]).abs() < 1e-12);
-                    assert!((dst_tr[(i, j)] - expected[(i, j)]).abs() < 1e-12);
+            // Each entry sums 3 products (plus the start value): a few ulps of the largest.
+            let tol = 8.0 * f64::EPSILON * expected.amax();
+            for j in 0..n {
+                for i in j..n {
+                    assert!(
+                        (dst[(i, j)] - expected[(i, j)]).abs() <= tol,
+                        "n = {n}, ({i}, {j})"
+                    );
+                    assert!(
+                        (dst_tr[(i, j)] - expected[(i, j)]).abs() <= tol,
+                        "n = {n}, ({i}, {j})"
+                    );
                 }
             }
         }
