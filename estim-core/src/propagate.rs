@@ -25,7 +25,9 @@ use crate::alloc::Alloc;
 use crate::error::{Quantity, Result, Stage};
 use crate::function::VectorFunction;
 use crate::gaussian::Gaussian;
-use crate::linalg::{ensure_finite, ensure_shape, mirror_lower_checked};
+use crate::linalg::{
+    ensure_finite, ensure_shape, mirror_lower_checked, symmetric_map, symmetrize_add_checked,
+};
 use crate::scalar::Real;
 
 mod affine;
@@ -121,6 +123,46 @@ where
         *out_mean = out.mean;
         *out_covariance = out.covariance;
         Ok(())
+    }
+
+    /// E\[y\] and cov(y) + `noise` for y = g(x) + w, w ~ N(0, `noise`) independent of x: what
+    /// a filter's prediction needs (P⁻ = cov f + Q), symmetrised, in `out_covariance`. The
+    /// default adds the noise after
+    /// [`propagate_mean_covariance_into`](Self::propagate_mean_covariance_into); the built-in
+    /// propagators add it in the pass that symmetrises their covariance (one sweep of the
+    /// matrix fewer). `noise` must be m × m (else a dimension error naming it as
+    /// `ProcessNoise`); a non-finite sum is an error
+    /// ([`Error::NonFinite`](crate::Error::NonFinite), stage `Propagation`, quantity
+    /// `Covariance`).
+    fn propagate_with_noise_into(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+        noise: &OMatrix<T, M, M>,
+        out_mean: &mut OVector<T, M>,
+        out_covariance: &mut OMatrix<T, M, M>,
+        workspace: &mut Workspace<T, N, M>,
+    ) -> Result<()> {
+        self.propagate_mean_covariance_into(
+            mean,
+            covariance,
+            g,
+            out_mean,
+            out_covariance,
+            workspace,
+        )?;
+        let stage = Stage::Propagation;
+        let m = out_mean.nrows();
+        ensure_shape(noise, m, m, stage, Quantity::ProcessNoise)?;
+        if symmetrize_add_checked(out_covariance, noise) {
+            Ok(())
+        } else {
+            Err(crate::Error::NonFinite {
+                stage,
+                quantity: Quantity::Covariance,
+            })
+        }
     }
 
     /// The moments of g(x) for x with mean `mean` and covariance `covariance`: see
@@ -223,13 +265,36 @@ fn finish<T: Real, N: Dim, M: Dim>(
     mean: &OVector<T, M>,
     covariance: &mut OMatrix<T, M, M>,
     cross: Option<&OMatrix<T, N, M>>,
+    noise: Option<&OMatrix<T, M, M>>,
 ) -> Result<()>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     let stage = Stage::Propagation;
     ensure_finite(mean, stage, Quantity::Mean)?;
-    if !mirror_lower_checked(covariance) {
+    let finite = match noise {
+        None => mirror_lower_checked(covariance),
+        Some(noise) => {
+            // cov + noise, symmetrised, from cov's lower triangle: the arithmetic of
+            // mirroring it, adding the noise and averaging the triangles, in one pass.
+            ensure_shape(
+                noise,
+                mean.nrows(),
+                mean.nrows(),
+                stage,
+                Quantity::ProcessNoise,
+            )?;
+            let half = crate::scalar::real::<T>(0.5);
+            let n = covariance.nrows();
+            symmetric_map(
+                n,
+                covariance.as_mut_slice(),
+                [noise.as_slice()],
+                |c_ij, [q_ij], _, [q_ji]| ((c_ij + q_ij) + (c_ij + q_ji)) * half,
+            )
+        }
+    };
+    if !finite {
         return Err(crate::Error::NonFinite {
             stage,
             quantity: Quantity::Covariance,
@@ -241,8 +306,9 @@ where
     Ok(())
 }
 
-/// Implements [`MomentPropagator`]'s two `_into` methods for a propagator with an inherent
-/// `moments_into(mean, covariance, g, out_mean, out_covariance, cross: Option<..>, workspace)`.
+/// Implements [`MomentPropagator`]'s three `_into` methods for a propagator with an inherent
+/// `moments_into(mean, covariance, g, out_mean, out_covariance, cross: Option<..>,
+/// noise: Option<..>, workspace)`.
 macro_rules! impl_propagator_via_moments_into {
     () => {
         #[inline(always)]
@@ -266,6 +332,7 @@ macro_rules! impl_propagator_via_moments_into {
                 out_mean,
                 out_covariance,
                 Some(cross_covariance),
+                None,
                 workspace,
             )
         }
@@ -287,6 +354,30 @@ macro_rules! impl_propagator_via_moments_into {
                 out_mean,
                 out_covariance,
                 None,
+                None,
+                workspace,
+            )
+        }
+
+        #[inline(always)]
+        fn propagate_with_noise_into(
+            &self,
+            mean: &OVector<T, N>,
+            covariance: &OMatrix<T, N, N>,
+            g: &G,
+            noise: &OMatrix<T, M, M>,
+            out_mean: &mut OVector<T, M>,
+            out_covariance: &mut OMatrix<T, M, M>,
+            workspace: &mut super::Workspace<T, N, M>,
+        ) -> Result<()> {
+            self.moments_into(
+                mean,
+                covariance,
+                g,
+                out_mean,
+                out_covariance,
+                None,
+                Some(noise),
                 workspace,
             )
         }

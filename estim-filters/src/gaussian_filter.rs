@@ -1,7 +1,7 @@
 //! The Kalman family as one filter parameterised by its moment propagator.
 
 use estim_core::kernel;
-use estim_core::linalg::{all_finite, ensure_shape, symmetrize_add_checked};
+use estim_core::linalg::{all_finite, ensure_shape};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{
     Affine, Linearized, MomentPropagator, SecondOrder, SecondOrderGaussian, Unscented,
@@ -247,16 +247,18 @@ where
     ensure_shape(q, n, n, stage, Quantity::ProcessNoise)?;
     // The propagator checks its own outputs; Q is checked through P⁻ = cov f + Q, and only on
     // failure is it examined to name the culprit.
-    propagator.propagate_mean_covariance_into(state, covariance, g, mean, p, propagation)?;
-    if !symmetrize_add_checked(p, q) {
-        let quantity = if all_finite(q) {
-            Quantity::Covariance
-        } else {
-            Quantity::ProcessNoise
-        };
-        return Err(Error::NonFinite { stage, quantity });
-    }
-    Ok(())
+    propagator
+        .propagate_with_noise_into(state, covariance, g, q, mean, p, propagation)
+        .map_err(|e| match e {
+            Error::NonFinite {
+                quantity: Quantity::Covariance,
+                ..
+            } if !all_finite(q) => Error::NonFinite {
+                stage,
+                quantity: Quantity::ProcessNoise,
+            },
+            e => e,
+        })
 }
 
 /// Makes `scratch`'s estimate the filter's, swapping buffers (no copy for runtime sizes).

@@ -25,6 +25,7 @@ impl Affine {
         out_mean: &mut OVector<T, M>,
         out_covariance: &mut OMatrix<T, M, M>,
         cross: Option<&mut OMatrix<T, N, M>>,
+        noise: Option<&OMatrix<T, M, M>>,
         workspace: &mut Workspace<T, N, M>,
     ) -> Result<()>
     where
@@ -42,6 +43,7 @@ impl Affine {
             out_mean,
             out_covariance,
             cross,
+            noise,
             workspace,
         )
     }

@@ -74,6 +74,7 @@ impl Linearized {
         out_mean: &mut OVector<T, M>,
         out_covariance: &mut OMatrix<T, M, M>,
         cross: Option<&mut OMatrix<T, N, M>>,
+        noise: Option<&OMatrix<T, M, M>>,
         workspace: &mut Workspace<T, N, M>,
     ) -> Result<()>
     where
@@ -93,7 +94,7 @@ impl Linearized {
             cross.as_deref_mut(),
             workspace,
         )?;
-        finish(out_mean, out_covariance, cross.as_deref())
+        finish(out_mean, out_covariance, cross.as_deref(), noise)
     }
 }
 

@@ -121,6 +121,7 @@ where
             &moments.mean,
             &mut moments.covariance,
             Some(&moments.cross_covariance),
+            None,
         )?;
         *out = moments;
         Ok(())

@@ -78,6 +78,7 @@ impl SecondOrder {
         out_mean: &mut OVector<T, M>,
         out_covariance: &mut OMatrix<T, M, M>,
         mut cross: Option<&mut OMatrix<T, N, M>>,
+        noise: Option<&OMatrix<T, M, M>>,
         workspace: &mut Workspace<T, N, M>,
     ) -> Result<()>
     where
@@ -105,7 +106,7 @@ impl SecondOrder {
                 out_mean[k] += half * h.dot(covariance);
             }
         }
-        finish(out_mean, out_covariance, cross.as_deref())
+        finish(out_mean, out_covariance, cross.as_deref(), noise)
     }
 }
 
@@ -130,6 +131,7 @@ impl SecondOrderGaussian {
         out_mean: &mut OVector<T, M>,
         out_covariance: &mut OMatrix<T, M, M>,
         mut cross: Option<&mut OMatrix<T, N, M>>,
+        noise: Option<&OMatrix<T, M, M>>,
         workspace: &mut Workspace<T, N, M>,
     ) -> Result<()>
     where
@@ -172,7 +174,7 @@ impl SecondOrderGaussian {
                 }
             }
         }
-        finish(out_mean, out_covariance, cross.as_deref())
+        finish(out_mean, out_covariance, cross.as_deref(), noise)
     }
 }
 

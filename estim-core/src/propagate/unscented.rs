@@ -123,6 +123,7 @@ impl<T: Real> Unscented<T> {
         out_mean: &mut OVector<T, M>,
         out_covariance: &mut OMatrix<T, M, M>,
         mut cross: Option<&mut OMatrix<T, N, M>>,
+        noise: Option<&OMatrix<T, M, M>>,
         workspace: &mut Workspace<T, N, M>,
     ) -> Result<()>
     where
@@ -204,7 +205,7 @@ impl<T: Real> Unscented<T> {
             mul_tr(cross, Accum::Replace, w, l, minus);
         }
         *out_mean += &*d_bar;
-        finish(out_mean, out_covariance, cross.as_deref())
+        finish(out_mean, out_covariance, cross.as_deref(), noise)
     }
 }
 
