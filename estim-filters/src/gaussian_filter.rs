@@ -298,29 +298,25 @@ where
 {
     #[inline(always)]
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
-        ensure_time_step(dt)?;
-        let Self {
-            state,
-            covariance,
-            propagator,
-            scratch,
-            ..
-        } = self;
-        let map = Transition::new(model, input, dt);
-        let noise =
-            |x: &OVector<T, N>, q: &mut OMatrix<T, N, N>| model.process_noise_into(x, input, dt, q);
-        predict_step(
-            propagator,
-            scratch,
-            state,
-            covariance,
-            &map,
-            noise,
-            Step::Apply,
-        )
+        self.process_step(model, input, dt, Step::Apply)
     }
 
     fn prepare_predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
+        self.process_step(model, input, dt, Step::Prepare)
+    }
+}
+
+impl<T: Real, N: Dim, Pr> GaussianFilter<T, N, Pr>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// A prediction through `model` (or its preparation).
+    #[inline(always)]
+    fn process_step<P>(&mut self, model: &P, input: &P::Input, dt: T, step: Step) -> Result<()>
+    where
+        P: ProcessModel<T, N>,
+        Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T>>,
+    {
         ensure_time_step(dt)?;
         let Self {
             state,
@@ -332,15 +328,7 @@ where
         let map = Transition::new(model, input, dt);
         let noise =
             |x: &OVector<T, N>, q: &mut OMatrix<T, N, N>| model.process_noise_into(x, input, dt, q);
-        predict_step(
-            propagator,
-            scratch,
-            state,
-            covariance,
-            &map,
-            noise,
-            Step::Prepare,
-        )
+        predict_step(propagator, scratch, state, covariance, &map, noise, step)
     }
 }
 
@@ -466,29 +454,34 @@ where
         z: &OVector<T, M>,
         report: &mut UpdateReport<T, M>,
     ) -> Result<()> {
-        let Self {
-            state,
-            covariance,
-            propagator,
-            settings,
-            scratch,
-        } = self;
-        update_step(
-            propagator,
-            scratch,
-            state,
-            covariance,
-            None,
-            model,
-            z,
-            *settings,
-            report,
-            Step::Apply,
-        )
+        self.measurement_step(model, z, report, Step::Apply)
     }
 
     fn prepare_update(&mut self, model: &H, report: &mut UpdateReport<T, M>) -> Result<()> {
         let z = model.measure(&self.state);
+        self.measurement_step(model, &z, report, Step::Prepare)
+    }
+}
+
+impl<T: Real, N: Dim, Pr> GaussianFilter<T, N, Pr>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// An update with `model` and `z` (or its preparation).
+    #[inline(always)]
+    fn measurement_step<M, H>(
+        &mut self,
+        model: &H,
+        z: &OVector<T, M>,
+        report: &mut UpdateReport<T, M>,
+        step: Step,
+    ) -> Result<()>
+    where
+        M: Dim,
+        H: MeasurementModel<T, N, M>,
+        Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
+        DefaultAllocator: Alloc<N, M>,
+    {
         let Self {
             state,
             covariance,
@@ -497,16 +490,7 @@ where
             scratch,
         } = self;
         update_step(
-            propagator,
-            scratch,
-            state,
-            covariance,
-            None,
-            model,
-            &z,
-            *settings,
-            report,
-            Step::Prepare,
+            propagator, scratch, state, covariance, None, model, z, *settings, report, step,
         )
     }
 }
