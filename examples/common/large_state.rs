@@ -457,7 +457,7 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
     }
     let band = ChiSquareBand::two_sided(NODES, 1, 0.95)?;
     println!(
-        "(timed: predict + update, steps 2…{steps}; a consistent filter's NEES is χ²({NODES}) \
+        "(timed: predict + update on prepared filters, steps 1…{steps}; a consistent filter's NEES is χ²({NODES}) \
          at every step, mean {NODES}, 95% of single values in [{:.1}, {:.1}]; successive \
          steps are correlated, so the average is not tighter by √{steps})",
         band.lower, band.upper
