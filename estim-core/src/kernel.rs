@@ -542,14 +542,20 @@ where
     let (Some(l), Some(b)) = (cast::<T, U, D, D>(l), cast_mut::<T, U, R, D>(b)) else {
         return false;
     };
-    let par = par(l.nrows().min(b.nrows()));
-    let bt = view_mut(b).transpose_mut();
-    if transpose {
-        solve_lower_triangular_in_place(view(l), bt, par);
-    } else {
-        solve_upper_triangular_in_place(view(l).transpose(), bt, par);
-    }
+    triangular_solve(view(l), view_mut(b).transpose_mut(), !transpose);
     true
+}
+
+/// rhs ← L⁻¹ rhs, or L⁻ᵀ rhs with `transpose`, on faer (L the lower triangle of `l`); the one
+/// place the left and right solves choose faer's kernel and its parallelism.
+#[inline(always)]
+fn triangular_solve<U: FaerScalar>(l: MatRef<'_, U>, rhs: MatMut<'_, U>, transpose: bool) {
+    let par = par(l.nrows().min(rhs.ncols()));
+    if transpose {
+        solve_upper_triangular_in_place(l.transpose(), rhs, par);
+    } else {
+        solve_lower_triangular_in_place(l, rhs, par);
+    }
 }
 
 /// The faer triangular solve with L (`transpose`: Lᵀ) if `T` is `U`.
@@ -565,12 +571,7 @@ where
     let (Some(l), Some(b)) = (cast::<T, U, D, D>(l), cast_mut::<T, U, D, C>(b)) else {
         return false;
     };
-    let par = par(l.nrows().min(b.ncols()));
-    if transpose {
-        solve_upper_triangular_in_place(view(l).transpose(), view_mut(b), par);
-    } else {
-        solve_lower_triangular_in_place(view(l), view_mut(b), par);
-    }
+    triangular_solve(view(l), view_mut(b), transpose);
     true
 }
 

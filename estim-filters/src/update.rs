@@ -152,11 +152,11 @@ where
         }
     };
 
-    // S = sym(cov ẑ + R), one pass. A non-finite S fails the factorisation below.
+    // S = sym(cov ẑ + R), one pass that also checks it; a non-finite S is not factorised.
     let s = &mut report.innovation_covariance;
-    symmetric_sum_into_checked(s, &predicted.covariance, noise);
+    let finite_s = symmetric_sum_into_checked(s, &predicted.covariance, noise);
     kernel::copy(factor, s);
-    if !kernel::cholesky_in_place(factor, cholesky) {
+    if !finite_s || !kernel::cholesky_in_place(factor, cholesky) {
         return Err(
             bad_input(&report.innovation, noise).unwrap_or(Error::NotPositiveDefinite {
                 stage,
@@ -194,7 +194,6 @@ where
     kernel::mul(new_state, Accum::Add, T::one(), gain, &report.innovation);
     // X = −K Pₓᵤᵀ (n × n, in the posterior's buffer).
     kernel::mul_tr(new_covariance, Accum::Replace, -T::one(), gain, cross);
-    let n = new_covariance.nrows();
     let finite = match settings.form {
         CovarianceUpdate::Joseph => {
             // G = K S Kᵀ = (K S) Kᵀ, both triangles (see below).
@@ -220,7 +219,7 @@ where
             let half = real::<T>(0.5);
             let sources = [covariance.as_slice(), gain_s_gain.as_slice()];
             symmetric_map(
-                n,
+                new_covariance.nrows(),
                 new_covariance.as_mut_slice(),
                 sources,
                 |x_ij, [p_ij, g_ij], x_ji, [p_ji, g_ji]| {

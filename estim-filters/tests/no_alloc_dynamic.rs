@@ -7,7 +7,9 @@
 // See tests/counting: the counting allocator implements the unsafe `GlobalAlloc` trait.
 #![allow(unsafe_code)]
 
+mod common;
 mod counting;
+use common::assert_bitwise_eq;
 use counting::allocations_during;
 
 use std::hint::black_box;
@@ -199,20 +201,8 @@ fn readings(m: usize) -> Vec<DVector<f64>> {
 
 /// Asserts `filter`'s estimate is bit for bit (x, P).
 fn assert_unchanged<F: Estimator<f64, Dyn>>(filter: &F, x: &DVector<f64>, p: &DMatrix<f64>) {
-    assert!(
-        filter
-            .state()
-            .iter()
-            .zip(x)
-            .all(|(a, b)| a.to_bits() == b.to_bits())
-    );
-    assert!(
-        filter
-            .covariance()
-            .iter()
-            .zip(p)
-            .all(|(a, b)| a.to_bits() == b.to_bits())
-    );
+    assert_bitwise_eq(filter.state(), x, "state");
+    assert_bitwise_eq(filter.covariance(), p, "covariance");
 }
 
 /// Prepared right after construction (which must not change the estimate), then allocations
