@@ -13,15 +13,35 @@ use crate::error::{Error, Quantity, Result, Stage};
 use crate::kernel::{CholeskyScratch, cholesky_in_place, copy, is_static};
 use crate::scalar::{Real, real};
 
-/// Whether every entry of `m` is finite. A branch-free scan of the contiguous storage (it
-/// vectorises; an early-exit `iter().all()` over nalgebra's generic iterator costs ≈ 4× more,
-/// which is a fifth of a small filter step). Needs contiguous storage (owned matrices and
+/// Whether every entry of `m` is finite. A branch-free scan of the contiguous storage
+/// ([`slice_finite`]; an early-exit `iter().all()` over nalgebra's generic iterator costs ≈ 4×
+/// more, which is a fifth of a small filter step). Needs contiguous storage (owned matrices and
 /// vectors); for a strided view use `view.iter().all(|v| v.is_finite())`.
 #[inline(always)]
 pub fn all_finite<T: Real, R: Dim, C: Dim, S: RawStorage<T, R, C> + IsContiguous>(
     m: &Matrix<T, R, C, S>,
 ) -> bool {
-    m.as_slice().iter().fold(true, |ok, v| ok & v.is_finite())
+    slice_finite(m.as_slice())
+}
+
+/// Whether every value is finite, without branching: Σ (v − v) over the values is 0 when all
+/// are finite and NaN otherwise (v − v is 0 for a finite v, NaN for ±∞ and NaN), summed in 8
+/// independent lanes so that it vectorises. Two flops per value, where `is_finite` costs an
+/// absolute value, two comparisons and two masks.
+#[inline(always)]
+pub fn slice_finite<T: Real>(values: &[T]) -> bool {
+    const LANES: usize = 8;
+    let mut lanes = [T::zero(); LANES];
+    let mut chunks = values.chunks_exact(LANES);
+    for chunk in &mut chunks {
+        for (lane, &v) in lanes.iter_mut().zip(chunk) {
+            *lane += v - v;
+        }
+    }
+    for (lane, &v) in lanes.iter_mut().zip(chunks.remainder()) {
+        *lane += v - v;
+    }
+    lanes.iter().fold(T::zero(), |sum, &lane| sum + lane) == T::zero()
 }
 
 /// `Ok(())` if every entry of `m` is finite, else [`Error::NonFinite`].
@@ -357,7 +377,7 @@ fn diagonal_tile<T: Real, const K: usize, const W: usize>(
             d[r][c] = v;
         }
     }
-    finite &= d.iter().flatten().fold(true, |ok, v| ok & v.is_finite());
+    finite &= slice_finite(d.as_flattened());
     for c in 0..W {
         let at = (jb + c) * n + jb;
         dst[at..at + W].copy_from_slice(&d[c]);
@@ -409,10 +429,7 @@ fn tile_pair<T: Real, const K: usize, const IW: usize, const JW: usize>(
             d_upper[r][c] = v;
         }
     }
-    finite &= d_lower
-        .iter()
-        .flatten()
-        .fold(true, |ok, v| ok & v.is_finite());
+    finite &= slice_finite(d_lower.as_flattened());
     for c in 0..JW {
         let at = (jb + c) * n + ib;
         dst[at..at + IW].copy_from_slice(&d_lower[c]);
@@ -618,6 +635,25 @@ mod tests {
             );
             let zeros = DMatrix::zeros(18, 18);
             assert!(!symmetrize_add_checked(&mut m, &zeros), "({i}, {j})");
+        }
+    }
+
+    /// Every length around the 8 lanes, every position, each kind of non-finite value; the
+    /// extreme finite values (whose sum would overflow) still count as finite.
+    #[test]
+    fn slice_finite_finds_any_non_finite_value() {
+        for len in 0..=19 {
+            let finite: Vec<f64> = (0..len)
+                .map(|k| [f64::MAX, -f64::MAX, f64::MIN_POSITIVE, -0.0, 1.5][k % 5])
+                .collect();
+            assert!(slice_finite(&finite), "len {len}");
+            for at in 0..len {
+                for bad in [f64::INFINITY, f64::NEG_INFINITY, f64::NAN] {
+                    let mut values = finite.clone();
+                    values[at] = bad;
+                    assert!(!slice_finite(&values), "len {len}, {bad} at {at}");
+                }
+            }
         }
     }
 }
