@@ -29,6 +29,7 @@ pub fn all_finite<T: Real, R: Dim, C: Dim, S: RawStorage<T, R, C> + IsContiguous
 /// independent lanes so that it vectorises. Two flops per value, where `is_finite` costs an
 /// absolute value, two comparisons and two masks.
 #[inline(always)]
+#[allow(clippy::eq_op)] // v − v is the test: it is not 0 for ±∞ and NaN.
 pub fn slice_finite<T: Real>(values: &[T]) -> bool {
     const LANES: usize = 8;
     let mut lanes = [T::zero(); LANES];
