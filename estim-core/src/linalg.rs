@@ -312,6 +312,8 @@ const TILE: usize = 8;
 /// and stored back, so the strided half of every pair costs no more than the contiguous half.
 /// (Measured with `perf record` on the n = 50 KF step of `benches/dynamic.rs`: an element-wise
 /// pair loop with a finiteness flag per element was ~40 % of the step; see BENCHMARKS.md.)
+/// From n = 16 the tile loop is compiled for the CPU's widest instruction set (pulp's runtime
+/// dispatch), with the same arithmetic in the same order, so the same results.
 #[inline(always)]
 #[track_caller]
 pub fn symmetric_map<T: Real, const K: usize>(
@@ -325,21 +327,57 @@ pub fn symmetric_map<T: Real, const K: usize>(
         sources.iter().all(|s| s.len() == n * n),
         "symmetric_map: a source is not n × n"
     );
+    // Compiled per instruction set (pulp's runtime dispatch; the same arithmetic in the same
+    // order on each, so the same bits) from two tiles on: KF step at n = 24 14 % faster, at
+    // n = 50 12 %, at n = 200 6 %; no difference at n = 12 (dynamic bench, ab runs).
+    if n < 2 * TILE {
+        return symmetric_tiles(n, dst, &sources, &f);
+    }
+    pulp::Arch::new().dispatch(SymmetricTiles { n, dst, sources, f })
+}
+
+/// The operands of [`symmetric_tiles`], as the `pulp` operation compiled per instruction set.
+struct SymmetricTiles<'a, T, const K: usize, F> {
+    n: usize,
+    dst: &'a mut [T],
+    sources: [&'a [T]; K],
+    f: F,
+}
+
+impl<T: Real, const K: usize, F: Fn(T, [T; K], T, [T; K]) -> T> pulp::WithSimd
+    for SymmetricTiles<'_, T, K, F>
+{
+    type Output = bool;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> bool {
+        symmetric_tiles(self.n, self.dst, &self.sources, &self.f)
+    }
+}
+
+/// [`symmetric_map`]'s tile loop.
+#[inline(always)]
+fn symmetric_tiles<T: Real, const K: usize>(
+    n: usize,
+    dst: &mut [T],
+    sources: &[&[T]; K],
+    f: &impl Fn(T, [T; K], T, [T; K]) -> T,
+) -> bool {
     let mut finite = true;
     for jb in (0..n).step_by(TILE) {
         let jw = TILE.min(n - jb);
         finite &= if jw == TILE {
-            diagonal_tile::<T, K, TILE>(n, jb, dst, &sources, &f)
+            diagonal_tile::<T, K, TILE>(n, jb, dst, sources, f)
         } else {
-            tile_pair_partial(n, jb, jb, jw, jw, dst, &sources, &f)
+            tile_pair_partial(n, jb, jb, jw, jw, dst, sources, f)
         };
         // The tiles below it and their mirror images to its right.
         for ib in (jb + jw..n).step_by(TILE) {
             let iw = TILE.min(n - ib);
             finite &= if iw == TILE && jw == TILE {
-                tile_pair::<T, K, TILE, TILE>(n, ib, jb, dst, &sources, &f)
+                tile_pair::<T, K, TILE, TILE>(n, ib, jb, dst, sources, f)
             } else {
-                tile_pair_partial(n, ib, jb, iw, jw, dst, &sources, &f)
+                tile_pair_partial(n, ib, jb, iw, jw, dst, sources, f)
             };
         }
     }
