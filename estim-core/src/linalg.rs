@@ -32,6 +32,11 @@ pub fn all_finite<T: Real, R: Dim, C: Dim, S: RawStorage<T, R, C> + IsContiguous
 #[allow(clippy::eq_op)] // v − v is the test: it is not 0 for ±∞ and NaN.
 pub fn slice_finite<T: Real>(values: &[T]) -> bool {
     const LANES: usize = 8;
+    if values.len() < 2 * LANES {
+        // Short (mostly static-size) scans: the plain fold unrolls into less code (the lanes
+        // cost the 3/2 static KF step 12 %).
+        return values.iter().fold(true, |ok, v| ok & v.is_finite());
+    }
     let mut lanes = [T::zero(); LANES];
     let mut chunks = values.chunks_exact(LANES);
     for chunk in &mut chunks {
