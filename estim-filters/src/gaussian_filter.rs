@@ -45,9 +45,9 @@ use crate::update::{self, CovarianceUpdate, UpdateSettings};
 /// [`LinearMeasurement`](estim_core::LinearMeasurement) do) and
 /// [`update_into`](Update::update_into) with a reused report. Which to pick, measured
 /// (BENCHMARKS.md, "Static or dynamic"): static sizes for the small states of the papers
-/// (n ≤ 6; no heap); runtime sizes from n ≈ 12 for the KF and EKF (at n = 12 they are already
-/// 1.2–1.3× faster) and from n ≈ 16–24 for the UKF (static still 1.3× faster at 12); at n = 24
-/// static steps are 2.8–9× slower (nalgebra's fixed-size products are not blocked).
+/// (n ≤ 6; no heap); runtime sizes from n ≈ 12 (there the KF and EKF are already 1.2–1.3×
+/// faster and the UKF breaks even); at n = 24 static steps are 1.2–2.7× slower (nalgebra's
+/// fixed-size products are not blocked).
 #[derive(Clone, Debug, PartialEq)]
 pub struct GaussianFilter<T: Real, N: Dim, Pr>
 where
