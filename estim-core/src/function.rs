@@ -45,6 +45,19 @@ where
     fn difference_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
         *out = self.difference(a, b);
     }
+
+    /// g at every column of `points` (n × n) into the same column of `out` (m × n), all at
+    /// once: `true` if done, `false` (the default, with nothing written) to have the caller
+    /// evaluate the columns one by one through [`eval_into`](Self::eval_into). The unscented
+    /// transform passes its sigma points μ ± √c Lⱼ, one sign at a time, for runtime (`Dyn`)
+    /// state sizes (at static sizes it evaluates them one by one, which measured faster there).
+    /// Implement it when the columns map together more cheaply, e.g. F X as one matrix product
+    /// instead of n matrix–vector products ([`LinearProcess`](crate::LinearProcess) does).
+    #[inline(always)]
+    fn eval_columns_into(&self, points: &OMatrix<T, N, N>, out: &mut OMatrix<T, M, N>) -> bool {
+        let _ = (points, out);
+        false
+    }
 }
 
 /// A [`VectorFunction`] with an analytic Jacobian.

@@ -61,9 +61,9 @@ where
         // Static sizes: the operator form unrolls and allocates nothing anyway.
         let dynamic = !(is_static::<N>() && is_static::<U>());
         if dynamic && fits {
-            // kernel::mul, not nalgebra's gemv: for runtime sizes it runs faer's kernels,
-            // dispatched on the CPU's vector width at run time, where nalgebra's gemv is
-            // compiled for the baseline target (a UKF evaluates F x 2n + 1 times a step).
+            // kernel::mul, not nalgebra's gemv: for runtime sizes its matrix–vector kernel is
+            // compiled for the CPU's vector width (chosen at run time), where nalgebra's gemv
+            // is compiled for the baseline target.
             kernel::mul(out, Accum::Replace, T::one(), f, x);
             kernel::mul(out, Accum::Add, T::one(), b, u);
         } else {
@@ -80,6 +80,40 @@ where
         out: &mut OMatrix<T, N, N>,
     ) {
         assign(out, &self.noise);
+    }
+
+    /// F X + (B u) 1ᵀ: one matrix product for all the columns (an unscented prediction's
+    /// sigma points) instead of one matrix–vector product each.
+    #[inline(always)]
+    fn transition_columns_into(
+        &self,
+        points: &OMatrix<T, N, N>,
+        u: &OVector<T, U>,
+        _dt: T,
+        out: &mut OMatrix<T, N, N>,
+    ) -> bool {
+        let (f, b) = (&self.transition, &self.input);
+        let n = points.nrows();
+        if f.shape() != (n, n) || b.shape() != (n, u.nrows()) || out.shape() != (n, n) {
+            return false; // per column (where wrong shapes are reported)
+        }
+        if n == 0 || u.nrows() == 0 {
+            kernel::mul(out, Accum::Replace, T::one(), f, points);
+            return true;
+        }
+        // B u into the first column, copied to the others, then + F X.
+        let first = &mut out.as_mut_slice()[..n];
+        first.fill(T::zero());
+        for (column, &uk) in b.as_slice().chunks_exact(n).zip(u.as_slice()) {
+            for (o, &v) in first.iter_mut().zip(column) {
+                *o += v * uk;
+            }
+        }
+        for j in 1..n {
+            out.as_mut_slice().copy_within(..n, j * n);
+        }
+        kernel::mul(out, Accum::Add, T::one(), f, points);
+        true
     }
 }
 
@@ -169,6 +203,17 @@ where
     #[inline(always)]
     fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
         crate::model::subtract_into(a, b, out);
+    }
+
+    /// H X: one matrix product for all the columns.
+    #[inline(always)]
+    fn measure_columns_into(&self, points: &OMatrix<T, N, N>, out: &mut OMatrix<T, M, N>) -> bool {
+        let h = &self.observation;
+        if h.ncols() != points.nrows() || out.shape() != (h.nrows(), points.ncols()) {
+            return false; // per column (where wrong shapes are reported)
+        }
+        kernel::mul(out, Accum::Replace, T::one(), h, points);
+        true
     }
 }
 

@@ -61,6 +61,23 @@ where
     ) {
         *out = self.process_noise(x, u, dt);
     }
+
+    /// f(·, u, Δt) at every column of `points` (n × n) into the same column of `out`, all at
+    /// once: `true` if done, `false` (the default, nothing written) for one column at a time
+    /// through [`transition_into`](Self::transition_into). See
+    /// [`VectorFunction::eval_columns_into`]: the unscented prediction uses it for its sigma
+    /// points, and a model that maps them in one matrix product saves most of its cost.
+    #[inline(always)]
+    fn transition_columns_into(
+        &self,
+        points: &OMatrix<T, N, N>,
+        u: &Self::Input,
+        dt: T,
+        out: &mut OMatrix<T, N, N>,
+    ) -> bool {
+        let _ = (points, u, dt, out);
+        false
+    }
 }
 
 /// A [`ProcessModel`] with an analytic Jacobian.
@@ -201,6 +218,16 @@ where
     fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
         *out = self.residual(a, b);
     }
+
+    /// h at every column of `points` (n × n) into the same column of `out` (m × n), all at
+    /// once: `true` if done, `false` (the default, nothing written) for one column at a time
+    /// through [`measure_into`](Self::measure_into). See
+    /// [`VectorFunction::eval_columns_into`].
+    #[inline(always)]
+    fn measure_columns_into(&self, points: &OMatrix<T, N, N>, out: &mut OMatrix<T, M, N>) -> bool {
+        let _ = (points, out);
+        false
+    }
 }
 
 /// A [`MeasurementModel`] with an analytic Jacobian.
@@ -299,6 +326,12 @@ where
     }
 
     #[inline(always)]
+    fn eval_columns_into(&self, points: &OMatrix<T, N, N>, out: &mut OMatrix<T, N, N>) -> bool {
+        self.model
+            .transition_columns_into(points, self.input, self.dt, out)
+    }
+
+    #[inline(always)]
     fn difference_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
         subtract_into(a, b, out);
     }
@@ -389,6 +422,11 @@ where
     #[inline(always)]
     fn eval_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
         self.model.measure_into(x, out);
+    }
+
+    #[inline(always)]
+    fn eval_columns_into(&self, points: &OMatrix<T, N, N>, out: &mut OMatrix<T, M, N>) -> bool {
+        self.model.measure_columns_into(points, out)
     }
 
     #[inline(always)]
