@@ -272,7 +272,8 @@ impl<U: Real> pulp::WithSimd for Matvec<'_, U> {
     }
 }
 
-/// `true` if the product was done on faer (runtime sizes, `f32`/`f64`).
+/// `true` if the product was done on the runtime-size kernels (faer, or [`matvec`]; runtime
+/// sizes, `f32`/`f64`).
 /// `$lower`: only the lower triangle of the (square) destination is computed.
 macro_rules! on_faer {
     ($dims:expr, $dst:expr, $accum:expr, $alpha:expr, $a:expr, $ta:expr, $b:expr, $tb:expr) => {

@@ -304,9 +304,9 @@ where
 }
 
 /// out ← A x, without allocating for runtime sizes, through `estim_core::kernel::mul` as the
-/// library's linear models do it (faer's runtime-dispatched kernels for `Dyn`; the faer
-/// baseline's models use the same faer product); static sizes keep the operator form, which
-/// unrolls.
+/// library's linear models do it (for `Dyn` its matrix–vector sweep, compiled for the CPU at
+/// run time; the faer baseline's models use faer's general product); static sizes keep the
+/// operator form, which unrolls.
 fn product_into<R: Dim, C: Dim>(
     out: &mut OVector<f64, R>,
     a: &OMatrix<f64, R, C>,
