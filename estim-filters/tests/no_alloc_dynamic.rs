@@ -236,17 +236,19 @@ fn count_linear<F>(mut filter: F, n: usize) -> usize
 where
     F: Predict<f64, Dyn, Process> + Update<f64, Dyn, Dyn, Measurement>,
 {
-    let (process, measurement) = linear_models(n);
+    let (mut process, measurement) = linear_models(n);
+    // Two inputs: x⁺ = F x + B u (the UKF maps its sigma points as F X + (B u) 1ᵀ).
+    process.input = DMatrix::from_fn(n, 2, |i, j| 0.01 * (i + j) as f64);
+    let u = DVector::from_vec(vec![0.3, -0.1]);
     let zs = readings(n / 2);
-    let none = DVector::zeros(0);
     let mut report = UpdateReport::zeros(Dyn(n / 2));
     let (x, p) = (filter.state().clone(), filter.covariance().clone());
-    filter.prepare_predict(&process, &none, DT).unwrap();
+    filter.prepare_predict(&process, &u, DT).unwrap();
     filter.prepare_update(&measurement, &mut report).unwrap();
     assert_unchanged(&filter, &x, &p);
     allocations_during(|| {
         for z in &zs {
-            filter.predict(&process, &none, DT).unwrap();
+            filter.predict(&process, &u, DT).unwrap();
             filter.update_into(&measurement, z, &mut report).unwrap();
             black_box(&report);
         }
