@@ -46,16 +46,23 @@ where
         *out = self.difference(a, b);
     }
 
-    /// g at every column of `points` (n × n) into the same column of `out` (m × n), all at
-    /// once: `true` if done, `false` (the default, with nothing written) to have the caller
-    /// evaluate the columns one by one through [`eval_into`](Self::eval_into). The unscented
-    /// transform passes its sigma points μ ± √c Lⱼ, one sign at a time, for runtime (`Dyn`)
-    /// state sizes (at static sizes it evaluates them one by one, which measured faster there).
-    /// Implement it when the columns map together more cheaply, e.g. F X as one matrix product
-    /// instead of n matrix–vector products ([`LinearProcess`](crate::LinearProcess) does).
+    /// g at the 2n points μ ± Lⱼ (Lⱼ the columns of the n × n `offsets`), all at once: g(μ + Lⱼ)
+    /// into column j of `plus` and g(μ − Lⱼ) into column j of `minus` (both m × n). `true` if
+    /// done; `false` (the default, nothing written) has the caller evaluate the points one by
+    /// one through [`eval_into`](Self::eval_into). The unscented transform asks for its sigma
+    /// points this way (offsets √c L) when the state size is a runtime one (`Dyn`; at static
+    /// sizes it goes point by point, which measured faster there). Implement it when the points
+    /// map together more cheaply: e.g. for g(x) = A x, A μ 1ᵀ ± A L with one matrix product A L
+    /// for all 2n points ([`LinearProcess`](crate::LinearProcess) does this).
     #[inline(always)]
-    fn eval_columns_into(&self, points: &OMatrix<T, N, N>, out: &mut OMatrix<T, M, N>) -> bool {
-        let _ = (points, out);
+    fn eval_sigma_points_into(
+        &self,
+        mean: &OVector<T, N>,
+        offsets: &OMatrix<T, N, N>,
+        plus: &mut OMatrix<T, M, N>,
+        minus: &mut OMatrix<T, M, N>,
+    ) -> bool {
+        let _ = (mean, offsets, plus, minus);
         false
     }
 }

@@ -82,37 +82,35 @@ where
         assign(out, &self.noise);
     }
 
-    /// F X + (B u) 1ᵀ: one matrix product for all the columns (an unscented prediction's
-    /// sigma points) instead of one matrix–vector product each.
+    /// (F μ + B u) ± F Lⱼ: one matrix product F L for all 2n sigma points instead of a
+    /// matrix–vector product each.
     #[inline(always)]
-    fn transition_columns_into(
+    fn transition_sigma_points_into(
         &self,
-        points: &OMatrix<T, N, N>,
+        mean: &OVector<T, N>,
+        offsets: &OMatrix<T, N, N>,
         u: &OVector<T, U>,
         _dt: T,
-        out: &mut OMatrix<T, N, N>,
+        plus: &mut OMatrix<T, N, N>,
+        minus: &mut OMatrix<T, N, N>,
     ) -> bool {
         let (f, b) = (&self.transition, &self.input);
-        let n = points.nrows();
-        if f.shape() != (n, n) || b.shape() != (n, u.nrows()) || out.shape() != (n, n) {
-            return false; // per column (where wrong shapes are reported)
+        let n = mean.nrows();
+        let fits = f.shape() == (n, n)
+            && b.shape() == (n, u.nrows())
+            && offsets.shape() == (n, n)
+            && plus.shape() == (n, n)
+            && minus.shape() == (n, n);
+        if !fits {
+            return false; // point by point (where wrong shapes are reported)
         }
-        if n == 0 || u.nrows() == 0 {
-            kernel::mul(out, Accum::Replace, T::one(), f, points);
-            return true;
-        }
-        // B u into the first column, copied to the others, then + F X.
-        let first = &mut out.as_mut_slice()[..n];
-        first.fill(T::zero());
-        for (column, &uk) in b.as_slice().chunks_exact(n).zip(u.as_slice()) {
-            for (o, &v) in first.iter_mut().zip(column) {
-                *o += v * uk;
-            }
-        }
-        for j in 1..n {
-            out.as_mut_slice().copy_within(..n, j * n);
-        }
-        kernel::mul(out, Accum::Add, T::one(), f, points);
+        kernel::mul(plus, Accum::Replace, T::one(), f, offsets);
+        // The centre F μ + B u in the first column of `minus`, then spread.
+        let centre = &mut minus.as_mut_slice()[..n];
+        centre.fill(T::zero());
+        add_product(centre, f.as_slice(), mean.as_slice());
+        add_product(centre, b.as_slice(), u.as_slice());
+        centre_plus_minus(n, plus.as_mut_slice(), minus.as_mut_slice());
         true
     }
 }
@@ -127,6 +125,44 @@ where
         crate::kernel::copy(out, value);
     } else {
         *out = value.clone();
+    }
+}
+
+/// y += A x for a column-major A of `y.len()` rows (the centre of a sigma-point set: once per
+/// transform, so a plain column sweep).
+fn add_product<T: Real>(y: &mut [T], a: &[T], x: &[T]) {
+    if y.is_empty() {
+        return;
+    }
+    for (column, &xk) in a.chunks_exact(y.len()).zip(x) {
+        for (yi, &v) in y.iter_mut().zip(column) {
+            *yi += v * xk;
+        }
+    }
+}
+
+/// With `plus` holding A L (columns of `rows`) and the first column of `minus` the centre c:
+/// `plus` ← c + A Lⱼ and `minus` ← c − A Lⱼ, column by column (the first column last, as it
+/// holds c).
+fn centre_plus_minus<T: Real>(rows: usize, plus: &mut [T], minus: &mut [T]) {
+    if rows == 0 || minus.is_empty() {
+        return;
+    }
+    let (centre, rest) = minus.split_at_mut(rows);
+    let (first_plus, rest_plus) = plus.split_at_mut(rows);
+    for (p, m) in rest_plus
+        .chunks_exact_mut(rows)
+        .zip(rest.chunks_exact_mut(rows))
+    {
+        for ((pi, mi), &ci) in p.iter_mut().zip(m.iter_mut()).zip(centre.iter()) {
+            *mi = ci - *pi;
+            *pi += ci;
+        }
+    }
+    for (pi, ci) in first_plus.iter_mut().zip(centre.iter_mut()) {
+        let c = *ci;
+        *ci = c - *pi;
+        *pi += c;
     }
 }
 
@@ -205,14 +241,31 @@ where
         crate::model::subtract_into(a, b, out);
     }
 
-    /// H X: one matrix product for all the columns.
+    /// H μ ± H Lⱼ: one matrix product H L for all 2n sigma points.
     #[inline(always)]
-    fn measure_columns_into(&self, points: &OMatrix<T, N, N>, out: &mut OMatrix<T, M, N>) -> bool {
+    fn measure_sigma_points_into(
+        &self,
+        mean: &OVector<T, N>,
+        offsets: &OMatrix<T, N, N>,
+        plus: &mut OMatrix<T, M, N>,
+        minus: &mut OMatrix<T, M, N>,
+    ) -> bool {
         let h = &self.observation;
-        if h.ncols() != points.nrows() || out.shape() != (h.nrows(), points.ncols()) {
-            return false; // per column (where wrong shapes are reported)
+        let (m, n) = (h.nrows(), mean.nrows());
+        let fits = h.ncols() == n
+            && offsets.shape() == (n, n)
+            && plus.shape() == (m, n)
+            && minus.shape() == (m, n);
+        if !fits {
+            return false; // point by point (where wrong shapes are reported)
         }
-        kernel::mul(out, Accum::Replace, T::one(), h, points);
+        kernel::mul(plus, Accum::Replace, T::one(), h, offsets);
+        if n > 0 {
+            let centre = &mut minus.as_mut_slice()[..m];
+            centre.fill(T::zero());
+            add_product(centre, h.as_slice(), mean.as_slice());
+        }
+        centre_plus_minus(m, plus.as_mut_slice(), minus.as_mut_slice());
         true
     }
 }

@@ -62,20 +62,23 @@ where
         *out = self.process_noise(x, u, dt);
     }
 
-    /// f(·, u, Δt) at every column of `points` (n × n) into the same column of `out`, all at
-    /// once: `true` if done, `false` (the default, nothing written) for one column at a time
-    /// through [`transition_into`](Self::transition_into). See
-    /// [`VectorFunction::eval_columns_into`]: the unscented prediction uses it for its sigma
-    /// points, and a model that maps them in one matrix product saves most of its cost.
+    /// f(·, u, Δt) at the 2n points μ ± Lⱼ into the columns of `plus` and `minus`, all at once:
+    /// `true` if done, `false` (the default, nothing written) for one point at a time through
+    /// [`transition_into`](Self::transition_into). See
+    /// [`VectorFunction::eval_sigma_points_into`]: the unscented prediction asks for its sigma
+    /// points this way, and a model that maps them with one matrix product saves most of its
+    /// cost.
     #[inline(always)]
-    fn transition_columns_into(
+    fn transition_sigma_points_into(
         &self,
-        points: &OMatrix<T, N, N>,
+        mean: &OVector<T, N>,
+        offsets: &OMatrix<T, N, N>,
         u: &Self::Input,
         dt: T,
-        out: &mut OMatrix<T, N, N>,
+        plus: &mut OMatrix<T, N, N>,
+        minus: &mut OMatrix<T, N, N>,
     ) -> bool {
-        let _ = (points, u, dt, out);
+        let _ = (mean, offsets, u, dt, plus, minus);
         false
     }
 }
@@ -219,13 +222,18 @@ where
         *out = self.residual(a, b);
     }
 
-    /// h at every column of `points` (n × n) into the same column of `out` (m × n), all at
-    /// once: `true` if done, `false` (the default, nothing written) for one column at a time
-    /// through [`measure_into`](Self::measure_into). See
-    /// [`VectorFunction::eval_columns_into`].
+    /// h at the 2n points μ ± Lⱼ into the columns of `plus` and `minus` (m × n), all at once:
+    /// `true` if done, `false` (the default, nothing written) for one point at a time through
+    /// [`measure_into`](Self::measure_into). See [`VectorFunction::eval_sigma_points_into`].
     #[inline(always)]
-    fn measure_columns_into(&self, points: &OMatrix<T, N, N>, out: &mut OMatrix<T, M, N>) -> bool {
-        let _ = (points, out);
+    fn measure_sigma_points_into(
+        &self,
+        mean: &OVector<T, N>,
+        offsets: &OMatrix<T, N, N>,
+        plus: &mut OMatrix<T, M, N>,
+        minus: &mut OMatrix<T, M, N>,
+    ) -> bool {
+        let _ = (mean, offsets, plus, minus);
         false
     }
 }
@@ -326,9 +334,15 @@ where
     }
 
     #[inline(always)]
-    fn eval_columns_into(&self, points: &OMatrix<T, N, N>, out: &mut OMatrix<T, N, N>) -> bool {
+    fn eval_sigma_points_into(
+        &self,
+        mean: &OVector<T, N>,
+        offsets: &OMatrix<T, N, N>,
+        plus: &mut OMatrix<T, N, N>,
+        minus: &mut OMatrix<T, N, N>,
+    ) -> bool {
         self.model
-            .transition_columns_into(points, self.input, self.dt, out)
+            .transition_sigma_points_into(mean, offsets, self.input, self.dt, plus, minus)
     }
 
     #[inline(always)]
@@ -425,8 +439,15 @@ where
     }
 
     #[inline(always)]
-    fn eval_columns_into(&self, points: &OMatrix<T, N, N>, out: &mut OMatrix<T, M, N>) -> bool {
-        self.model.measure_columns_into(points, out)
+    fn eval_sigma_points_into(
+        &self,
+        mean: &OVector<T, N>,
+        offsets: &OMatrix<T, N, N>,
+        plus: &mut OMatrix<T, M, N>,
+        minus: &mut OMatrix<T, M, N>,
+    ) -> bool {
+        self.model
+            .measure_sigma_points_into(mean, offsets, plus, minus)
     }
 
     #[inline(always)]

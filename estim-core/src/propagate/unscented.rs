@@ -113,9 +113,9 @@ impl<T: Real> Unscented<T> {
     ///
     /// The deviations are stored column by column in D₊ and D₋ (m × n, in the workspace), so
     /// the sums are matrix products: cov(y) = w (D₊D₊ᵀ + D₋D₋ᵀ) + (β − α²) d̄ d̄ᵀ and, since
-    /// χ±ⱼ − μ = ±√c Lⱼ, cov(x, y) = w √c L (D₊ − D₋)ᵀ. The n points of one sign go to g
-    /// together ([`VectorFunction::eval_columns_into`]) where g supports it and n is a runtime
-    /// size, else one by one.
+    /// χ±ⱼ − μ = ±√c Lⱼ, cov(x, y) = w √c L (D₊ − D₋)ᵀ. The 2n points go to g together
+    /// ([`VectorFunction::eval_sigma_points_into`]) where g supports it and n is a runtime size,
+    /// else one by one.
     #[inline(always)]
     fn moments_into<N, M, G>(
         &self,
@@ -164,26 +164,11 @@ impl<T: Real> Unscented<T> {
         let d = buffer(&mut workspace.deviation, m_dim, U1);
         let plus = buffer(&mut workspace.plus, m_dim, n_dim);
         let minus = buffer(&mut workspace.minus, m_dim, n_dim);
-        // First each sign's n points together where g can (eval_columns_into; runtime sizes
-        // only: at static sizes forming the point matrix costs more than it saves, 14 % of the
-        // 3/2 static UKF step), ...
-        let mut together = [false; 2];
-        if !is_static::<N>() {
-            let n1 = n.max(1);
-            let halves = [(T::one(), &mut *plus), (-T::one(), &mut *minus)];
-            for (done, (sign, deviations)) in together.iter_mut().zip(halves) {
-                // χⱼ = μ ± √c Lⱼ as the columns of `points`.
-                let points = buffer(&mut workspace.points, n_dim, n_dim);
-                let columns = points.as_mut_slice().chunks_exact_mut(n1);
-                for (point, column) in columns.zip(l.as_slice().chunks_exact(n1)) {
-                    for ((pi, &mi), &li) in point.iter_mut().zip(mean.as_slice()).zip(column) {
-                        *pi = mi + sign * li;
-                    }
-                }
-                *done = g.eval_columns_into(points, deviations);
-                if !*done {
-                    continue;
-                }
+        // All 2n points together where g can (eval_sigma_points_into; runtime sizes only: at
+        // static sizes the per-point loop below measured faster), ...
+        let together = !is_static::<N>() && g.eval_sigma_points_into(mean, l, plus, minus);
+        if together {
+            for deviations in [&mut *plus, &mut *minus] {
                 ensure_shape(deviations, m, n, stage, Quantity::FunctionValue)?;
                 for j in 0..n {
                     let column = &mut deviations.as_mut_slice()[j * m..(j + 1) * m];
@@ -193,18 +178,13 @@ impl<T: Real> Unscented<T> {
                     column.copy_from_slice(d.as_slice());
                 }
             }
-        }
-        // ... else one point at a time. Columns of column-major storage are contiguous
-        // slices: plain slice loops here, where nalgebra's generic column views cost
-        // measurably on small static sizes.
-        if together != [true; 2] {
+        } else {
+            // ... else one at a time. Columns of column-major storage are contiguous slices:
+            // plain slice loops here, where nalgebra's generic column views cost measurably on
+            // small static sizes.
             for j in 0..n {
                 let column = &l.as_slice()[j * n..(j + 1) * n];
-                let halves = [(T::one(), &mut *plus), (-T::one(), &mut *minus)];
-                for (&done, (sign, deviations)) in together.iter().zip(halves) {
-                    if done {
-                        continue;
-                    }
+                for (sign, deviations) in [(T::one(), &mut *plus), (-T::one(), &mut *minus)] {
                     let pairs = x.as_mut_slice().iter_mut().zip(mean.as_slice());
                     for ((xi, &mi), &li) in pairs.zip(column) {
                         *xi = mi + sign * li;

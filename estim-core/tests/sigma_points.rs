@@ -1,10 +1,11 @@
-//! Evaluating all sigma points of one sign at once (`VectorFunction::eval_columns_into`,
-//! `ProcessModel::transition_columns_into`, `MeasurementModel::measure_columns_into`):
+//! Evaluating all sigma points at once (`VectorFunction::eval_sigma_points_into`,
+//! `ProcessModel::transition_sigma_points_into`, `MeasurementModel::measure_sigma_points_into`):
 //!
 //! - the unscented transform gives the same bits whether a function maps its points together or
 //!   one by one, when both routes compute each point the same way;
-//! - the linear models' one-product versions agree with their per-point versions within the
-//!   round-off of the two sums (Higham: |fl(Σ aᵢbᵢ) − Σ aᵢbᵢ| ≤ γₖ Σ |aᵢbᵢ|, per side);
+//! - the linear models' one-product versions, c ± A Lⱼ, agree with their per-point values
+//!   A (μ ± Lⱼ) (+ B u) within the round-off of the two routes (Higham: |fl(Σ aᵢbᵢ) − Σ aᵢbᵢ|
+//!   ≤ γₖ Σ |aᵢbᵢ|, per side; the point μ ± Lⱼ itself rounds once more);
 //! - a batch written in the wrong shape is a typed error, not a wrong answer.
 
 mod common;
@@ -19,7 +20,8 @@ use estim_core::{
 };
 
 /// g(x) = A x + ε sin x (componentwise on the first m components), either evaluated one
-/// point at a time (`together = false`) or in `eval_columns_into` by the same per-point code.
+/// point at a time (`together = false`) or in `eval_sigma_points_into` by the same per-point
+/// code on the same points μ ± Lⱼ.
 struct SineMap<N: Dim, M: Dim>
 where
     DefaultAllocator: Alloc<N, M>,
@@ -40,13 +42,21 @@ where
         y
     }
 
-    fn eval_columns_into(&self, points: &OMatrix<f64, N, N>, out: &mut OMatrix<f64, M, N>) -> bool {
+    fn eval_sigma_points_into(
+        &self,
+        mean: &OVector<f64, N>,
+        offsets: &OMatrix<f64, N, N>,
+        plus: &mut OMatrix<f64, M, N>,
+        minus: &mut OMatrix<f64, M, N>,
+    ) -> bool {
         if !self.together {
             return false;
         }
-        for j in 0..points.ncols() {
-            let y = self.eval(&points.column(j).into_owned());
-            out.set_column(j, &y);
+        for j in 0..offsets.ncols() {
+            for (sign, out) in [(1.0, &mut *plus), (-1.0, &mut *minus)] {
+                let point = mean.zip_map(&offsets.column(j), |mi, li| mi + sign * li);
+                out.set_column(j, &self.eval(&point));
+            }
         }
         true
     }
@@ -111,25 +121,27 @@ fn unscented_transform_is_the_same_one_by_one_or_together() {
     same_bits_both_routes(Dyn(1), Dyn(1));
 }
 
-/// Column j of `together` against `single(j)`, within 2 γₖ `scale[:, j]` elementwise.
+/// Column j of `together` against `single(j)`, within `bound[:, j]` elementwise.
 fn assert_columns_within(
     together: &DMatrix<f64>,
     single: impl Fn(usize) -> DVector<f64>,
-    scale: &DMatrix<f64>,
-    k: usize,
+    bound: &DMatrix<f64>,
 ) {
     for j in 0..together.ncols() {
         let y = single(j);
         for i in 0..together.nrows() {
-            let bound = 2.0 * gamma(k) * scale[(i, j)];
             let gap = (together[(i, j)] - y[i]).abs();
-            assert!(gap <= bound, "({i}, {j}): {gap:e} > {bound:e}");
+            assert!(
+                gap <= bound[(i, j)],
+                "({i}, {j}): {gap:e} > {:e}",
+                bound[(i, j)]
+            );
         }
     }
 }
 
 #[test]
-fn linear_models_map_columns_as_they_map_points() {
+fn linear_models_map_sigma_points_as_they_map_points() {
     let (n, p, m) = (11, 3, 5);
     let f = DMatrix::from_fn(n, n, |i, j| ((i * 13 + j * 7) as f64 * 0.37).sin());
     let b = DMatrix::from_fn(n, p, |i, j| ((i + 3 * j) as f64).cos());
@@ -144,50 +156,64 @@ fn linear_models_map_columns_as_they_map_points() {
         noise: DMatrix::identity(m, m),
     };
     let u = DVector::from_fn(p, |i, _| 1.5 - i as f64);
-    let points = DMatrix::from_fn(n, n, |i, j| ((i * 3 + j * 11) as f64 * 0.13).sin() * 4.0);
+    let mu = DVector::from_fn(n, |i, _| (i as f64 * 0.7).cos() * 3.0);
+    let l = DMatrix::from_fn(n, n, |i, j| ((i * 3 + j * 11) as f64 * 0.13).sin() * 0.5);
+    let point = |j: usize, sign: f64| mu.zip_map(&l.column(j), |mi, li| mi + sign * li);
+    let ones = DMatrix::from_element(1, n, 1.0);
+    // |A| (|μ| 1ᵀ + |L|) (+ |B| |u| 1ᵀ): the magnitude every element's sums run over.
+    let magnitude =
+        |a: &DMatrix<f64>, extra: DMatrix<f64>| abs(a) * (abs(&mu) * &ones + abs(&l)) + extra;
+    let bu = abs(&b) * abs(&u) * &ones;
+    // Per side: γ_{n+p+1} for a sum of n + p products of rounded points, and the centre's
+    // extra addition; both sides round.
+    let bound = |scale: DMatrix<f64>, k: usize| scale * (2.0 * gamma(k + 2));
 
-    let mut x_out = DMatrix::zeros(n, n);
-    assert!(process.transition_columns_into(&points, &u, 0.1, &mut x_out));
-    let column = |j: usize| points.column(j).into_owned();
-    // Each element is a sum of n + p products, in either route.
-    let scale = abs(&f) * abs(&points) + (abs(&b) * abs(&u)) * DMatrix::from_element(1, n, 1.0);
-    assert_columns_within(
-        &x_out,
-        |j| {
+    let (mut plus, mut minus) = (DMatrix::zeros(n, n), DMatrix::zeros(n, n));
+    assert!(process.transition_sigma_points_into(&mu, &l, &u, 0.1, &mut plus, &mut minus));
+    let (process_ref, u_ref, point_ref) = (&process, &u, &point);
+    let single = move |sign: f64| {
+        move |j: usize| {
             let mut y = DVector::zeros(n);
-            process.transition_into(&column(j), &u, 0.1, &mut y);
+            process_ref.transition_into(&point_ref(j, sign), u_ref, 0.1, &mut y);
             y
-        },
-        &scale,
-        n + p,
-    );
-    // Through the adapter the unscented transform uses, and with no inputs.
+        }
+    };
+    let x_bound = bound(magnitude(&f, bu.clone()), n + p);
+    assert_columns_within(&plus, single(1.0), &x_bound);
+    assert_columns_within(&minus, single(-1.0), &x_bound);
+    // Through the adapter the unscented transform uses: the same values.
     let map = Transition::new(&process, &u, 0.1);
-    let mut again = DMatrix::zeros(n, n);
-    assert!(map.eval_columns_into(&points, &mut again));
-    assert_eq!(again, x_out);
+    let (mut plus2, mut minus2) = (DMatrix::zeros(n, n), DMatrix::zeros(n, n));
+    assert!(map.eval_sigma_points_into(&mu, &l, &mut plus2, &mut minus2));
+    assert_eq!((&plus2, &minus2), (&plus, &minus));
+    // No inputs.
     let no_input = LinearProcess {
         transition: f.clone(),
         input: DMatrix::zeros(n, 0),
         noise: DMatrix::identity(n, n),
     };
-    assert!(no_input.transition_columns_into(&points, &DVector::zeros(0), 0.1, &mut x_out));
-    assert_columns_within(&x_out, |j| &f * column(j), &(abs(&f) * abs(&points)), n);
+    let none = DVector::zeros(0);
+    assert!(no_input.transition_sigma_points_into(&mu, &l, &none, 0.1, &mut plus, &mut minus));
+    let f_bound = bound(magnitude(&f, DMatrix::zeros(n, n)), n);
+    assert_columns_within(&plus, |j| &f * point(j, 1.0), &f_bound);
+    assert_columns_within(&minus, |j| &f * point(j, -1.0), &f_bound);
 
-    let mut z_out = DMatrix::zeros(m, n);
-    assert!(sensor.measure_columns_into(&points, &mut z_out));
-    assert_columns_within(&z_out, |j| &h * column(j), &(abs(&h) * abs(&points)), n);
+    let (mut plus, mut minus) = (DMatrix::zeros(m, n), DMatrix::zeros(m, n));
+    assert!(sensor.measure_sigma_points_into(&mu, &l, &mut plus, &mut minus));
+    let h_bound = bound(magnitude(&h, DMatrix::zeros(m, n)), n);
+    assert_columns_within(&plus, |j| &h * point(j, 1.0), &h_bound);
+    assert_columns_within(&minus, |j| &h * point(j, -1.0), &h_bound);
     let observation = Observation::new(&sensor);
-    let mut again = DMatrix::zeros(m, n);
-    assert!(observation.eval_columns_into(&points, &mut again));
-    assert_eq!(again, z_out);
+    let (mut plus2, mut minus2) = (DMatrix::zeros(m, n), DMatrix::zeros(m, n));
+    assert!(observation.eval_sigma_points_into(&mu, &l, &mut plus2, &mut minus2));
+    assert_eq!((&plus2, &minus2), (&plus, &minus));
 
     // Shapes that do not fit: left to the per-point route, which reports them.
     let mut wrong = DMatrix::zeros(m + 1, n);
-    assert!(!sensor.measure_columns_into(&points, &mut wrong));
+    assert!(!sensor.measure_sigma_points_into(&mu, &l, &mut wrong, &mut minus));
 }
 
-/// Claims to have mapped the points but leaves its output a row short.
+/// Claims to have mapped the points but leaves its outputs a row short.
 struct ShortBatch;
 
 impl VectorFunction<f64, Dyn, Dyn> for ShortBatch {
@@ -195,8 +221,15 @@ impl VectorFunction<f64, Dyn, Dyn> for ShortBatch {
         x.rows(0, 2).into_owned()
     }
 
-    fn eval_columns_into(&self, points: &DMatrix<f64>, out: &mut DMatrix<f64>) -> bool {
-        *out = DMatrix::zeros(1, points.ncols());
+    fn eval_sigma_points_into(
+        &self,
+        _: &DVector<f64>,
+        offsets: &DMatrix<f64>,
+        plus: &mut DMatrix<f64>,
+        minus: &mut DMatrix<f64>,
+    ) -> bool {
+        *plus = DMatrix::zeros(1, offsets.ncols());
+        *minus = DMatrix::zeros(1, offsets.ncols());
         true
     }
 }
