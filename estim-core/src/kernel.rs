@@ -212,7 +212,7 @@ where
 /// 24 % faster at n = 50 and 18 % at n = 12, the KF 6 % at n = 12 (BENCHMARKS.md, "Matrix–
 /// vector products").
 #[inline(always)]
-fn matvec<U: Real>(y: &mut [U], accum: Accum, alpha: U, a: &[U], x: &[U]) {
+pub(crate) fn matvec<U: Real>(y: &mut [U], accum: Accum, alpha: U, a: &[U], x: &[U]) {
     assert_eq!(a.len(), y.len() * x.len(), "matvec: shapes differ");
     pulp::Arch::new().dispatch(Matvec {
         y,
@@ -264,10 +264,7 @@ impl<U: Real> pulp::WithSimd for Matvec<'_, U> {
             }
         }
         for (column, &xj) in blocks.remainder().chunks_exact(rows).zip(xs.remainder()) {
-            let xj = alpha * xj;
-            for (yi, &v) in y.iter_mut().zip(column) {
-                *yi += v * xj;
-            }
+            axpy(y, alpha * xj, column);
         }
     }
 }
@@ -565,7 +562,7 @@ pub fn solve_right_lower_transpose_in_place<T: Real, R: Dim, D: Dim>(
     }
 }
 
-/// y ← y + a x over two columns.
+/// y ← y + a x over two columns (slices of equal length).
 #[inline(always)]
 fn axpy<T: Real>(y: &mut [T], a: T, x: &[T]) {
     for (yi, &xi) in y.iter_mut().zip(x) {

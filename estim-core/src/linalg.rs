@@ -57,7 +57,14 @@ pub fn ensure_finite<T: Real, R: Dim, C: Dim, S: RawStorage<T, R, C> + IsContigu
     stage: Stage,
     quantity: Quantity,
 ) -> Result<()> {
-    if all_finite(m) {
+    finite_or_error(all_finite(m), stage, quantity)
+}
+
+/// `Ok(())` if `finite`, else [`Error::NonFinite`]: for passes that check finiteness as they
+/// write (e.g. [`symmetric_map`]).
+#[inline(always)]
+pub fn finite_or_error(finite: bool, stage: Stage, quantity: Quantity) -> Result<()> {
+    if finite {
         Ok(())
     } else {
         Err(Error::NonFinite { stage, quantity })
@@ -332,9 +339,8 @@ pub fn symmetric_map<T: Real, const K: usize>(
         sources.iter().all(|s| s.len() == n * n),
         "symmetric_map: a source is not n × n"
     );
-    // Compiled per instruction set (pulp's runtime dispatch; the same arithmetic in the same
-    // order on each, so the same bits) from two tiles on: KF step at n = 24 14 % faster, at
-    // n = 50 12 %, at n = 200 6 %; no difference at n = 12 (dynamic bench, ab runs).
+    // Dispatched from two tiles on (doc above): KF step at n = 24 14 % faster, at n = 50
+    // 12 %, at n = 200 6 %; no difference at n = 12 (dynamic bench, A/B runs).
     if n < 2 * TILE {
         return symmetric_tiles(n, dst, &sources, &f);
     }
@@ -398,7 +404,6 @@ fn diagonal_tile<T: Real, const K: usize, const W: usize>(
     sources: &[&[T]; K],
     f: &impl Fn(T, [T; K], T, [T; K]) -> T,
 ) -> bool {
-    let mut finite = true;
     // d[c][r] = M[jb + r, jb + c].
     let mut d = [[T::zero(); W]; W];
     let mut s = [[[T::zero(); W]; W]; K];
@@ -421,7 +426,7 @@ fn diagonal_tile<T: Real, const K: usize, const W: usize>(
             d[r][c] = v;
         }
     }
-    finite &= slice_finite(d.as_flattened());
+    let finite = slice_finite(d.as_flattened());
     for c in 0..W {
         let at = (jb + c) * n + jb;
         dst[at..at + W].copy_from_slice(&d[c]);
@@ -440,7 +445,6 @@ fn tile_pair<T: Real, const K: usize, const IW: usize, const JW: usize>(
     sources: &[&[T]; K],
     f: &impl Fn(T, [T; K], T, [T; K]) -> T,
 ) -> bool {
-    let mut finite = true;
     // lower[c][r] = M[ib + r, jb + c] (column runs); upper[r][c] = M[jb + c, ib + r] (the
     // mirror image's column runs).
     let mut d_lower = [[T::zero(); IW]; JW];
@@ -473,7 +477,7 @@ fn tile_pair<T: Real, const K: usize, const IW: usize, const JW: usize>(
             d_upper[r][c] = v;
         }
     }
-    finite &= slice_finite(d_lower.as_flattened());
+    let finite = slice_finite(d_lower.as_flattened());
     for c in 0..JW {
         let at = (jb + c) * n + ib;
         dst[at..at + IW].copy_from_slice(&d_lower[c]);

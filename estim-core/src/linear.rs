@@ -107,9 +107,14 @@ where
         kernel::mul(plus, Accum::Replace, T::one(), f, offsets);
         // The centre F μ + B u in the first column of `minus`, then spread.
         let centre = &mut minus.as_mut_slice()[..n];
-        centre.fill(T::zero());
-        add_product(centre, f.as_slice(), mean.as_slice());
-        add_product(centre, b.as_slice(), u.as_slice());
+        kernel::matvec(
+            centre,
+            Accum::Replace,
+            T::one(),
+            f.as_slice(),
+            mean.as_slice(),
+        );
+        kernel::matvec(centre, Accum::Add, T::one(), b.as_slice(), u.as_slice());
         centre_plus_minus(n, plus.as_mut_slice(), minus.as_mut_slice());
         true
     }
@@ -125,19 +130,6 @@ where
         crate::kernel::copy(out, value);
     } else {
         *out = value.clone();
-    }
-}
-
-/// y += A x for a column-major A of `y.len()` rows (the centre of a sigma-point set: once per
-/// transform, so a plain column sweep).
-fn add_product<T: Real>(y: &mut [T], a: &[T], x: &[T]) {
-    if y.is_empty() {
-        return;
-    }
-    for (column, &xk) in a.chunks_exact(y.len()).zip(x) {
-        for (yi, &v) in y.iter_mut().zip(column) {
-            *yi += v * xk;
-        }
     }
 }
 
@@ -262,8 +254,13 @@ where
         kernel::mul(plus, Accum::Replace, T::one(), h, offsets);
         if n > 0 {
             let centre = &mut minus.as_mut_slice()[..m];
-            centre.fill(T::zero());
-            add_product(centre, h.as_slice(), mean.as_slice());
+            kernel::matvec(
+                centre,
+                Accum::Replace,
+                T::one(),
+                h.as_slice(),
+                mean.as_slice(),
+            );
         }
         centre_plus_minus(m, plus.as_mut_slice(), minus.as_mut_slice());
         true

@@ -26,7 +26,8 @@ use crate::error::{Quantity, Result, Stage};
 use crate::function::VectorFunction;
 use crate::gaussian::Gaussian;
 use crate::linalg::{
-    ensure_finite, ensure_shape, mirror_lower_checked, symmetric_map, symmetrize_add_checked,
+    ensure_finite, ensure_shape, finite_or_error, mirror_lower_checked, symmetric_map,
+    symmetrize_add_checked,
 };
 use crate::scalar::Real;
 
@@ -155,14 +156,8 @@ where
         let stage = Stage::Propagation;
         let m = out_mean.nrows();
         ensure_shape(noise, m, m, stage, Quantity::ProcessNoise)?;
-        if symmetrize_add_checked(out_covariance, noise) {
-            Ok(())
-        } else {
-            Err(crate::Error::NonFinite {
-                stage,
-                quantity: Quantity::Covariance,
-            })
-        }
+        let finite = symmetrize_add_checked(out_covariance, noise);
+        finite_or_error(finite, stage, Quantity::Covariance)
     }
 
     /// The moments of g(x) for x with mean `mean` and covariance `covariance`: see
@@ -294,12 +289,7 @@ where
             )
         }
     };
-    if !finite {
-        return Err(crate::Error::NonFinite {
-            stage,
-            quantity: Quantity::Covariance,
-        });
-    }
+    finite_or_error(finite, stage, Quantity::Covariance)?;
     if let Some(cross) = cross {
         ensure_finite(cross, stage, Quantity::CrossCovariance)?;
     }

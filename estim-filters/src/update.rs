@@ -21,8 +21,8 @@
 
 use estim_core::kernel::{self, Accum};
 use estim_core::linalg::{
-    all_finite, ensure_finite, ensure_shape, symmetric_map, symmetric_sum_into_checked,
-    symmetrize_add_checked,
+    all_finite, ensure_finite, ensure_shape, finite_or_error, symmetric_map,
+    symmetric_sum_into_checked, symmetrize_add_checked,
 };
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::scalar::real;
@@ -238,12 +238,7 @@ where
     };
     // A non-finite gain shows up in both the state and the covariance.
     ensure_finite(new_state, stage, Quantity::Mean)
-        .and_then(|()| {
-            finite.then_some(()).ok_or(Error::NonFinite {
-                stage,
-                quantity: Quantity::Covariance,
-            })
-        })
+        .and_then(|()| finite_or_error(finite, stage, Quantity::Covariance))
         .map_err(|e| bad_input(&report.innovation, noise).unwrap_or(e))?;
     Ok(true)
 }
