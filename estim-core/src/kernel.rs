@@ -32,7 +32,7 @@ use faer::linalg::triangular_solve::{
     solve_lower_triangular_in_place, solve_upper_triangular_in_place,
 };
 use faer::{MatMut, MatRef, Par};
-use nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, Scalar, allocator::Allocator};
+use nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, OVector, Scalar, allocator::Allocator};
 
 use crate::scalar::Real;
 
@@ -131,9 +131,181 @@ where
 }
 
 /// The scalar types faer computes in.
-trait FaerScalar: Real + faer::traits::ComplexField {}
-impl FaerScalar for f32 {}
-impl FaerScalar for f64 {}
+trait FaerScalar: Real + faer::traits::ComplexField {
+    /// y (+)= α A x for a column-major `a` of `y.len()` rows and `x.len()` columns (see
+    /// [`Matvec`]).
+    fn matvec(y: &mut [Self], accum: Accum, alpha: Self, a: &[Self], x: &[Self]);
+}
+
+/// y (+)= α A x, the kernel behind every runtime-size matrix × vector product: rows in panels
+/// of whole SIMD vectors held in registers across all the columns, y_P ← (y_P +) (Σ_even
+/// a_P,j (αx_j) + Σ_odd a_P,j (αx_j)), each sum a chain of fused multiply–adds (plain on CPUs
+/// without FMA); the last `rows mod lanes` rows one at a time. Compiled for the widest SIMD the
+/// CPU has (`pulp`'s runtime dispatch), so the last bits depend on the instruction set.
+///
+/// A panel is 8 vectors with AVX-512 (64 f64 rows; 2 × 8 accumulators of 32 registers), 4
+/// otherwise (16 on AVX2). Two chains per row hide the FMA latency; the 4-column sweep this
+/// replaced (y ← y + a₀x₀ + … + a₃x₃ over the whole of y, four columns at a time) waited on
+/// each block's store of y and was latency-bound below n ≈ 100. One-off loop, AVX-512,
+/// best of 5 (`cargo run --release` in a scratch crate calling `kernel::mul`, the old sweep
+/// side by side): 24 × 24 46 → 18 ns, 50 × 50 176 → 101 ns, 25 × 50 111 → 59 ns, 100 × 100 739
+/// → 712 ns, 200 × 200 2.79 → 2.92 µs (L2-bound, the panel reads columns in 512-byte pieces),
+/// 6 × 6 equal. faer's general product costs 2–3× the sweep at these sizes, so it is not used
+/// for one column.
+struct Matvec<'a, U> {
+    y: &'a mut [U],
+    accum: Accum,
+    alpha: U,
+    a: &'a [U],
+    x: &'a [U],
+}
+
+macro_rules! impl_matvec {
+    ($t:ty, $ts:ident, $splat:ident, $fma:ident, $add:ident, $as_simd:ident, $as_mut_simd:ident) => {
+        impl FaerScalar for $t {
+            #[inline(always)]
+            fn matvec(y: &mut [$t], accum: Accum, alpha: $t, a: &[$t], x: &[$t]) {
+                assert_eq!(a.len(), y.len() * x.len(), "matvec: shapes differ");
+                pulp::Arch::new().dispatch(Matvec {
+                    y,
+                    accum,
+                    alpha,
+                    a,
+                    x,
+                });
+            }
+        }
+
+        impl Matvec<'_, $t> {
+            /// (y (+)) α A x on rows `start..start + V·lanes`: V vectors of accumulators per
+            /// column parity.
+            #[inline(always)]
+            fn sums<S: pulp::Simd, const V: usize>(&self, simd: S, start: usize) -> [S::$ts; V] {
+                let rows = self.y.len();
+                let end = start + V * (size_of::<S::$ts>() / size_of::<$t>());
+                let zero = simd.$splat(0.0);
+                let (mut even, mut odd) = ([zero; V], [zero; V]);
+                let mut columns = self.a.chunks_exact(rows).zip(self.x);
+                while let Some((c0, &x0)) = columns.next() {
+                    let s0 = simd.$splat(self.alpha * x0);
+                    for (acc, &v) in even.iter_mut().zip(S::$as_simd(&c0[start..end]).0) {
+                        *acc = simd.$fma(v, s0, *acc);
+                    }
+                    let Some((c1, &x1)) = columns.next() else {
+                        break;
+                    };
+                    let s1 = simd.$splat(self.alpha * x1);
+                    for (acc, &v) in odd.iter_mut().zip(S::$as_simd(&c1[start..end]).0) {
+                        *acc = simd.$fma(v, s1, *acc);
+                    }
+                }
+                let y = S::$as_simd(&self.y[start..end]).0;
+                for ((e, &d), &yi) in even.iter_mut().zip(&odd).zip(y) {
+                    *e = simd.$add(*e, d);
+                    if self.accum == Accum::Add {
+                        *e = simd.$add(yi, *e);
+                    }
+                }
+                even
+            }
+
+            /// Rows `start..start + V·lanes` of y ← (y +) α A x.
+            #[inline(always)]
+            fn panel<S: pulp::Simd, const V: usize>(&mut self, simd: S, start: usize) {
+                let sums = self.sums::<S, V>(simd, start);
+                let end = start + V * (size_of::<S::$ts>() / size_of::<$t>());
+                for (o, v) in S::$as_mut_simd(&mut self.y[start..end])
+                    .0
+                    .iter_mut()
+                    .zip(sums)
+                {
+                    *o = v;
+                }
+            }
+
+            /// The first `vectors` vectors of rows, in panels of `V` vectors and one of the rest.
+            #[inline(always)]
+            fn panels<S: pulp::Simd, const V: usize>(&mut self, simd: S, vectors: usize) {
+                let lanes = size_of::<S::$ts>() / size_of::<$t>();
+                let mut start = 0;
+                for _ in 0..vectors / V {
+                    self.panel::<S, V>(simd, start);
+                    start += V * lanes;
+                }
+                match vectors % V {
+                    7 => self.panel::<S, 7>(simd, start),
+                    6 => self.panel::<S, 6>(simd, start),
+                    5 => self.panel::<S, 5>(simd, start),
+                    4 => self.panel::<S, 4>(simd, start),
+                    3 => self.panel::<S, 3>(simd, start),
+                    2 => self.panel::<S, 2>(simd, start),
+                    1 => self.panel::<S, 1>(simd, start),
+                    _ => {}
+                }
+            }
+        }
+
+        impl pulp::WithSimd for Matvec<'_, $t> {
+            type Output = ();
+
+            #[inline(always)]
+            fn with_simd<S: pulp::Simd>(mut self, simd: S) {
+                let rows = self.y.len();
+                if rows == 0 {
+                    return;
+                }
+                let lanes = size_of::<S::$ts>() / size_of::<$t>();
+                let vectors = rows / lanes;
+                // The last rows mod lanes rows: a whole vector ending at the last row, computed
+                // before the panels overwrite the y it reads and stored after them (the rows it
+                // shares with the last panel get the same bits: same operations, same order).
+                let last = (vectors > 0 && rows % lanes != 0)
+                    .then(|| self.sums::<S, 1>(simd, rows - lanes));
+                if size_of::<S::$ts>() >= 64 {
+                    self.panels::<S, 8>(simd, vectors);
+                } else {
+                    self.panels::<S, 4>(simd, vectors);
+                }
+                if let Some([v]) = last {
+                    S::$as_mut_simd(&mut self.y[rows - lanes..]).0[0] = v;
+                    return;
+                }
+                // Fewer rows than lanes: one at a time.
+                let (alpha, a, x) = (self.alpha, self.a, self.x);
+                for i in vectors * lanes..rows {
+                    let mut sum: $t = 0.0;
+                    for (column, &xj) in a.chunks_exact(rows).zip(x) {
+                        sum += column[i] * (alpha * xj);
+                    }
+                    let yi = &mut self.y[i];
+                    *yi = match self.accum {
+                        Accum::Add => *yi + sum,
+                        Accum::Replace => sum,
+                    };
+                }
+            }
+        }
+    };
+}
+
+impl_matvec!(
+    f64,
+    f64s,
+    splat_f64s,
+    mul_add_e_f64s,
+    add_f64s,
+    as_simd_f64s,
+    as_mut_simd_f64s
+);
+impl_matvec!(
+    f32,
+    f32s,
+    splat_f32s,
+    mul_add_e_f32s,
+    add_f32s,
+    as_simd_f32s,
+    as_mut_simd_f32s
+);
 
 /// dst (+)= α op(a) op(b) on faer (a matrix times a vector: [`matvec`]) if `T` is `U`;
 /// `false` (nothing done) otherwise.
@@ -169,9 +341,9 @@ where
         return false;
     };
     if dst.ncols() == 1 && !transpose_a && !transpose_b && !lower {
-        // A matrix times a vector: faer's general product costs 2–3× a plain column sweep
-        // here (see `matvec`).
-        matvec(dst.as_mut_slice(), accum, alpha, a.as_slice(), b.as_slice());
+        // A matrix times a vector: faer's general product costs 2–3× the panel kernel here
+        // (see `Matvec`).
+        U::matvec(dst.as_mut_slice(), accum, alpha, a.as_slice(), b.as_slice());
         return true;
     }
     let (a, b) = (view(a), view(b));
@@ -200,76 +372,75 @@ where
     true
 }
 
-/// y (+)= α A x for a column-major `a` of `y.len()` rows and `x.len()` columns: a sweep over
-/// the columns four at a time, y ← y + a₀(αx₀) + a₁(αx₁) + a₂(αx₂) + a₃(αx₃), compiled for the
-/// widest SIMD the CPU has (`pulp`'s runtime dispatch; the sums are in the same order on every
-/// instruction set, so the result is too).
+/// Column `column` of `dst` (+)= α A x: [`Matvec`] for `f32`/`f64`, a plain loop of dot
+/// products for other scalars.
 ///
-/// faer's general product for a single column costs 2–3× this sweep at filter sizes (a
-/// one-off loop of 10⁵ calls, AVX2: 50 × 50 in 157 ns against 290 ns, 25 × 50 88 against 260,
-/// 12 × 12 22 against 67; equal from n = 100). In the filters it is the model's F x and H x at
-/// every sigma point of a UKF and x + K ν in every update: the dynamic bench's UKF step
-/// 24 % faster at n = 50 and 18 % at n = 12, the KF 6 % at n = 12 (BENCHMARKS.md, "Matrix–
-/// vector products").
-#[inline(always)]
-pub(crate) fn matvec<U: Real>(y: &mut [U], accum: Accum, alpha: U, a: &[U], x: &[U]) {
-    assert_eq!(a.len(), y.len() * x.len(), "matvec: shapes differ");
-    pulp::Arch::new().dispatch(Matvec {
-        y,
-        accum,
-        alpha,
-        a,
-        x,
-    });
-}
-
-/// The operands of [`matvec`], as the `pulp` operation compiled per instruction set.
-struct Matvec<'a, U> {
-    y: &'a mut [U],
+/// # Panics
+/// If the shapes do not agree or `column` is out of range (a programmer error).
+#[track_caller]
+pub(crate) fn mul_into_column<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim>(
+    dst: &mut OMatrix<T, R, C>,
+    column: usize,
     accum: Accum,
-    alpha: U,
-    a: &'a [U],
-    x: &'a [U],
-}
-
-impl<U: Real> pulp::WithSimd for Matvec<'_, U> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) {
-        let Self {
-            y,
-            accum,
-            alpha,
-            a,
-            x,
-        } = self;
-        let rows = y.len();
-        if accum == Accum::Replace {
-            y.fill(U::zero());
+    alpha: T,
+    a: &OMatrix<T, RA, CA>,
+    x: &OVector<T, RX>,
+) where
+    DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RX>,
+{
+    assert!(
+        column < dst.ncols() && a.shape() == (dst.nrows(), x.nrows()),
+        "mul_into_column: column {column} of {:?} ← {:?} × {:?}",
+        dst.shape(),
+        a.shape(),
+        x.shape()
+    );
+    if column_on_kernel::<f64, _, _, _, _, _, _>(dst, column, accum, alpha, a, x)
+        || column_on_kernel::<f32, _, _, _, _, _, _>(dst, column, accum, alpha, a, x)
+    {
+        return;
+    }
+    for i in 0..dst.nrows() {
+        let mut sum = T::zero();
+        for j in 0..x.nrows() {
+            sum += a[(i, j)] * x[j];
         }
-        if rows == 0 {
-            return;
-        }
-        let mut blocks = a.chunks_exact(4 * rows);
-        let mut xs = x.chunks_exact(4);
-        for (block, xb) in (&mut blocks).zip(&mut xs) {
-            let (a0, rest) = block.split_at(rows);
-            let (a1, rest) = rest.split_at(rows);
-            let (a2, a3) = rest.split_at(rows);
-            let (x0, x1, x2, x3) = (alpha * xb[0], alpha * xb[1], alpha * xb[2], alpha * xb[3]);
-            let columns = a0.iter().zip(a1).zip(a2).zip(a3);
-            for (yi, (((&v0, &v1), &v2), &v3)) in y.iter_mut().zip(columns) {
-                *yi = *yi + v0 * x0 + v1 * x1 + v2 * x2 + v3 * x3;
-            }
-        }
-        for (column, &xj) in blocks.remainder().chunks_exact(rows).zip(xs.remainder()) {
-            axpy(y, alpha * xj, column);
-        }
+        let d = &mut dst[(i, column)];
+        *d = match accum {
+            Accum::Add => *d + alpha * sum,
+            Accum::Replace => alpha * sum,
+        };
     }
 }
 
-/// `true` if the product was done on the runtime-size kernels (faer, or [`matvec`]; runtime
+/// [`mul_into_column`] on [`Matvec`] if `T` is `U`; `false` (nothing done) otherwise.
+#[inline(always)]
+fn column_on_kernel<U: FaerScalar, T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim>(
+    dst: &mut OMatrix<T, R, C>,
+    column: usize,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, RA, CA>,
+    x: &OVector<T, RX>,
+) -> bool
+where
+    DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RX>,
+{
+    let (Some(dst), Some(a), Some(x), Some(&alpha)) = (
+        cast_mut::<T, U, R, C>(dst),
+        cast::<T, U, RA, CA>(a),
+        cast::<T, U, RX, nalgebra::U1>(x),
+        (&alpha as &dyn Any).downcast_ref::<U>(),
+    ) else {
+        return false;
+    };
+    let rows = dst.nrows();
+    let y = &mut dst.as_mut_slice()[column * rows..(column + 1) * rows];
+    U::matvec(y, accum, alpha, a.as_slice(), x.as_slice());
+    true
+}
+
+/// `true` if the product was done on the runtime-size kernels (faer, or [`Matvec`]; runtime
 /// sizes, `f32`/`f64`).
 /// `$lower`: only the lower triangle of the (square) destination is computed.
 macro_rules! on_faer {
@@ -684,20 +855,42 @@ mod tests {
         assert!((dst + &a * &b).amax() < 1e-12);
     }
 
-    /// The matrix–vector kernel against nalgebra's product, on every shape around its
-    /// four-column blocks (and empty ones), both accumulations, α = 1 and not; the bound is the
-    /// usual dot-product one, |error| ≤ k ε Σ |α aᵢⱼ xⱼ| (+ |y| ε for the accumulation).
-    /// And the dispatched result equals the scalar build's bit for bit (same sums, same order).
+    /// `Matvec` on one instruction set, as `kernel::mul` runs it on the best one.
+    fn matvec_on<S: pulp::Simd>(
+        simd: S,
+        y: &mut [f64],
+        accum: Accum,
+        alpha: f64,
+        a: &[f64],
+        x: &[f64],
+    ) {
+        pulp::WithSimd::with_simd(
+            Matvec {
+                y,
+                accum,
+                alpha,
+                a,
+                x,
+            },
+            simd,
+        );
+    }
+
+    /// The matrix–vector kernel against nalgebra's product, on every instruction set this CPU
+    /// has (scalar, AVX2, AVX-512), on shapes around its panels (1–8 vectors and a remainder
+    /// of rows, empty ones), both accumulations, α = 1 and not; the bound is the usual
+    /// dot-product one, |error| ≤ k ε Σ |α aᵢⱼ xⱼ| (+ |y| ε for the accumulation). Also
+    /// `kernel::mul` itself and `mul_into_column` in f32.
     #[test]
-    fn matrix_vector_products_match_nalgebra_and_every_instruction_set() {
-        for rows in 0..=9 {
-            for cols in 0..=9 {
+    fn matrix_vector_products_match_nalgebra_on_every_instruction_set() {
+        let mut row_counts: Vec<usize> = (0..=9).collect();
+        row_counts.extend([15, 16, 17, 31, 32, 33, 47, 63, 64, 65, 71, 130]);
+        for &rows in &row_counts {
+            for cols in [0, 1, 2, 3, 4, 5, 9, 13] {
                 let a = DMatrix::from_fn(rows, cols, |i, j| ((i * 5 + j * 3) as f64 * 0.7).sin());
                 let x = DVector::from_fn(cols, |i, _| (i as f64 * 1.3).cos() * 1e3);
                 let y0 = DVector::from_fn(rows, |i, _| 0.25 * i as f64 - 1.0);
                 for (accum, alpha) in [(Accum::Replace, 1.0), (Accum::Add, -0.3)] {
-                    let mut y = y0.clone();
-                    mul(&mut y, accum, alpha, &a, &x);
                     let base = if accum == Accum::Add {
                         y0.clone()
                     } else {
@@ -706,28 +899,48 @@ mod tests {
                     let expected = &base + alpha * (&a * &x);
                     let scale = base.abs() + (alpha.abs() * a.abs() * x.abs());
                     let k = (cols + 2) as f64;
-                    for i in 0..rows {
-                        let bound = k * f64::EPSILON * scale[i];
-                        assert!(
-                            (y[i] - expected[i]).abs() <= bound,
-                            "{rows}×{cols} row {i}: {} vs {} bound {bound}",
-                            y[i],
-                            expected[i]
-                        );
+                    let check = |y: &DVector<f64>, set: &str| {
+                        for i in 0..rows {
+                            let bound = k * f64::EPSILON * scale[i];
+                            assert!(
+                                (y[i] - expected[i]).abs() <= bound,
+                                "{set} {rows}×{cols} row {i}: {} vs {} bound {bound}",
+                                y[i],
+                                expected[i]
+                            );
+                        }
+                    };
+                    let (a_, x_) = (a.as_slice(), x.as_slice());
+                    let mut y = y0.clone();
+                    mul(&mut y, accum, alpha, &a, &x);
+                    check(&y, "dispatched");
+                    let mut y = y0.clone();
+                    matvec_on(pulp::Scalar::new(), y.as_mut_slice(), accum, alpha, a_, x_);
+                    check(&y, "scalar");
+                    #[cfg(target_arch = "x86_64")]
+                    if let Some(simd) = pulp::x86::V3::try_new() {
+                        let mut y = y0.clone();
+                        matvec_on(simd, y.as_mut_slice(), accum, alpha, a_, x_);
+                        check(&y, "AVX2");
                     }
-                    let mut scalar = y0.clone();
-                    pulp::WithSimd::with_simd(
-                        Matvec {
-                            y: scalar.as_mut_slice(),
-                            accum,
-                            alpha,
-                            a: a.as_slice(),
-                            x: x.as_slice(),
-                        },
-                        pulp::Scalar::new(),
-                    );
-                    for (u, v) in y.iter().zip(scalar.iter()) {
-                        assert_eq!(u.to_bits(), v.to_bits(), "{rows}×{cols}");
+                    #[cfg(target_arch = "x86_64")]
+                    if let Some(simd) = pulp::x86::V4::try_new() {
+                        let mut y = y0.clone();
+                        matvec_on(simd, y.as_mut_slice(), accum, alpha, a_, x_);
+                        check(&y, "AVX-512");
+                    }
+                    // f32 through mul_into_column (column 1 of 3; the others untouched).
+                    let (a32, x32) = (a.map(|v| v as f32), x.map(|v| v as f32));
+                    let mut d =
+                        DMatrix::from_fn(rows, 3, |i, j| if j == 1 { y0[i] as f32 } else { 7.0 });
+                    mul_into_column(&mut d, 1, accum, alpha as f32, &a32, &x32);
+                    for i in 0..rows {
+                        let bound = 4.0 * k * f32::EPSILON as f64 * scale[i];
+                        assert!(
+                            (d[(i, 1)] as f64 - expected[i]).abs() <= bound,
+                            "f32 {rows}×{cols} row {i}"
+                        );
+                        assert!(d[(i, 0)] == 7.0 && d[(i, 2)] == 7.0);
                     }
                 }
             }

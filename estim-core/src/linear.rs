@@ -106,15 +106,10 @@ where
         }
         kernel::mul(plus, Accum::Replace, T::one(), f, offsets);
         // The centre F μ + B u in the first column of `minus`, then spread.
-        let centre = &mut minus.as_mut_slice()[..n];
-        kernel::matvec(
-            centre,
-            Accum::Replace,
-            T::one(),
-            f.as_slice(),
-            mean.as_slice(),
-        );
-        kernel::matvec(centre, Accum::Add, T::one(), b.as_slice(), u.as_slice());
+        if n > 0 {
+            kernel::mul_into_column(minus, 0, Accum::Replace, T::one(), f, mean);
+            kernel::mul_into_column(minus, 0, Accum::Add, T::one(), b, u);
+        }
         centre_plus_minus(n, plus.as_mut_slice(), minus.as_mut_slice());
         true
     }
@@ -253,14 +248,7 @@ where
         }
         kernel::mul(plus, Accum::Replace, T::one(), h, offsets);
         if n > 0 {
-            let centre = &mut minus.as_mut_slice()[..m];
-            kernel::matvec(
-                centre,
-                Accum::Replace,
-                T::one(),
-                h.as_slice(),
-                mean.as_slice(),
-            );
+            kernel::mul_into_column(minus, 0, Accum::Replace, T::one(), h, mean);
         }
         centre_plus_minus(m, plus.as_mut_slice(), minus.as_mut_slice());
         true
