@@ -212,13 +212,10 @@ impl<T: Real> Unscented<T> {
         mul_tr_lower(out_covariance, Accum::Replace, w, plus, plus);
         mul_tr_lower(out_covariance, Accum::Add, w, minus, minus);
         let centre = self.beta - self.alpha * self.alpha;
-        // + (β − α²) d̄ d̄ᵀ on the lower triangle, column by column.
-        let bar = d_bar.as_slice();
-        let columns = out_covariance.as_mut_slice().chunks_exact_mut(m.max(1));
-        for (j, (column, &dj)) in columns.zip(bar).enumerate() {
-            let dj = centre * dj;
-            for (c, &di) in column[j..].iter_mut().zip(&bar[j..]) {
-                *c += di * dj;
+        for j in 0..m {
+            let dj = centre * d_bar[j];
+            for i in j..m {
+                out_covariance[(i, j)] += d_bar[i] * dj;
             }
         }
         if let Some(cross) = cross.as_deref_mut() {
