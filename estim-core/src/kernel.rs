@@ -7,8 +7,8 @@
 //!   for small matrices, and nothing allocates.
 //! - **runtime sizes** (any dimension `Dyn`) with `f32` or `f64`: faer, over zero-copy views of
 //!   the same column-major storage, writing into the destination; a matrix times a vector is
-//!   a column sweep of our own, compiled per instruction set (faer's general product is 2–3×
-//!   slower there at filter sizes). Nothing allocates (the Cholesky kernel's scratch lives in a
+//!   a register-blocked kernel of our own, compiled per instruction set (faer's general
+//!   product is 2–3× slower there at filter sizes). Nothing allocates (the Cholesky kernel's scratch lives in a
 //!   [`CholeskyScratch`] the caller keeps).
 //! - runtime sizes with another scalar type: nalgebra (which may allocate temporaries).
 //!
@@ -140,18 +140,19 @@ trait FaerScalar: Real + faer::traits::ComplexField {
 /// y (+)= α A x, the kernel behind every runtime-size matrix × vector product: rows in panels
 /// of whole SIMD vectors held in registers across all the columns, y_P ← (y_P +) (Σ_even
 /// a_P,j (αx_j) + Σ_odd a_P,j (αx_j)), each sum a chain of fused multiply–adds (plain on CPUs
-/// without FMA); the last `rows mod lanes` rows one at a time. Compiled for the widest SIMD the
-/// CPU has (`pulp`'s runtime dispatch), so the last bits depend on the instruction set.
+/// without FMA). The last `rows mod lanes` rows are one whole vector ending at the last row
+/// (one at a time if there are fewer rows than lanes). Compiled for the widest SIMD the CPU has
+/// (`pulp`'s runtime dispatch), so the last bits depend on the instruction set.
 ///
 /// A panel is 8 vectors with AVX-512 (64 f64 rows; 2 × 8 accumulators of 32 registers), 4
-/// otherwise (16 on AVX2). Two chains per row hide the FMA latency; the 4-column sweep this
+/// otherwise (16 on AVX2). Two chains per row hide the FMA latency. The four-column sweep this
 /// replaced (y ← y + a₀x₀ + … + a₃x₃ over the whole of y, four columns at a time) waited on
-/// each block's store of y and was latency-bound below n ≈ 100. One-off loop, AVX-512,
-/// best of 5 (`cargo run --release` in a scratch crate calling `kernel::mul`, the old sweep
-/// side by side): 24 × 24 46 → 18 ns, 50 × 50 176 → 101 ns, 25 × 50 111 → 59 ns, 100 × 100 739
-/// → 712 ns, 200 × 200 2.79 → 2.92 µs (L2-bound, the panel reads columns in 512-byte pieces),
-/// 6 × 6 equal. faer's general product costs 2–3× the sweep at these sizes, so it is not used
-/// for one column.
+/// each block's store of y and was latency-bound below n ≈ 100. Speed-up over it (a one-off
+/// loop of `kernel::mul`, best of 5, the two builds alternating three times in a scratch crate,
+/// median of the three ratios; e.g. 50 × 50 180 → 99 ns): 12 × 12 1.72, 24 × 24 2.5, 25 × 50
+/// 1.74, 50 × 50 1.82, 64 × 64 1.82, 100 × 100 1.22, 128 × 128 1.09; 6 × 6 1.04, 200 × 200
+/// 1.02, 400 × 400 1.07 (L2-bound). faer's general product costs 2–3× the sweep at these
+/// sizes, so it is not used for one column.
 struct Matvec<'a, U> {
     y: &'a mut [U],
     accum: Accum,

@@ -324,8 +324,9 @@ const TILE: usize = 8;
 /// and stored back, so the strided half of every pair costs no more than the contiguous half.
 /// (Measured with `perf record` on the n = 50 KF step of `benches/dynamic.rs`: an element-wise
 /// pair loop with a finiteness flag per element was ~40 % of the step; see BENCHMARKS.md.)
-/// From n = 16 the tile loop is compiled for the CPU's widest instruction set (pulp's runtime
-/// dispatch), with the same arithmetic in the same order, so the same results.
+/// From n = 16 the tile loop is compiled for AVX2 where the CPU has it (pulp's runtime
+/// dispatch; AVX-512 measured slower), with the same arithmetic in the same order, so the same
+/// results.
 #[inline(always)]
 #[track_caller]
 pub fn symmetric_map<T: Real, const K: usize>(
