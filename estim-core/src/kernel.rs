@@ -401,6 +401,20 @@ pub(crate) fn mul_into_column<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim
     {
         return;
     }
+    column_by_dot_products(dst, column, accum, alpha, a, x);
+}
+
+/// [`mul_into_column`] for any scalar: one dot product per row.
+fn column_by_dot_products<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim>(
+    dst: &mut OMatrix<T, R, C>,
+    column: usize,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, RA, CA>,
+    x: &OVector<T, RX>,
+) where
+    DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RX>,
+{
     for i in 0..dst.nrows() {
         let mut sum = T::zero();
         for j in 0..x.nrows() {
@@ -881,7 +895,7 @@ mod tests {
     /// has (scalar, AVX2, AVX-512), on shapes around its panels (1–8 vectors and a remainder
     /// of rows, empty ones), both accumulations, α = 1 and not; the bound is the usual
     /// dot-product one, |error| ≤ k ε Σ |α aᵢⱼ xⱼ| (+ |y| ε for the accumulation). Also
-    /// `kernel::mul` itself and `mul_into_column` in f32.
+    /// `kernel::mul` itself, `mul_into_column` in f32 and its any-scalar fallback.
     #[test]
     fn matrix_vector_products_match_nalgebra_on_every_instruction_set() {
         let mut row_counts: Vec<usize> = (0..=9).collect();
@@ -930,6 +944,11 @@ mod tests {
                         matvec_on(simd, y.as_mut_slice(), accum, alpha, a_, x_);
                         check(&y, "AVX-512");
                     }
+                    // The any-scalar fallback of mul_into_column (run here on f64).
+                    let mut d = DMatrix::from_fn(rows, 2, |i, j| if j == 0 { y0[i] } else { 7.0 });
+                    column_by_dot_products(&mut d, 0, accum, alpha, &a, &x);
+                    check(&d.column(0).into_owned(), "dot products");
+                    assert!(d.column(1).iter().all(|&v| v == 7.0));
                     // f32 through mul_into_column (column 1 of 3; the others untouched).
                     let (a32, x32) = (a.map(|v| v as f32), x.map(|v| v as f32));
                     let mut d =
