@@ -144,8 +144,10 @@ trait FaerScalar: Real + faer::traits::ComplexField {
 /// (one at a time if there are fewer rows than lanes). Compiled for the widest SIMD the CPU has
 /// (`pulp`'s runtime dispatch), so the last bits depend on the instruction set.
 ///
-/// A panel is 8 vectors with AVX-512 (64 f64 rows; 2 × 8 accumulators of 32 registers), 4
-/// otherwise (16 on AVX2). Two chains per row hide the FMA latency. The four-column sweep this
+/// A panel is 4 vectors (16 f64 rows on AVX2: 2 × 4 accumulators of 16 registers), or 8 with
+/// AVX-512 (32 registers), which pulp dispatches to only if its `x86-v4` feature is on: we
+/// leave it off, since it made the test build ~1.5× slower (BENCHMARKS.md). Two chains per
+/// row hide the FMA latency. The four-column sweep this
 /// replaced (y ← y + a₀x₀ + … + a₃x₃ over the whole of y, four columns at a time) waited on
 /// each block's store of y and was latency-bound below n ≈ 100. Speed-up over it (a one-off
 /// loop of `kernel::mul`, best of 5, the two builds alternating three times in a scratch crate,
@@ -891,8 +893,8 @@ mod tests {
         );
     }
 
-    /// The matrix–vector kernel against nalgebra's product, on every instruction set this CPU
-    /// has (scalar, AVX2, AVX-512), on shapes around its panels (1–8 vectors and a remainder
+    /// The matrix–vector kernel against nalgebra's product, on the instruction set `mul`
+    /// dispatches to, and on scalar and AVX2 (if the CPU has it), on shapes around its panels (1–8 vectors and a remainder
     /// of rows, empty ones), both accumulations, α = 1 and not; the bound is the usual
     /// dot-product one, |error| ≤ k ε Σ |α aᵢⱼ xⱼ| (+ |y| ε for the accumulation). Also
     /// `kernel::mul` itself, `mul_into_column` in f32 and its any-scalar fallback.
@@ -937,12 +939,6 @@ mod tests {
                         let mut y = y0.clone();
                         matvec_on(simd, y.as_mut_slice(), accum, alpha, a_, x_);
                         check(&y, "AVX2");
-                    }
-                    #[cfg(target_arch = "x86_64")]
-                    if let Some(simd) = pulp::x86::V4::try_new() {
-                        let mut y = y0.clone();
-                        matvec_on(simd, y.as_mut_slice(), accum, alpha, a_, x_);
-                        check(&y, "AVX-512");
                     }
                     // The any-scalar fallback of mul_into_column (run here on f64).
                     let mut d = DMatrix::from_fn(rows, 2, |i, j| if j == 0 { y0[i] } else { 7.0 });
