@@ -149,12 +149,13 @@ trait FaerScalar: Real + faer::traits::ComplexField {
 /// leave it off, since it made the test build ~1.5× slower (BENCHMARKS.md). Two chains per
 /// row hide the FMA latency. The four-column sweep this
 /// replaced (y ← y + a₀x₀ + … + a₃x₃ over the whole of y, four columns at a time) waited on
-/// each block's store of y and was latency-bound below n ≈ 100. Speed-up over it (a one-off
-/// loop of `kernel::mul`, best of 5, the two builds alternating three times in a scratch crate,
-/// median of the three ratios; e.g. 50 × 50 180 → 99 ns): 12 × 12 1.72, 24 × 24 2.5, 25 × 50
-/// 1.74, 50 × 50 1.82, 64 × 64 1.82, 100 × 100 1.22, 128 × 128 1.09; 6 × 6 1.04, 200 × 200
-/// 1.02, 400 × 400 1.07 (L2-bound). faer's general product costs 2–3× the sweep at these
-/// sizes, so it is not used for one column.
+/// each block's store of y and was latency-bound at filter sizes. Speed-up over it on AVX2 (a
+/// one-off loop of `kernel::mul`, best of 5, the two builds alternating three times in a
+/// scratch crate; e.g. 50 × 50 188 → 143 ns): 6 × 6 2.2, 12 × 12 1.85, 24 × 24 1.45, 25 × 50
+/// 1.25, 50 × 50 1.32, 64 × 64 1.2, 100 × 100 1.04, 200 × 200 1.0; but 128 × 128 0.74 and
+/// 400 × 400 0.72: from there A is read from L2 in 128-byte pieces per column and panel, where
+/// the sweep streamed whole columns (open: a sweep or column blocking for large A). faer's
+/// general product costs 2–3× the sweep at these sizes, so it is not used for one column.
 struct Matvec<'a, U> {
     y: &'a mut [U],
     accum: Accum,
