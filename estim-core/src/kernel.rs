@@ -181,12 +181,18 @@ macro_rules! impl_matvec {
         }
 
         impl Matvec<'_, $t> {
+            /// Values per SIMD vector of `S`.
+            #[inline(always)]
+            fn lanes<S: pulp::Simd>() -> usize {
+                size_of::<S::$ts>() / size_of::<$t>()
+            }
+
             /// (y (+)) α A x on rows `start..start + V·lanes`: V vectors of accumulators per
             /// column parity.
             #[inline(always)]
             fn sums<S: pulp::Simd, const V: usize>(&self, simd: S, start: usize) -> [S::$ts; V] {
                 let rows = self.y.len();
-                let end = start + V * (size_of::<S::$ts>() / size_of::<$t>());
+                let end = start + V * Self::lanes::<S>();
                 let zero = simd.$splat(0.0);
                 let (mut even, mut odd) = ([zero; V], [zero; V]);
                 let mut columns = self.a.chunks_exact(rows).zip(self.x);
@@ -217,7 +223,7 @@ macro_rules! impl_matvec {
             #[inline(always)]
             fn panel<S: pulp::Simd, const V: usize>(&mut self, simd: S, start: usize) {
                 let sums = self.sums::<S, V>(simd, start);
-                let end = start + V * (size_of::<S::$ts>() / size_of::<$t>());
+                let end = start + V * Self::lanes::<S>();
                 for (o, v) in S::$as_mut_simd(&mut self.y[start..end])
                     .0
                     .iter_mut()
@@ -230,7 +236,7 @@ macro_rules! impl_matvec {
             /// The first `vectors` vectors of rows, in panels of `V` vectors and one of the rest.
             #[inline(always)]
             fn panels<S: pulp::Simd, const V: usize>(&mut self, simd: S, vectors: usize) {
-                let lanes = size_of::<S::$ts>() / size_of::<$t>();
+                let lanes = Self::lanes::<S>();
                 let mut start = 0;
                 for _ in 0..vectors / V {
                     self.panel::<S, V>(simd, start);
@@ -258,7 +264,7 @@ macro_rules! impl_matvec {
                 if rows == 0 {
                     return;
                 }
-                let lanes = size_of::<S::$ts>() / size_of::<$t>();
+                let lanes = Self::lanes::<S>();
                 let vectors = rows / lanes;
                 // The last rows mod lanes rows: a whole vector ending at the last row, computed
                 // before the panels overwrite the y it reads and stored after them (the rows it
