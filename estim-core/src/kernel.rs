@@ -8,7 +8,8 @@
 //! - **runtime sizes** (any dimension `Dyn`) with `f32` or `f64`: faer, over zero-copy views of
 //!   the same column-major storage, writing into the destination; a matrix times a vector is
 //!   a register-blocked kernel of our own, compiled per instruction set (faer's general
-//!   product is 2–3× slower there at filter sizes). Nothing allocates (the Cholesky kernel's scratch lives in a
+//!   product is 2–3× slower there at filter sizes), and so is a Cholesky factor below
+//!   n = 96 (faer's costs up to 2.2× as much there). Nothing allocates (the Cholesky kernel's scratch lives in a
 //!   [`CholeskyScratch`] the caller keeps).
 //! - runtime sizes with another scalar type: nalgebra (which may allocate temporaries).
 //!
@@ -22,7 +23,7 @@
 
 use core::any::Any;
 
-use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::{
     LltRegularization, cholesky_in_place as faer_cholesky, cholesky_in_place_scratch,
 };
@@ -73,6 +74,14 @@ pub const PARALLEL_THRESHOLD: usize = 256;
 /// the triangular kernel at every size): the step 14 % faster for the KF at n = 12, 10 % for
 /// the EKF, 6 % for the UKF, 5 % for the KF at n = 24; 32 and 64 tie at n = 50.
 const LOWER_TRIANGLE_MIN: usize = 32;
+
+/// Below this dimension a runtime-size Cholesky factor is computed by our own column kernel
+/// ([`FaerScalar::lower_cholesky`]) rather than by faer, whose factor costs 2–2.2× as much
+/// from n = 25 to 50. Measured (faer 0.24, one core, AVX2, best of 7 loops of a copy and a
+/// factor in a scratch crate), faer vs ours: n = 12 236 vs 218 ns, 25 1.22 vs 0.62 µs, 50 5.8
+/// vs 2.6, 64 7.3 vs 4.5, 80 9.7 vs 8.0, 96 12.6 vs 12.3, 112 16.2 vs 18.6, 128 23.4 vs
+/// 41.4 µs. See BENCHMARKS.md ("Our own Cholesky factor below n = 96").
+const OWN_CHOLESKY_BELOW: usize = 96;
 
 /// `true` when `D` is a compile-time dimension.
 #[inline(always)]
@@ -135,6 +144,14 @@ trait FaerScalar: Real + faer::traits::ComplexField {
     /// y (+)= α A x for a column-major `a` of `y.len()` rows and `x.len()` columns (see
     /// [`Matvec`]).
     fn matvec(y: &mut [Self], accum: Accum, alpha: Self, a: &[Self], x: &[Self]);
+
+    /// Replaces the lower triangle of the column-major n × n `a` by its Cholesky factor L,
+    /// column by column (left-looking): a_(j..n, j) ← a_(j..n, j) − L_(j..n, ..j) L_(j, ..j)ᵀ
+    /// on [`Matvec`], then l_jj = √a_jj and l_(j+1..n, j) = a_(j+1..n, j) / l_jj. `row` is
+    /// scratch for at least n values (row j of L). `false` at the first pivot a_jj that is not
+    /// positive and finite (a NaN or infinity anywhere in L reaches a later pivot), and then
+    /// `a` is unspecified. Used below [`OWN_CHOLESKY_BELOW`].
+    fn lower_cholesky(a: &mut [Self], n: usize, row: &mut [Self]) -> bool;
 }
 
 /// y (+)= α A x, the kernel behind every runtime-size matrix × vector product: rows in panels
@@ -160,8 +177,19 @@ struct Matvec<'a, U> {
     y: &'a mut [U],
     accum: Accum,
     alpha: U,
+    /// A, column-major (or the matrix A is a block of: [`BlockMatvec`]).
     a: &'a [U],
     x: &'a [U],
+}
+
+/// [`Matvec`] with A the rows `first..first + y.len()` of the column-major matrix `matvec.a`
+/// with `stride` rows: the column updates of [`FaerScalar::lower_cholesky`]. A type of its
+/// own so that the whole-matrix products keep their constant offsets (fields in `Matvec` cost
+/// ≈ 1 ns a call at 6 × 6 and 12 × 12, measured).
+struct BlockMatvec<'a, U> {
+    matvec: Matvec<'a, U>,
+    stride: usize,
+    first: usize,
 }
 
 macro_rules! impl_matvec {
@@ -178,6 +206,45 @@ macro_rules! impl_matvec {
                     x,
                 });
             }
+
+            fn lower_cholesky(a: &mut [$t], n: usize, row: &mut [$t]) -> bool {
+                assert!(
+                    a.len() == n * n && row.len() >= n,
+                    "lower_cholesky: shapes differ"
+                );
+                let arch = pulp::Arch::new();
+                for j in 0..n {
+                    // Column j below the diagonal: a_j ← a_j − L_(j.., ..j) L_(j, ..j)ᵀ.
+                    let (left, right) = a.split_at_mut(j * n);
+                    if j > 0 {
+                        for (r, column) in row.iter_mut().zip(left.chunks_exact(n)) {
+                            *r = column[j];
+                        }
+                        arch.dispatch(BlockMatvec {
+                            matvec: Matvec {
+                                y: &mut right[j..n],
+                                accum: Accum::Add,
+                                alpha: -1.0,
+                                a: left,
+                                x: &row[..j],
+                            },
+                            stride: n,
+                            first: j,
+                        });
+                    }
+                    let pivot = right[j];
+                    if !(pivot > 0.0 && pivot.is_finite()) {
+                        return false;
+                    }
+                    let d = pivot.sqrt();
+                    right[j] = d;
+                    let inverse = 1.0 / d;
+                    for v in &mut right[j + 1..n] {
+                        *v *= inverse;
+                    }
+                }
+                true
+            }
         }
 
         impl Matvec<'_, $t> {
@@ -188,24 +255,29 @@ macro_rules! impl_matvec {
             }
 
             /// (y (+)) α A x on rows `start..start + V·lanes`: V vectors of accumulators per
-            /// column parity.
+            /// column parity. `block` is A's first row in `a` and the rows of `a`.
             #[inline(always)]
-            fn sums<S: pulp::Simd, const V: usize>(&self, simd: S, start: usize) -> [S::$ts; V] {
-                let rows = self.y.len();
+            fn sums<S: pulp::Simd, const V: usize>(
+                &self,
+                simd: S,
+                start: usize,
+                (first, stride): (usize, usize),
+            ) -> [S::$ts; V] {
                 let end = start + V * Self::lanes::<S>();
+                let (a_start, a_end) = (first + start, first + end);
                 let zero = simd.$splat(0.0);
                 let (mut even, mut odd) = ([zero; V], [zero; V]);
-                let mut columns = self.a.chunks_exact(rows).zip(self.x);
+                let mut columns = self.a.chunks_exact(stride).zip(self.x);
                 while let Some((c0, &x0)) = columns.next() {
                     let s0 = simd.$splat(self.alpha * x0);
-                    for (acc, &v) in even.iter_mut().zip(S::$as_simd(&c0[start..end]).0) {
+                    for (acc, &v) in even.iter_mut().zip(S::$as_simd(&c0[a_start..a_end]).0) {
                         *acc = simd.$fma(v, s0, *acc);
                     }
                     let Some((c1, &x1)) = columns.next() else {
                         break;
                     };
                     let s1 = simd.$splat(self.alpha * x1);
-                    for (acc, &v) in odd.iter_mut().zip(S::$as_simd(&c1[start..end]).0) {
+                    for (acc, &v) in odd.iter_mut().zip(S::$as_simd(&c1[a_start..a_end]).0) {
                         *acc = simd.$fma(v, s1, *acc);
                     }
                 }
@@ -221,8 +293,13 @@ macro_rules! impl_matvec {
 
             /// Rows `start..start + V·lanes` of y ← (y +) α A x.
             #[inline(always)]
-            fn panel<S: pulp::Simd, const V: usize>(&mut self, simd: S, start: usize) {
-                let sums = self.sums::<S, V>(simd, start);
+            fn panel<S: pulp::Simd, const V: usize>(
+                &mut self,
+                simd: S,
+                start: usize,
+                block: (usize, usize),
+            ) {
+                let sums = self.sums::<S, V>(simd, start, block);
                 let end = start + V * Self::lanes::<S>();
                 for (o, v) in S::$as_mut_simd(&mut self.y[start..end])
                     .0
@@ -235,21 +312,26 @@ macro_rules! impl_matvec {
 
             /// The first `vectors` vectors of rows, in panels of `V` vectors and one of the rest.
             #[inline(always)]
-            fn panels<S: pulp::Simd, const V: usize>(&mut self, simd: S, vectors: usize) {
+            fn panels<S: pulp::Simd, const V: usize>(
+                &mut self,
+                simd: S,
+                vectors: usize,
+                block: (usize, usize),
+            ) {
                 let lanes = Self::lanes::<S>();
                 let mut start = 0;
                 for _ in 0..vectors / V {
-                    self.panel::<S, V>(simd, start);
+                    self.panel::<S, V>(simd, start, block);
                     start += V * lanes;
                 }
                 match vectors % V {
-                    7 => self.panel::<S, 7>(simd, start),
-                    6 => self.panel::<S, 6>(simd, start),
-                    5 => self.panel::<S, 5>(simd, start),
-                    4 => self.panel::<S, 4>(simd, start),
-                    3 => self.panel::<S, 3>(simd, start),
-                    2 => self.panel::<S, 2>(simd, start),
-                    1 => self.panel::<S, 1>(simd, start),
+                    7 => self.panel::<S, 7>(simd, start, block),
+                    6 => self.panel::<S, 6>(simd, start, block),
+                    5 => self.panel::<S, 5>(simd, start, block),
+                    4 => self.panel::<S, 4>(simd, start, block),
+                    3 => self.panel::<S, 3>(simd, start, block),
+                    2 => self.panel::<S, 2>(simd, start, block),
+                    1 => self.panel::<S, 1>(simd, start, block),
                     _ => {}
                 }
             }
@@ -259,7 +341,25 @@ macro_rules! impl_matvec {
             type Output = ();
 
             #[inline(always)]
-            fn with_simd<S: pulp::Simd>(mut self, simd: S) {
+            fn with_simd<S: pulp::Simd>(self, simd: S) {
+                let rows = self.y.len();
+                self.run(simd, (0, rows));
+            }
+        }
+
+        impl pulp::WithSimd for BlockMatvec<'_, $t> {
+            type Output = ();
+
+            #[inline(always)]
+            fn with_simd<S: pulp::Simd>(self, simd: S) {
+                self.matvec.run(simd, (self.first, self.stride));
+            }
+        }
+
+        impl Matvec<'_, $t> {
+            /// The product, A in `a` as `block` says (see [`Matvec::sums`]).
+            #[inline(always)]
+            fn run<S: pulp::Simd>(mut self, simd: S, block: (usize, usize)) {
                 let rows = self.y.len();
                 if rows == 0 {
                     return;
@@ -270,11 +370,11 @@ macro_rules! impl_matvec {
                 // before the panels overwrite the y it reads and stored after them (the rows it
                 // shares with the last panel get the same bits: same operations, same order).
                 let last = (vectors > 0 && rows % lanes != 0)
-                    .then(|| self.sums::<S, 1>(simd, rows - lanes));
+                    .then(|| self.sums::<S, 1>(simd, rows - lanes, block));
                 if size_of::<S::$ts>() >= 64 {
-                    self.panels::<S, 8>(simd, vectors);
+                    self.panels::<S, 8>(simd, vectors, block);
                 } else {
-                    self.panels::<S, 4>(simd, vectors);
+                    self.panels::<S, 4>(simd, vectors, block);
                 }
                 if let Some([v]) = last {
                     S::$as_mut_simd(&mut self.y[rows - lanes..]).0[0] = v;
@@ -282,10 +382,11 @@ macro_rules! impl_matvec {
                 }
                 // Fewer rows than lanes: one at a time.
                 let (alpha, a, x) = (self.alpha, self.a, self.x);
+                let (first, stride) = block;
                 for i in vectors * lanes..rows {
                     let mut sum: $t = 0.0;
-                    for (column, &xj) in a.chunks_exact(rows).zip(x) {
-                        sum += column[i] * (alpha * xj);
+                    for (column, &xj) in a.chunks_exact(stride).zip(x) {
+                        sum += column[first + i] * (alpha * xj);
                     }
                     let yi = &mut self.y[i];
                     *yi = match self.accum {
@@ -637,7 +738,8 @@ impl core::fmt::Debug for CholeskyScratch {
 impl CholeskyScratch {
     /// Room for factorising `dim × dim` matrices of `U`.
     fn stack<U: FaerScalar>(&mut self, dim: usize, par: Par) -> &mut MemStack {
-        let req = cholesky_in_place_scratch::<U>(dim, par, Default::default());
+        let req = cholesky_in_place_scratch::<U>(dim, par, Default::default())
+            .or(StackReq::new::<U>(dim));
         let bytes = req.size_bytes();
         if self.capacity < bytes {
             self.buffer = None;
@@ -647,7 +749,8 @@ impl CholeskyScratch {
     }
 }
 
-/// The faer Cholesky factorisation if `T` is `U`: `Some(success)`, or `None` if `T` is not `U`.
+/// The runtime-size Cholesky factorisation if `T` is `U` (ours below [`OWN_CHOLESKY_BELOW`],
+/// faer's from there): `Some(success)`, or `None` if `T` is not `U`.
 #[inline(always)]
 fn faer_cholesky_in_place<U: FaerScalar, T: Real, D: Dim>(
     a: &mut OMatrix<T, D, D>,
@@ -660,14 +763,19 @@ where
     let n = a.nrows();
     let par = par(n);
     let stack = scratch.stack::<U>(n, par);
-    let ok = faer_cholesky(
-        view_mut(a),
-        LltRegularization::default(),
-        par,
-        stack,
-        Default::default(),
-    )
-    .is_ok();
+    let ok = if n < OWN_CHOLESKY_BELOW {
+        let (mut row, _) = stack.make_with(n, |_| U::zero());
+        U::lower_cholesky(a.as_mut_slice(), n, &mut row)
+    } else {
+        faer_cholesky(
+            view_mut(a),
+            LltRegularization::default(),
+            par,
+            stack,
+            Default::default(),
+        )
+        .is_ok()
+    };
     // faer leaves NaN pivots unreported on some paths; a factor must be finite to be used.
     Some(ok && (0..n).all(|i| nalgebra::ComplexField::is_finite(&a[(i, i)])))
 }
@@ -879,25 +987,35 @@ mod tests {
         assert!((dst + &a * &b).amax() < 1e-12);
     }
 
-    /// `Matvec` on one instruction set, as `kernel::mul` runs it on the best one.
+    /// `Matvec` on one instruction set, as `kernel::mul` runs it on the best one: A all of
+    /// `a`, or (`block`: `Some((stride, first))`) rows `first..first + y.len()` of the matrix
+    /// `a` with `stride` rows, as `lower_cholesky` runs it.
     fn matvec_on<S: pulp::Simd>(
         simd: S,
         y: &mut [f64],
         accum: Accum,
         alpha: f64,
-        a: &[f64],
+        (a, block): (&[f64], Option<(usize, usize)>),
         x: &[f64],
     ) {
-        pulp::WithSimd::with_simd(
-            Matvec {
-                y,
-                accum,
-                alpha,
-                a,
-                x,
-            },
-            simd,
-        );
+        let matvec = Matvec {
+            y,
+            accum,
+            alpha,
+            a,
+            x,
+        };
+        match block {
+            None => pulp::WithSimd::with_simd(matvec, simd),
+            Some((stride, first)) => pulp::WithSimd::with_simd(
+                BlockMatvec {
+                    matvec,
+                    stride,
+                    first,
+                },
+                simd,
+            ),
+        }
     }
 
     /// The matrix–vector kernel against nalgebra's product, on the instruction set `mul`
@@ -934,18 +1052,32 @@ mod tests {
                             );
                         }
                     };
-                    let (a_, x_) = (a.as_slice(), x.as_slice());
+                    // A alone, and A as rows 2..rows + 2 of a matrix with 5 more rows (as
+                    // lower_cholesky reads it).
+                    let mut big = DMatrix::from_element(rows + 5, cols, f64::NAN);
+                    big.rows_mut(2, rows).copy_from(&a);
+                    let blocks = [(a.as_slice(), None), (big.as_slice(), Some((rows + 5, 2)))];
+                    let x_ = x.as_slice();
                     let mut y = y0.clone();
                     mul(&mut y, accum, alpha, &a, &x);
                     check(&y, "dispatched");
-                    let mut y = y0.clone();
-                    matvec_on(pulp::Scalar::new(), y.as_mut_slice(), accum, alpha, a_, x_);
-                    check(&y, "scalar");
-                    #[cfg(target_arch = "x86_64")]
-                    if let Some(simd) = pulp::x86::V3::try_new() {
+                    for block in blocks {
                         let mut y = y0.clone();
-                        matvec_on(simd, y.as_mut_slice(), accum, alpha, a_, x_);
-                        check(&y, "AVX2");
+                        matvec_on(
+                            pulp::Scalar::new(),
+                            y.as_mut_slice(),
+                            accum,
+                            alpha,
+                            block,
+                            x_,
+                        );
+                        check(&y, "scalar");
+                        #[cfg(target_arch = "x86_64")]
+                        if let Some(simd) = pulp::x86::V3::try_new() {
+                            let mut y = y0.clone();
+                            matvec_on(simd, y.as_mut_slice(), accum, alpha, block, x_);
+                            check(&y, "AVX2");
+                        }
                     }
                     // The any-scalar fallback of mul_into_column (run here on f64).
                     let mut d = DMatrix::from_fn(rows, 2, |i, j| if j == 0 { y0[i] } else { 7.0 });
@@ -991,6 +1123,77 @@ mod tests {
         for i in 0..3 {
             for j in 0..2 {
                 assert!((xs[(i, j)] - x[(i, j)]).abs() < 1e-12);
+            }
+        }
+    }
+
+    /// The Cholesky factor on both sides of [`OWN_CHOLESKY_BELOW`] (`lower_cholesky` below it,
+    /// faer above), f64 and f32: lower triangular with a positive diagonal, and a backward
+    /// error within Higham's bound |L Lᵀ − A| ≤ γₙ₊₁ |L| |L|ᵀ (elementwise, γₖ = kε / (1 − kε));
+    /// a matrix that fails the pivot test at its first, middle or last column, or holds a NaN
+    /// or infinity below the diagonal, is refused.
+    #[test]
+    fn cholesky_factors_have_a_small_backward_error_on_both_paths() {
+        let mut scratch = CholeskyScratch::default();
+        let below = OWN_CHOLESKY_BELOW;
+        for n in [
+            0,
+            1,
+            2,
+            3,
+            4,
+            5,
+            7,
+            8,
+            9,
+            17,
+            33,
+            50,
+            below - 1,
+            below,
+            below + 5,
+        ] {
+            // A spread-out spectrum: eigenvalues of G Gᵀ / n plus 10⁻³.
+            let g = DMatrix::from_fn(n, n, |i, j| ((i * 13 + j * 7) as f64 * 0.37).sin());
+            let a = &g * g.transpose() / n.max(1) as f64 + DMatrix::identity(n, n) * 1e-3;
+            let mut l = a.clone();
+            assert!(cholesky_in_place(&mut l, &mut scratch), "n = {n}");
+            let l = l.lower_triangle();
+            let gamma = |eps: f64| (n + 1) as f64 * eps / (1.0 - (n + 1) as f64 * eps);
+            let residual = &l * l.transpose() - &a;
+            let scale = l.abs() * l.abs().transpose();
+            for i in 0..n {
+                assert!(l[(i, i)] > 0.0);
+                for j in 0..n {
+                    let bound = gamma(f64::EPSILON) * scale[(i, j)];
+                    assert!(residual[(i, j)].abs() <= bound, "n = {n} ({i}, {j})");
+                }
+            }
+            let a32 = a.map(|v| v as f32);
+            let mut l32 = a32.clone();
+            assert!(cholesky_in_place(&mut l32, &mut scratch), "f32 n = {n}");
+            let l32 = l32.lower_triangle().map(f64::from);
+            let residual = &l32 * l32.transpose() - a32.map(f64::from);
+            let scale = l32.abs() * l32.abs().transpose();
+            for (r, s) in residual.iter().zip(scale.iter()) {
+                assert!(r.abs() <= gamma(f32::EPSILON as f64) * s, "f32 n = {n}");
+            }
+            if n < 2 {
+                continue;
+            }
+            for k in [0, n / 2, n - 1] {
+                // Pivot k non-positive: a_kk lowered to the sum of squares it must exceed.
+                let mut bad = a.clone();
+                bad[(k, k)] = l.row(k).columns(0, k).norm_squared() - 1e-3;
+                assert!(
+                    !cholesky_in_place(&mut bad, &mut scratch),
+                    "n = {n} pivot {k}"
+                );
+            }
+            for v in [f64::NAN, f64::INFINITY] {
+                let mut bad = a.clone();
+                bad[(n - 1, n / 2 - 1)] = v;
+                assert!(!cholesky_in_place(&mut bad, &mut scratch), "n = {n} {v}");
             }
         }
     }

@@ -143,8 +143,9 @@ where
         })
 }
 
-/// [`psd_factor`] into `out`. For runtime sizes it first tries faer's Cholesky factorisation in
-/// place (allocation-free with a sized `scratch`), which succeeds for every positive definite C
+/// [`psd_factor`] into `out`. For runtime sizes it first tries the Cholesky factorisation in
+/// place ([`cholesky_in_place`]: faer's, or our own column kernel below n = 96;
+/// allocation-free with a sized `scratch`), which succeeds for every positive definite C
 /// and gives the same lower factor up to round-off; only a semi-definite C falls back to
 /// [`psd_factor`] (which allocates). Static sizes use [`psd_factor`] directly.
 pub fn psd_factor_into<T: Real, D: Dim>(

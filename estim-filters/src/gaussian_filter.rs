@@ -37,7 +37,8 @@ use crate::update::{self, CovarianceUpdate, UpdateSettings};
 ///
 /// The same code runs on nalgebra's static sizes (`SVector<f64, 6>`, on the stack) and runtime
 /// sizes (`DVector<f64>`); switching is changing the types. Static sizes allocate nothing. With
-/// runtime sizes the heavy kernels (products, Cholesky, triangular solves) run on faer in
+/// runtime sizes the heavy kernels (products, Cholesky, triangular solves) run on faer (and
+/// our own SIMD kernels for a matrix times a vector and a Cholesky factor below n = 96) in
 /// buffers the filter keeps, sized by [`prepare_predict`](Predict::prepare_predict) and
 /// [`prepare_update`](Update::prepare_update) (once per sensor) right after construction, or
 /// else by the first prediction and the first update with each measurement length; after that

@@ -31,7 +31,7 @@ use crate::scalar::{Real, real};
 /// the order of ‖y‖ itself, so with `f32` use α ≳ 0.3 or [`Unscented::cubature`].
 /// Deviations go through the function's [`difference`](VectorFunction::difference), so
 /// wrapped outputs (angles) are handled. The factor L is a semi-definite square root
-/// ([`psd_factor`](crate::linalg::psd_factor); for runtime sizes faer's Cholesky first), so directions with zero variance
+/// ([`psd_factor`](crate::linalg::psd_factor); for runtime sizes a plain Cholesky factor first), so directions with zero variance
 /// are allowed. The deviations are collected as the columns of two m × n matrices and the sums
 /// are matrix products (faer for runtime sizes); all buffers live in the caller's
 /// [`Workspace`], so nothing is allocated for static sizes, nor for runtime sizes after the
