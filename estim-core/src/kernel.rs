@@ -163,15 +163,16 @@ trait FaerScalar: Real + faer::traits::ComplexField {
 ///
 /// A panel is 4 vectors (16 f64 rows on AVX2: 2 × 4 accumulators of 16 registers), or 8 with
 /// AVX-512 (32 registers), which pulp dispatches to only if its `x86-v4` feature is on: we
-/// leave it off, since it made the test build ~1.5× slower (BENCHMARKS.md). Two chains per
-/// row hide the FMA latency. The four-column sweep this
-/// replaced (y ← y + a₀x₀ + … + a₃x₃ over the whole of y, four columns at a time) waited on
-/// each block's store of y and was latency-bound at filter sizes. Speed-up over it on AVX2 (a
-/// one-off loop of `kernel::mul`, best of 5, the two builds alternating three times in a
-/// scratch crate; e.g. 50 × 50 188 → 143 ns): 6 × 6 2.2, 12 × 12 1.85, 24 × 24 1.45, 25 × 50
-/// 1.25, 50 × 50 1.32, 64 × 64 1.2, 100 × 100 1.04, 200 × 200 1.0; but 128 × 128 0.74 and
-/// 400 × 400 0.72: from there A is read from L2 in 128-byte pieces per column and panel, where
-/// the sweep streamed whole columns (open: a sweep or column blocking for large A). faer's
+/// leave it off, since it made the test build ~1.5× slower (BENCHMARKS.md). For `f64` with at
+/// least 16 rows on a CPU with AVX-512 the same kernel runs instead from `kernel::avx512`
+/// (`std::arch`, one function, so no such build cost). Two chains per row hide the FMA
+/// latency. The four-column sweep this replaced (y ← y + a₀x₀ + … + a₃x₃ over the whole of
+/// y, four columns at a time) waited on each block's store of y and was latency-bound at
+/// filter sizes. Time against it (`kernel::mul` in a loop, best of 5, three builds alternating
+/// five times in a scratch crate; AVX2 panels below 16 rows, AVX-512 from there): 6 × 6 0.46,
+/// 12 × 12 0.53, 24 × 24 0.55, 25 × 50 0.66, 50 × 50 0.58 (170 → 99 ns), 64 × 64 0.56,
+/// 100 × 100 0.93, 128 × 128 1.01, 200 × 200 1.00, 400 × 400 1.14: from 128 rows A comes from
+/// L2 in pieces of one panel per column, where the sweep streamed whole columns. faer's
 /// general product costs 2–3× the sweep at these sizes, so it is not used for one column.
 struct Matvec<'a, U> {
     y: &'a mut [U],
@@ -192,12 +193,48 @@ struct BlockMatvec<'a, U> {
     first: usize,
 }
 
+#[cfg(target_arch = "x86_64")]
+mod avx512;
+
+/// y (+)= α A x with A rows `first..first + y.len()` of the column-major `a` with `stride`
+/// rows, on AVX-512 if the CPU has it and y has at least 8 rows (`true`), else nothing done
+/// (`false`; [`Matvec`] on pulp's best instruction set then).
+#[inline(always)]
+fn matvec_avx512_f64(
+    y: &mut [f64],
+    accum: Accum,
+    alpha: f64,
+    (a, stride, first): (&[f64], usize, usize),
+    x: &[f64],
+) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let block = avx512::Block { a, stride, first };
+        avx512::matvec(y, accum, alpha, block, x)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = (y, accum, alpha, a, stride, first, x);
+        false
+    }
+}
+
+/// No AVX-512 kernel (`f32`): always `false`.
+#[inline(always)]
+fn matvec_avx512_none<U>(_: &mut [U], _: Accum, _: U, _: (&[U], usize, usize), _: &[U]) -> bool {
+    false
+}
+
 macro_rules! impl_matvec {
-    ($t:ty, $ts:ident, $splat:ident, $fma:ident, $add:ident, $as_simd:ident, $as_mut_simd:ident) => {
+    ($t:ty, $ts:ident, $splat:ident, $fma:ident, $add:ident, $as_simd:ident, $as_mut_simd:ident, $wide:ident) => {
         impl FaerScalar for $t {
             #[inline(always)]
             fn matvec(y: &mut [$t], accum: Accum, alpha: $t, a: &[$t], x: &[$t]) {
                 assert_eq!(a.len(), y.len() * x.len(), "matvec: shapes differ");
+                let rows = y.len();
+                if $wide(y, accum, alpha, (a, rows, 0), x) {
+                    return;
+                }
                 pulp::Arch::new().dispatch(Matvec {
                     y,
                     accum,
@@ -220,17 +257,20 @@ macro_rules! impl_matvec {
                         for (r, column) in row.iter_mut().zip(left.chunks_exact(n)) {
                             *r = column[j];
                         }
-                        arch.dispatch(BlockMatvec {
-                            matvec: Matvec {
-                                y: &mut right[j..n],
-                                accum: Accum::Add,
-                                alpha: -1.0,
-                                a: left,
-                                x: &row[..j],
-                            },
-                            stride: n,
-                            first: j,
-                        });
+                        let (y, x) = (&mut right[j..n], &row[..j]);
+                        if !$wide(y, Accum::Add, -1.0, (left, n, j), x) {
+                            arch.dispatch(BlockMatvec {
+                                matvec: Matvec {
+                                    y,
+                                    accum: Accum::Add,
+                                    alpha: -1.0,
+                                    a: left,
+                                    x,
+                                },
+                                stride: n,
+                                first: j,
+                            });
+                        }
                     }
                     let pivot = right[j];
                     if !(pivot > 0.0 && pivot.is_finite()) {
@@ -406,7 +446,8 @@ impl_matvec!(
     mul_add_e_f64s,
     add_f64s,
     as_simd_f64s,
-    as_mut_simd_f64s
+    as_mut_simd_f64s,
+    matvec_avx512_f64
 );
 impl_matvec!(
     f32,
@@ -415,7 +456,8 @@ impl_matvec!(
     mul_add_e_f32s,
     add_f32s,
     as_simd_f32s,
-    as_mut_simd_f32s
+    as_mut_simd_f32s,
+    matvec_avx512_none
 );
 
 /// dst (+)= α op(a) op(b) on faer (a matrix times a vector: [`matvec`]) if `T` is `U`;
@@ -1019,7 +1061,7 @@ mod tests {
     }
 
     /// The matrix–vector kernel against nalgebra's product, on the instruction set `mul`
-    /// dispatches to, and on scalar and AVX2 (if the CPU has it), on shapes around its panels (1–8 vectors and a remainder
+    /// dispatches to, and on scalar, AVX2 and (f64, from 16 rows) AVX-512 if the CPU has them, on shapes around its panels (1–8 vectors and a remainder
     /// of rows, empty ones), both accumulations, α = 1 and not; the bound is the usual
     /// dot-product one, |error| ≤ k ε Σ |α aᵢⱼ xⱼ| (+ |y| ε for the accumulation). Also
     /// `kernel::mul` itself, `mul_into_column` in f32 and its any-scalar fallback.
@@ -1077,6 +1119,20 @@ mod tests {
                             let mut y = y0.clone();
                             matvec_on(simd, y.as_mut_slice(), accum, alpha, block, x_);
                             check(&y, "AVX2");
+                        }
+                        #[cfg(target_arch = "x86_64")]
+                        if avx512::available() {
+                            let (a, place) = block;
+                            let (stride, first) = place.unwrap_or((rows, 0));
+                            let block = avx512::Block { a, stride, first };
+                            let mut y = y0.clone();
+                            let done = avx512::matvec(y.as_mut_slice(), accum, alpha, block, x_);
+                            assert_eq!(done, rows >= 16, "AVX-512 runs from 16 rows");
+                            if done {
+                                check(&y, "AVX-512");
+                            } else {
+                                assert_eq!(y, y0, "nothing done below 16 rows");
+                            }
                         }
                     }
                     // The any-scalar fallback of mul_into_column (run here on f64).
