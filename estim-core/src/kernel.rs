@@ -152,6 +152,69 @@ trait FaerScalar: Real + faer::traits::ComplexField {
     /// positive and finite (a NaN or infinity anywhere in L reaches a later pivot), and then
     /// `a` is unspecified. Used below [`OWN_CHOLESKY_BELOW`].
     fn lower_cholesky(a: &mut [Self], n: usize, row: &mut [Self]) -> bool;
+
+    /// y (+)= α A x by [`Sweep`] (out of line: compiled once, here).
+    fn sweep(y: &mut [Self], accum: Accum, alpha: Self, a: &[Self], x: &[Self]);
+}
+
+/// From this many rows a matrix × vector product is [`Sweep`] rather than [`Matvec`]'s panels,
+/// which read a tall A one panel's rows of each column at a time. Measured (`kernel::mul` in a
+/// loop, best of 5, five alternating runs of the builds, scratch crate; sweep vs panels in ns):
+/// 96 × 96 678 vs 676, 100 × 100 619 vs 621, 128 × 128 907 vs 1202, 150 × 150 1490 vs 1559,
+/// 200 × 200 2376 vs 2960, 256 × 256 4694 vs 4976, 400 × 400 11003 vs 13528, 800 × 800
+/// 50870 vs 61352 (300 × 300: 6462 vs 6058).
+const SWEEP_MIN_ROWS: usize = 128;
+
+/// y (+)= α A x for tall A (at least [`SWEEP_MIN_ROWS`] rows): y ← y + Σ αxⱼ aⱼ over the whole
+/// of y, four columns at a time, so each pass streams four whole columns of A (y stays in L1).
+/// The loop is plain Rust, vectorised by the compiler for the instruction set pulp dispatches
+/// to (AVX2 here). This was the kernel for every size before [`Matvec`].
+struct Sweep<'a, U> {
+    y: &'a mut [U],
+    accum: Accum,
+    alpha: U,
+    a: &'a [U],
+    x: &'a [U],
+}
+
+impl<U: Real> pulp::WithSimd for Sweep<'_, U> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        let Self {
+            y,
+            accum,
+            alpha,
+            a,
+            x,
+        } = self;
+        let rows = y.len();
+        if accum == Accum::Replace {
+            y.fill(U::zero());
+        }
+        if rows == 0 {
+            return;
+        }
+        let mut blocks = a.chunks_exact(4 * rows);
+        let mut xs = x.chunks_exact(4);
+        for (block, xb) in (&mut blocks).zip(&mut xs) {
+            let (a0, rest) = block.split_at(rows);
+            let (a1, rest) = rest.split_at(rows);
+            let (a2, a3) = rest.split_at(rows);
+            let (x0, x1, x2, x3) = (alpha * xb[0], alpha * xb[1], alpha * xb[2], alpha * xb[3]);
+            let columns = a0.iter().zip(a1).zip(a2).zip(a3);
+            for (yi, (((&v0, &v1), &v2), &v3)) in y.iter_mut().zip(columns) {
+                *yi = *yi + v0 * x0 + v1 * x1 + v2 * x2 + v3 * x3;
+            }
+        }
+        for (column, &xj) in blocks.remainder().chunks_exact(rows).zip(xs.remainder()) {
+            let scale = alpha * xj;
+            for (yi, &v) in y.iter_mut().zip(column) {
+                *yi += v * scale;
+            }
+        }
+    }
 }
 
 /// y (+)= α A x, the kernel behind every runtime-size matrix × vector product: rows in panels
@@ -169,11 +232,11 @@ trait FaerScalar: Real + faer::traits::ComplexField {
 /// latency. The four-column sweep this replaced (y ← y + a₀x₀ + … + a₃x₃ over the whole of
 /// y, four columns at a time) waited on each block's store of y and was latency-bound at
 /// filter sizes. Time against it (`kernel::mul` in a loop, best of 5, three builds alternating
-/// five times in a scratch crate; AVX2 panels below 16 rows, AVX-512 from there): 6 × 6 0.46,
-/// 12 × 12 0.53, 24 × 24 0.55, 25 × 50 0.66, 50 × 50 0.58 (170 → 99 ns), 64 × 64 0.56,
-/// 100 × 100 0.93, 128 × 128 1.01, 200 × 200 1.00, 400 × 400 1.14: from 128 rows A comes from
-/// L2 in pieces of one panel per column, where the sweep streamed whole columns. faer's
-/// general product costs 2–3× the sweep at these sizes, so it is not used for one column.
+/// five times in a scratch crate; AVX2 panels below 16 rows, AVX-512 from there): 6 × 6 0.47,
+/// 12 × 12 0.52, 24 × 24 0.56, 25 × 50 0.61, 50 × 50 0.52 (179 → 93 ns), 64 × 64 0.51,
+/// 100 × 100 0.98. From 128 rows, where the panels read A from L2 one panel's rows of each
+/// column at a time, the sweep is kept ([`Sweep`], [`SWEEP_MIN_ROWS`]). faer's general product
+/// costs 2–3× the sweep at these sizes, so it is not used for one column.
 struct Matvec<'a, U> {
     y: &'a mut [U],
     accum: Accum,
@@ -232,10 +295,23 @@ macro_rules! impl_matvec {
             fn matvec(y: &mut [$t], accum: Accum, alpha: $t, a: &[$t], x: &[$t]) {
                 assert_eq!(a.len(), y.len() * x.len(), "matvec: shapes differ");
                 let rows = y.len();
+                if rows >= SWEEP_MIN_ROWS {
+                    return Self::sweep(y, accum, alpha, a, x);
+                }
                 if $wide(y, accum, alpha, (a, rows, 0), x) {
                     return;
                 }
                 pulp::Arch::new().dispatch(Matvec {
+                    y,
+                    accum,
+                    alpha,
+                    a,
+                    x,
+                });
+            }
+
+            fn sweep(y: &mut [$t], accum: Accum, alpha: $t, a: &[$t], x: &[$t]) {
+                pulp::Arch::new().dispatch(Sweep {
                     y,
                     accum,
                     alpha,
@@ -1068,7 +1144,9 @@ mod tests {
     #[test]
     fn matrix_vector_products_match_nalgebra_on_every_instruction_set() {
         let mut row_counts: Vec<usize> = (0..=9).collect();
-        row_counts.extend([15, 16, 17, 31, 32, 33, 47, 63, 64, 65, 71, 130]);
+        row_counts.extend([
+            15, 16, 17, 31, 32, 33, 47, 63, 64, 65, 71, 130, 256, 263, 300,
+        ]);
         for &rows in &row_counts {
             for cols in [0, 1, 2, 3, 4, 5, 9, 13] {
                 let a = DMatrix::from_fn(rows, cols, |i, j| ((i * 5 + j * 3) as f64 * 0.7).sin());

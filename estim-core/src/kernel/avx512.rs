@@ -1,8 +1,11 @@
 //! y (+)= α A x for `f64` on AVX-512, with `std::arch`: the [`Matvec`](super::Matvec) panel
 //! kernel with 8-lane vectors and panels of 8 vectors (64 rows; 2 × 8 accumulators of the 32
-//! registers). pulp reaches AVX-512 only through its `x86-v4` feature, which also gives every
-//! pulp dispatch in faer an AVX-512 copy and made the optimised test build ~1.5× slower
-//! (BENCHMARKS.md); this one function costs nothing of the kind.
+//! registers), the last `rows mod 8` rows in the last panel's pass. Used from 16 rows (and
+//! below [`SWEEP_MIN_ROWS`](super::SWEEP_MIN_ROWS) for whole matrices), for the products and
+//! the Cholesky factor's column updates. pulp reaches AVX-512 only through its `x86-v4`
+//! feature, which also gives every pulp dispatch in faer an AVX-512 copy and made the
+//! optimised test build ~1.5× slower (BENCHMARKS.md); this module is compiled once, in
+//! estim-core (`.ci/run` on a fresh clone with it: 16 min 6 s).
 //!
 //! The workspace denies `unsafe_code`; this module is the exception, for two kinds of
 //! operation only: calling the `#[target_feature]` function after the CPU was checked for the
@@ -88,25 +91,30 @@ fn lanes_mut(s: &mut [f64], start: usize) -> &mut [f64; LANES] {
         .expect("eight values")
 }
 
-/// (y (+)) α A x on rows `start..start + 8V`: V accumulators per column parity, as `Matvec`.
+/// (y (+)) α A x on the rows of V vectors, as `Matvec`'s panels: V accumulators per column
+/// parity. Without `TAIL` the vectors are rows `start..start + 8V`; with it the first V − 1
+/// are rows `start..start + 8(V − 1)` and the last is rows `last..last + 8` (the overlapping
+/// vector that ends at the last row), all in one pass over the columns.
 #[inline]
 #[target_feature(enable = "avx512f")]
-fn sums<const V: usize>(
+fn sums<const V: usize, const TAIL: bool>(
     y: &[f64],
     accum: Accum,
     alpha: f64,
     block: Block<'_>,
     x: &[f64],
-    start: usize,
+    (start, last): (usize, usize),
 ) -> [__m512d; V] {
     let Block { a, stride, first } = block;
+    let whole = if TAIL { V - 1 } else { V };
     let mut even = [_mm512_setzero_pd(); V];
     let mut odd = even;
-    // Rows `start..start + 8V` of A in column j.
+    // The whole vectors' rows of column j, and the tail's.
     let piece = |j: usize| {
         let top = j * stride + first + start;
-        &a[top..top + LANES * V]
+        &a[top..top + LANES * whole]
     };
+    let tail = |j: usize| lanes(a, j * stride + first + last);
     let mut j = 0;
     while j + 1 < x.len() {
         let (s0, s1) = (
@@ -114,69 +122,98 @@ fn sums<const V: usize>(
             _mm512_set1_pd(alpha * x[j + 1]),
         );
         let (c0, c1) = (piece(j), piece(j + 1));
-        for v in 0..V {
+        for v in 0..whole {
             even[v] = _mm512_fmadd_pd(load(lanes(c0, LANES * v)), s0, even[v]);
             odd[v] = _mm512_fmadd_pd(load(lanes(c1, LANES * v)), s1, odd[v]);
+        }
+        if TAIL {
+            even[V - 1] = _mm512_fmadd_pd(load(tail(j)), s0, even[V - 1]);
+            odd[V - 1] = _mm512_fmadd_pd(load(tail(j + 1)), s1, odd[V - 1]);
         }
         j += 2;
     }
     if j < x.len() {
         let (s0, c0) = (_mm512_set1_pd(alpha * x[j]), piece(j));
-        for v in 0..V {
+        for v in 0..whole {
             even[v] = _mm512_fmadd_pd(load(lanes(c0, LANES * v)), s0, even[v]);
+        }
+        if TAIL {
+            even[V - 1] = _mm512_fmadd_pd(load(tail(j)), s0, even[V - 1]);
         }
     }
     for v in 0..V {
         even[v] = _mm512_add_pd(even[v], odd[v]);
         if accum == Accum::Add {
-            even[v] = _mm512_add_pd(load(lanes(y, start + LANES * v)), even[v]);
+            let row = if TAIL && v + 1 == V {
+                last
+            } else {
+                start + LANES * v
+            };
+            even[v] = _mm512_add_pd(load(lanes(y, row)), even[v]);
         }
     }
     even
 }
 
-/// Rows `start..start + 8V` of y ← (y +) α A x.
+/// y ← (y +) α A x on the rows of [`sums`] (with `TAIL`, the whole vectors first, then the
+/// tail: in the rows they share both hold the same sums, same operations in the same order).
 #[inline]
 #[target_feature(enable = "avx512f")]
-fn panel<const V: usize>(
+fn panel<const V: usize, const TAIL: bool>(
     y: &mut [f64],
     accum: Accum,
     alpha: f64,
     block: Block<'_>,
     x: &[f64],
-    start: usize,
+    (start, last): (usize, usize),
 ) {
-    let sums = sums::<V>(y, accum, alpha, block, x, start);
+    let sums = sums::<V, TAIL>(y, accum, alpha, block, x, (start, last));
     for (v, s) in sums.into_iter().enumerate() {
-        store(lanes_mut(y, start + LANES * v), s);
+        let row = if TAIL && v + 1 == V {
+            last
+        } else {
+            start + LANES * v
+        };
+        store(lanes_mut(y, row), s);
     }
 }
 
-/// The product, y having at least one vector of rows: panels of 8 vectors, one of the
-/// remaining whole vectors, and the last `rows mod 8` rows as one vector ending at the last
-/// row (computed before the panels overwrite the y it reads).
+/// The product, y having at least one vector of rows: panels of 8 vectors, then one panel of
+/// the remaining whole vectors and, if the rows are not a multiple of 8, the vector ending at
+/// the last row (at most 8 vectors: 16 accumulators of the 32 registers). If no whole vectors
+/// remain, that last vector overlaps the last 8-vector panel: it is computed before the panels
+/// overwrite the y it reads, and stored after them.
 #[target_feature(enable = "avx512f")]
 fn on_avx512(y: &mut [f64], accum: Accum, alpha: f64, block: Block<'_>, x: &[f64]) {
     let rows = y.len();
     let vectors = rows / LANES;
-    let last =
-        (!rows.is_multiple_of(LANES)).then(|| sums::<1>(y, accum, alpha, block, x, rows - LANES));
+    let tail_alone = vectors.is_multiple_of(8) && !rows.is_multiple_of(LANES);
+    let tail = (rows - LANES, 0);
+    let early = tail_alone.then(|| sums::<1, false>(y, accum, alpha, block, x, tail));
     let mut start = 0;
     for _ in 0..vectors / 8 {
-        panel::<8>(y, accum, alpha, block, x, start);
+        panel::<8, false>(y, accum, alpha, block, x, (start, 0));
         start += 8 * LANES;
     }
-    match vectors % 8 {
-        7 => panel::<7>(y, accum, alpha, block, x, start),
-        6 => panel::<6>(y, accum, alpha, block, x, start),
-        5 => panel::<5>(y, accum, alpha, block, x, start),
-        4 => panel::<4>(y, accum, alpha, block, x, start),
-        3 => panel::<3>(y, accum, alpha, block, x, start),
-        2 => panel::<2>(y, accum, alpha, block, x, start),
-        1 => panel::<1>(y, accum, alpha, block, x, start),
+    let rest = (start, rows - LANES);
+    match (vectors % 8, !rows.is_multiple_of(LANES)) {
+        (7, true) => panel::<8, true>(y, accum, alpha, block, x, rest),
+        (7, false) => panel::<7, false>(y, accum, alpha, block, x, rest),
+        (6, true) => panel::<7, true>(y, accum, alpha, block, x, rest),
+        (6, false) => panel::<6, false>(y, accum, alpha, block, x, rest),
+        (5, true) => panel::<6, true>(y, accum, alpha, block, x, rest),
+        (5, false) => panel::<5, false>(y, accum, alpha, block, x, rest),
+        (4, true) => panel::<5, true>(y, accum, alpha, block, x, rest),
+        (4, false) => panel::<4, false>(y, accum, alpha, block, x, rest),
+        (3, true) => panel::<4, true>(y, accum, alpha, block, x, rest),
+        (3, false) => panel::<3, false>(y, accum, alpha, block, x, rest),
+        (2, true) => panel::<3, true>(y, accum, alpha, block, x, rest),
+        (2, false) => panel::<2, false>(y, accum, alpha, block, x, rest),
+        (1, true) => panel::<2, true>(y, accum, alpha, block, x, rest),
+        (1, false) => panel::<1, false>(y, accum, alpha, block, x, rest),
         _ => {}
     }
-    if let Some([v]) = last {
+    if let Some([v]) = early {
         store(lanes_mut(y, rows - LANES), v);
     }
 }
