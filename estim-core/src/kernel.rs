@@ -168,27 +168,22 @@ const SWEEP_MIN_ROWS: usize = 128;
 /// y (+)= α A x for tall A (at least [`SWEEP_MIN_ROWS`] rows): y ← y + Σ αxⱼ aⱼ over the whole
 /// of y, four columns at a time, so each pass streams four whole columns of A (y stays in L1).
 /// The loop is plain Rust, vectorised by the compiler for the instruction set pulp dispatches
-/// to (AVX2 here). This was the kernel for every size before [`Matvec`].
-struct Sweep<'a, U> {
-    y: &'a mut [U],
-    accum: Accum,
-    alpha: U,
-    a: &'a [U],
-    x: &'a [U],
-}
+/// to (AVX2 here). This was the kernel for every size before [`Matvec`], whose operands it
+/// takes.
+struct Sweep<'a, U>(Matvec<'a, U>);
 
 impl<U: Real> pulp::WithSimd for Sweep<'_, U> {
     type Output = ();
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) {
-        let Self {
+        let Matvec {
             y,
             accum,
             alpha,
             a,
             x,
-        } = self;
+        } = self.0;
         let rows = y.len();
         if accum == Accum::Replace {
             y.fill(U::zero());
@@ -311,13 +306,13 @@ macro_rules! impl_matvec {
             }
 
             fn sweep(y: &mut [$t], accum: Accum, alpha: $t, a: &[$t], x: &[$t]) {
-                pulp::Arch::new().dispatch(Sweep {
+                pulp::Arch::new().dispatch(Sweep(Matvec {
                     y,
                     accum,
                     alpha,
                     a,
                     x,
-                });
+                }));
             }
 
             fn lower_cholesky(a: &mut [$t], n: usize, row: &mut [$t]) -> bool {
