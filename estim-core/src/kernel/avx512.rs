@@ -2,7 +2,8 @@
 //! kernel with 8-lane vectors and panels of 8 vectors (64 rows; 2 × 8 accumulators of the 32
 //! registers), the last `rows mod 8` rows in the last panel's pass. Used from 16 rows (and
 //! below [`SWEEP_MIN_ROWS`](super::SWEEP_MIN_ROWS) for whole matrices), for the products and
-//! the Cholesky factor's column updates. pulp reaches AVX-512 only through its `x86-v4`
+//! the Cholesky factor's column updates. Also the lower triangle of C (+)= α A Bᵀ (the
+//! covariance sums w D Dᵀ and J C Jᵀ) for 16 ≤ n ≤ [`LOWER_MAX`], in blocks of 4 columns. pulp reaches AVX-512 only through its `x86-v4`
 //! feature, which also gives every pulp dispatch in faer an AVX-512 copy and made the
 //! optimised test build ~1.5× slower (BENCHMARKS.md); this module is compiled once, in
 //! estim-core (`.ci/run` on a fresh clone with it: 16 min 6 s).
@@ -15,8 +16,8 @@
 
 use super::Accum;
 use core::arch::x86_64::{
-    __m512d, _mm512_add_pd, _mm512_fmadd_pd, _mm512_loadu_pd, _mm512_set1_pd, _mm512_setzero_pd,
-    _mm512_storeu_pd,
+    __m512d, _mm512_add_pd, _mm512_fmadd_pd, _mm512_loadu_pd, _mm512_mask_blend_pd, _mm512_mul_pd,
+    _mm512_set1_pd, _mm512_setzero_pd, _mm512_storeu_pd,
 };
 
 /// Rows per vector.
@@ -215,5 +216,148 @@ fn on_avx512(y: &mut [f64], accum: Accum, alpha: f64, block: Block<'_>, x: &[f64
     }
     if let Some([v]) = early {
         store(lanes_mut(y, rows - LANES), v);
+    }
+}
+
+/// Vectors per panel of [`lower_product_tr`]: 6 × 4 accumulators, 4 broadcasts and a load in
+/// the 32 registers.
+const LOWER_PANEL: usize = 6;
+
+/// Up to this order [`lower_product_tr`] runs here; above it faer's blocked product. Measured
+/// against faer's lower-triangle product (`kernel::mul_tr_lower` in a loop, best of 5, three
+/// alternating runs of the two builds in a scratch crate; n × k, ours / faer's): 25 × 50 0.69,
+/// 50 × 50 0.58 (2.80 → 1.62 µs), 50 × 25 0.56, 64 × 64 0.69, 100 × 50 0.67, 100 × 100 0.69,
+/// 128 × 128 0.99. faer's triangular product costs as much as its full one at these orders.
+pub(super) const LOWER_MAX: usize = 128;
+
+/// The lower triangle of C (+)= α A Bᵀ on AVX-512 and `true`, for the column-major n × n `c`
+/// and n × k `a` and `b`; `false` (nothing done) if the CPU lacks AVX-512 or n is outside
+/// [`MIN_ROWS`]..=[`LOWER_MAX`]. Entries above the diagonal may be overwritten (as by the
+/// whole-matrix product used below `LOWER_TRIANGLE_MIN`).
+///
+/// # Panics
+/// If the lengths do not fit these shapes (a programmer error).
+#[inline]
+pub(super) fn lower_product_tr(
+    c: &mut [f64],
+    n: usize,
+    accum: Accum,
+    alpha: f64,
+    a: &[f64],
+    b: &[f64],
+) -> bool {
+    if !(MIN_ROWS..=LOWER_MAX).contains(&n) || !available() {
+        return false;
+    }
+    let fits = c.len() == n * n && a.len() == b.len() && a.len().is_multiple_of(n);
+    assert!(fits, "lower_product_tr: shapes differ");
+    // SAFETY: the CPU has AVX-512F (checked above), the one precondition of `lower_on_avx512`.
+    unsafe { lower_on_avx512(c, n, accum, alpha, a, b) };
+    true
+}
+
+/// [`lower_product_tr`] in blocks of 4 columns j..j + 4, each over rows j..n.
+#[target_feature(enable = "avx512f")]
+fn lower_on_avx512(c: &mut [f64], n: usize, accum: Accum, alpha: f64, a: &[f64], b: &[f64]) {
+    let product = Lower {
+        n,
+        accum,
+        alpha,
+        a,
+        b,
+    };
+    let mut j = 0;
+    while j < n {
+        match n - j {
+            1 => product.columns::<1>(c, j),
+            2 => product.columns::<2>(c, j),
+            3 => product.columns::<3>(c, j),
+            _ => product.columns::<4>(c, j),
+        }
+        j += 4;
+    }
+}
+
+/// The operands of [`lower_product_tr`].
+#[derive(Clone, Copy)]
+struct Lower<'a> {
+    n: usize,
+    accum: Accum,
+    alpha: f64,
+    a: &'a [f64],
+    b: &'a [f64],
+}
+
+impl Lower<'_> {
+    /// Columns j..j + C over rows j..n: the whole vectors from row j in panels of up to
+    /// [`LOWER_PANEL`], then the vector ending at row n if the rows are not a multiple of 8,
+    /// which writes only the rows the panels did not.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn columns<const C: usize>(self, c: &mut [f64], j: usize) {
+        let n = self.n;
+        let whole = (n - j) / LANES;
+        let mut start = j;
+        let mut left = whole;
+        while left > 0 {
+            let v = left.min(LOWER_PANEL);
+            match v {
+                6 => self.panel::<6, C>(c, j, start, None),
+                5 => self.panel::<5, C>(c, j, start, None),
+                4 => self.panel::<4, C>(c, j, start, None),
+                3 => self.panel::<3, C>(c, j, start, None),
+                2 => self.panel::<2, C>(c, j, start, None),
+                _ => self.panel::<1, C>(c, j, start, None),
+            }
+            start += LANES * v;
+            left -= v;
+        }
+        if start < n {
+            self.panel::<1, C>(c, j, n - LANES, Some(start));
+        }
+    }
+
+    /// Rows `start..start + 8V` of columns j..j + C of C (+)= α A Bᵀ; with `from`, only the
+    /// rows from `from` on are written.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn panel<const V: usize, const C: usize>(
+        self,
+        c: &mut [f64],
+        j: usize,
+        start: usize,
+        from: Option<usize>,
+    ) {
+        let n = self.n;
+        let mut sums = [[_mm512_setzero_pd(); C]; V];
+        for (a_k, b_k) in self.a.chunks_exact(n).zip(self.b.chunks_exact(n)) {
+            let piece = &a_k[start..start + LANES * V];
+            let b_row: &[f64; C] = b_k[j..j + C].try_into().expect("C values");
+            let scales: [__m512d; C] = core::array::from_fn(|q| _mm512_set1_pd(b_row[q]));
+            for (v, sum) in sums.iter_mut().enumerate() {
+                let column = load(lanes(piece, LANES * v));
+                for (s, &scale) in sum.iter_mut().zip(&scales) {
+                    *s = _mm512_fmadd_pd(column, scale, *s);
+                }
+            }
+        }
+        let alpha = _mm512_set1_pd(self.alpha);
+        // Rows `from..` of a vector starting at row `start`: the lanes from `from − start` on.
+        let keep = from.map(|from| 0xffu8.checked_shl((from - start) as u32).unwrap_or(0));
+        for q in 0..C {
+            let out = &mut c[(j + q) * n..(j + q + 1) * n];
+            for (v, sum) in sums.iter().enumerate() {
+                let row = start + LANES * v;
+                let old = load(lanes(out, row));
+                let mut value = _mm512_mul_pd(sum[q], alpha);
+                if self.accum == Accum::Add {
+                    value = _mm512_add_pd(old, value);
+                }
+                if let Some(mask) = keep {
+                    value = _mm512_mask_blend_pd(mask, old, value);
+                }
+                store(lanes_mut(out, row), value);
+            }
+        }
     }
 }
