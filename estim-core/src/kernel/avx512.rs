@@ -145,15 +145,21 @@ fn sums<const V: usize, const TAIL: bool>(
     for v in 0..V {
         even[v] = _mm512_add_pd(even[v], odd[v]);
         if accum == Accum::Add {
-            let row = if TAIL && v + 1 == V {
-                last
-            } else {
-                start + LANES * v
-            };
+            let row = vector_row::<V, TAIL>(v, (start, last));
             even[v] = _mm512_add_pd(load(lanes(y, row)), even[v]);
         }
     }
     even
+}
+
+/// The first row of vector `v` of a [`sums`] panel: `start + 8v`, or `last` for the tail.
+#[inline(always)]
+fn vector_row<const V: usize, const TAIL: bool>(v: usize, (start, last): (usize, usize)) -> usize {
+    if TAIL && v + 1 == V {
+        last
+    } else {
+        start + LANES * v
+    }
 }
 
 /// y ← (y +) α A x on the rows of [`sums`] (with `TAIL`, the whole vectors first, then the
@@ -170,12 +176,7 @@ fn panel<const V: usize, const TAIL: bool>(
 ) {
     let sums = sums::<V, TAIL>(y, accum, alpha, block, x, (start, last));
     for (v, s) in sums.into_iter().enumerate() {
-        let row = if TAIL && v + 1 == V {
-            last
-        } else {
-            start + LANES * v
-        };
-        store(lanes_mut(y, row), s);
+        store(lanes_mut(y, vector_row::<V, TAIL>(v, (start, last))), s);
     }
 }
 
