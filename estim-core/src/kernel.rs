@@ -157,6 +157,30 @@ trait FaerScalar: Real + faer::traits::ComplexField {
     /// y (+)= α A x by [`Sweep`] (out of line: compiled once, here).
     fn sweep(y: &mut [Self], accum: Accum, alpha: Self, a: &[Self], x: &[Self]);
 
+    /// dst (+)= α A B by faer's product, of the lower triangle only if `lower` (faer's
+    /// triangular product from [`LOWER_TRIANGLE_MIN`]). This and the two below are the only
+    /// calls into faer's generic code, and each is out of line, so that code is compiled once,
+    /// in this crate, instead of in every crate that uses a kernel (each integration test was
+    /// its own copy; see `BENCHMARKS.md`, "Kernels compiled once").
+    fn faer_matmul(
+        dst: MatMut<'_, Self>,
+        accum: Accum,
+        alpha: Self,
+        a: MatRef<'_, Self>,
+        b: MatRef<'_, Self>,
+        lower: bool,
+    );
+
+    /// faer's Cholesky factor of `a` in place with `stack` (room for
+    /// [`cholesky_scratch`](Self::cholesky_scratch)); `false` if not positive definite.
+    fn faer_cholesky(a: MatMut<'_, Self>, stack: &mut MemStack) -> bool;
+
+    /// The scratch [`faer_cholesky`](Self::faer_cholesky) and [`lower_cholesky`](Self::lower_cholesky) need at order `dim`.
+    fn cholesky_scratch(dim: usize) -> StackReq;
+
+    /// rhs ← L⁻¹ rhs, or L⁻ᵀ rhs with `transpose`, by faer (L the lower triangle of `l`).
+    fn faer_triangular_solve(l: MatRef<'_, Self>, rhs: MatMut<'_, Self>, transpose: bool);
+
     /// The lower triangle of the n × n C (+)= α A Bᵀ (A, B n × k) on our own AVX-512 kernel
     /// (`f64`, 16 ≤ n ≤ 128, a CPU with AVX-512) and `true`; `false` (nothing done) otherwise.
     fn lower_product_tr(
@@ -337,7 +361,6 @@ macro_rules! impl_matvec {
                 $lower(c, n, accum, alpha, a, b)
             }
 
-            #[inline(always)]
             fn matvec(y: &mut [$t], accum: Accum, alpha: $t, a: &[$t], x: &[$t]) {
                 assert_eq!(a.len(), y.len() * x.len(), "matvec: shapes differ");
                 let rows = y.len();
@@ -364,6 +387,43 @@ macro_rules! impl_matvec {
                     a,
                     x,
                 }));
+            }
+
+            fn faer_matmul(
+                dst: MatMut<'_, $t>,
+                accum: Accum,
+                alpha: $t,
+                a: MatRef<'_, $t>,
+                b: MatRef<'_, $t>,
+                lower: bool,
+            ) {
+                faer_matmul_generic(dst, accum, alpha, a, b, lower)
+            }
+
+            fn faer_cholesky(a: MatMut<'_, $t>, stack: &mut MemStack) -> bool {
+                let par = par(a.nrows());
+                faer_cholesky(
+                    a,
+                    LltRegularization::default(),
+                    par,
+                    stack,
+                    Default::default(),
+                )
+                .is_ok()
+            }
+
+            fn cholesky_scratch(dim: usize) -> StackReq {
+                cholesky_in_place_scratch::<$t>(dim, par(dim), Default::default())
+                    .or(StackReq::new::<$t>(dim))
+            }
+
+            fn faer_triangular_solve(l: MatRef<'_, $t>, rhs: MatMut<'_, $t>, transpose: bool) {
+                let par = par(l.nrows().min(rhs.ncols()));
+                if transpose {
+                    solve_upper_triangular_in_place(l.transpose(), rhs, par);
+                } else {
+                    solve_lower_triangular_in_place(l, rhs, par);
+                }
             }
 
             fn lower_cholesky(a: &mut [$t], n: usize, row: &mut [$t]) -> bool {
@@ -531,8 +591,14 @@ macro_rules! impl_matvec {
                 // The last rows mod lanes rows: a whole vector ending at the last row, computed
                 // before the panels overwrite the y it reads and stored after them (the rows it
                 // shares with the last panel get the same bits: same operations, same order).
-                let last = (vectors > 0 && rows % lanes != 0)
-                    .then(|| self.sums::<S, 1>(simd, rows - lanes, block));
+                // No closure here: a closure does not get the SIMD target features of the
+                // function pulp compiles this into, and if the compiler keeps it out of line,
+                // every SIMD intrinsic in it becomes a call (6 × 6 took 79 ns instead of 7).
+                let last = if vectors > 0 && rows % lanes != 0 {
+                    Some(self.sums::<S, 1>(simd, rows - lanes, block))
+                } else {
+                    None
+                };
                 if size_of::<S::$ts>() >= 64 {
                     self.panels::<S, 8>(simd, vectors, block);
                 } else {
@@ -642,6 +708,20 @@ where
     let (a, b) = (view(a), view(b));
     let a = if transpose_a { a.transpose() } else { a };
     let b = if transpose_b { b.transpose() } else { b };
+    U::faer_matmul(view_mut(dst), accum, alpha, a, b, lower);
+    true
+}
+
+/// [`FaerScalar::faer_matmul`], instantiated only by its two implementations.
+#[inline(always)]
+fn faer_matmul_generic<U: FaerScalar>(
+    dst: MatMut<'_, U>,
+    accum: Accum,
+    alpha: U,
+    a: MatRef<'_, U>,
+    b: MatRef<'_, U>,
+    lower: bool,
+) {
     let size = dst.nrows().min(dst.ncols()).min(a.ncols());
     let accum = match accum {
         Accum::Replace => faer::Accum::Replace,
@@ -649,7 +729,7 @@ where
     };
     if lower && size >= LOWER_TRIANGLE_MIN {
         triangular::matmul(
-            view_mut(dst),
+            dst,
             BlockStructure::TriangularLower,
             accum,
             a,
@@ -660,9 +740,8 @@ where
             par(size),
         );
     } else {
-        matmul(view_mut(dst), accum, a, b, alpha, par(size));
+        matmul(dst, accum, a, b, alpha, par(size));
     }
-    true
 }
 
 /// Column `column` of `dst` (+)= α A x: [`Matvec`] for `f32`/`f64`, a plain loop of dot
@@ -919,9 +998,8 @@ impl core::fmt::Debug for CholeskyScratch {
 
 impl CholeskyScratch {
     /// Room for factorising `dim × dim` matrices of `U`.
-    fn stack<U: FaerScalar>(&mut self, dim: usize, par: Par) -> &mut MemStack {
-        let req = cholesky_in_place_scratch::<U>(dim, par, Default::default())
-            .or(StackReq::new::<U>(dim));
+    fn stack<U: FaerScalar>(&mut self, dim: usize) -> &mut MemStack {
+        let req = U::cholesky_scratch(dim);
         let bytes = req.size_bytes();
         if self.capacity < bytes {
             self.buffer = None;
@@ -943,20 +1021,12 @@ where
 {
     let a = cast_mut::<T, U, D, D>(a)?;
     let n = a.nrows();
-    let par = par(n);
-    let stack = scratch.stack::<U>(n, par);
+    let stack = scratch.stack::<U>(n);
     let ok = if n < OWN_CHOLESKY_BELOW {
         let (mut row, _) = stack.make_with(n, |_| U::zero());
         U::lower_cholesky(a.as_mut_slice(), n, &mut row)
     } else {
-        faer_cholesky(
-            view_mut(a),
-            LltRegularization::default(),
-            par,
-            stack,
-            Default::default(),
-        )
-        .is_ok()
+        U::faer_cholesky(view_mut(a), stack)
     };
     // faer leaves NaN pivots unreported on some paths; a factor must be finite to be used.
     Some(ok && (0..n).all(|i| nalgebra::ComplexField::is_finite(&a[(i, i)])))
@@ -1106,20 +1176,8 @@ where
     let (Some(l), Some(b)) = (cast::<T, U, D, D>(l), cast_mut::<T, U, R, D>(b)) else {
         return false;
     };
-    triangular_solve(view(l), view_mut(b).transpose_mut(), !transpose);
+    U::faer_triangular_solve(view(l), view_mut(b).transpose_mut(), !transpose);
     true
-}
-
-/// rhs ← L⁻¹ rhs, or L⁻ᵀ rhs with `transpose`, on faer (L the lower triangle of `l`); the one
-/// place the left and right solves choose faer's kernel and its parallelism.
-#[inline(always)]
-fn triangular_solve<U: FaerScalar>(l: MatRef<'_, U>, rhs: MatMut<'_, U>, transpose: bool) {
-    let par = par(l.nrows().min(rhs.ncols()));
-    if transpose {
-        solve_upper_triangular_in_place(l.transpose(), rhs, par);
-    } else {
-        solve_lower_triangular_in_place(l, rhs, par);
-    }
 }
 
 /// The faer triangular solve with L (`transpose`: Lᵀ) if `T` is `U`.
@@ -1135,7 +1193,7 @@ where
     let (Some(l), Some(b)) = (cast::<T, U, D, D>(l), cast_mut::<T, U, D, C>(b)) else {
         return false;
     };
-    triangular_solve(view(l), view_mut(b), transpose);
+    U::faer_triangular_solve(view(l), view_mut(b), transpose);
     true
 }
 

@@ -191,7 +191,12 @@ fn on_avx512(y: &mut [f64], accum: Accum, alpha: f64, block: Block<'_>, x: &[f64
     let vectors = rows / LANES;
     let tail_alone = vectors.is_multiple_of(8) && !rows.is_multiple_of(LANES);
     let tail = (rows - LANES, 0);
-    let early = tail_alone.then(|| sums::<1, false>(y, accum, alpha, block, x, tail));
+    // (An `if`, not `bool::then` with a closure: see `Matvec::run`.)
+    let early = if tail_alone {
+        Some(sums::<1, false>(y, accum, alpha, block, x, tail))
+    } else {
+        None
+    };
     let mut start = 0;
     for _ in 0..vectors / 8 {
         panel::<8, false>(y, accum, alpha, block, x, (start, 0));
