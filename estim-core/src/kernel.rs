@@ -158,7 +158,7 @@ trait FaerScalar: Real + faer::traits::ComplexField {
     fn sweep(y: &mut [Self], accum: Accum, alpha: Self, a: &[Self], x: &[Self]);
 
     /// dst (+)= α A B by faer's product, of the lower triangle only if `lower` (faer's
-    /// triangular product from [`LOWER_TRIANGLE_MIN`]). This and the two below are the only
+    /// triangular product from [`LOWER_TRIANGLE_MIN`]). This and the three below are the only
     /// calls into faer's generic code, and each is out of line, so that code is compiled once,
     /// in this crate, instead of in every crate that uses a kernel (each integration test was
     /// its own copy; see `BENCHMARKS.md`, "Kernels compiled once").
@@ -397,7 +397,26 @@ macro_rules! impl_matvec {
                 b: MatRef<'_, $t>,
                 lower: bool,
             ) {
-                faer_matmul_generic(dst, accum, alpha, a, b, lower)
+                let size = dst.nrows().min(dst.ncols()).min(a.ncols());
+                let accum = match accum {
+                    Accum::Replace => faer::Accum::Replace,
+                    Accum::Add => faer::Accum::Add,
+                };
+                if lower && size >= LOWER_TRIANGLE_MIN {
+                    triangular::matmul(
+                        dst,
+                        BlockStructure::TriangularLower,
+                        accum,
+                        a,
+                        BlockStructure::Rectangular,
+                        b,
+                        BlockStructure::Rectangular,
+                        alpha,
+                        par(size),
+                    );
+                } else {
+                    matmul(dst, accum, a, b, alpha, par(size));
+                }
             }
 
             fn faer_cholesky(a: MatMut<'_, $t>, stack: &mut MemStack) -> bool {
@@ -710,38 +729,6 @@ where
     let b = if transpose_b { b.transpose() } else { b };
     U::faer_matmul(view_mut(dst), accum, alpha, a, b, lower);
     true
-}
-
-/// [`FaerScalar::faer_matmul`], instantiated only by its two implementations.
-#[inline(always)]
-fn faer_matmul_generic<U: FaerScalar>(
-    dst: MatMut<'_, U>,
-    accum: Accum,
-    alpha: U,
-    a: MatRef<'_, U>,
-    b: MatRef<'_, U>,
-    lower: bool,
-) {
-    let size = dst.nrows().min(dst.ncols()).min(a.ncols());
-    let accum = match accum {
-        Accum::Replace => faer::Accum::Replace,
-        Accum::Add => faer::Accum::Add,
-    };
-    if lower && size >= LOWER_TRIANGLE_MIN {
-        triangular::matmul(
-            dst,
-            BlockStructure::TriangularLower,
-            accum,
-            a,
-            BlockStructure::Rectangular,
-            b,
-            BlockStructure::Rectangular,
-            alpha,
-            par(size),
-        );
-    } else {
-        matmul(dst, accum, a, b, alpha, par(size));
-    }
 }
 
 /// Column `column` of `dst` (+)= α A x: [`Matvec`] for `f32`/`f64`, a plain loop of dot
