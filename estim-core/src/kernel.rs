@@ -175,7 +175,8 @@ trait FaerScalar: Real + faer::traits::ComplexField {
     /// [`cholesky_scratch`](Self::cholesky_scratch)); `false` if not positive definite.
     fn faer_cholesky(a: MatMut<'_, Self>, stack: &mut MemStack) -> bool;
 
-    /// The scratch [`faer_cholesky`](Self::faer_cholesky) and [`lower_cholesky`](Self::lower_cholesky) need at order `dim`.
+    /// The scratch [`faer_cholesky`](Self::faer_cholesky) and
+    /// [`lower_cholesky`](Self::lower_cholesky) need at order `dim`.
     fn cholesky_scratch(dim: usize) -> StackReq;
 
     /// rhs ← L⁻¹ rhs, or L⁻ᵀ rhs with `transpose`, by faer (L the lower triangle of `l`).
@@ -669,7 +670,7 @@ impl_matvec!(
     lower_product_tr_none
 );
 
-/// dst (+)= α op(a) op(b) on faer (a matrix times a vector: [`matvec`]) if `T` is `U`;
+/// dst (+)= α op(a) op(b) on faer (a matrix times a vector: [`Matvec`]) if `T` is `U`;
 /// `false` (nothing done) otherwise.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]

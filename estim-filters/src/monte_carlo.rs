@@ -68,7 +68,7 @@
 //! runs are split into a fixed number of contiguous chunks (64 by default, independent of the
 //! number of threads); each chunk is accumulated sequentially in run order, and the chunk
 //! accumulators are merged in chunk order. The sequential runner does exactly the same, so
-//! [`MonteCarlo::run_sequential`] and [`MonteCarlo::run_parallel`] return bit-identical
+//! [`MonteCarlo::run_sequential`] and `MonteCarlo::run_parallel` return bit-identical
 //! statistics for the same seed, on any number of threads.
 //!
 //! Nothing is stored per run or per step: each slot holds running moments (O(n²) numbers for
@@ -786,8 +786,8 @@ impl MonteCarlo {
         Ok(self.finish(&total))
     }
 
-    /// [`run_parallel`](Self::run_parallel) when the `parallel` feature is on (the `estim`
-    /// facade turns it on by default), else [`run_sequential`](Self::run_sequential). Both
+    /// `run_parallel` when the `parallel` feature is on (off by default, in this crate and in
+    /// the `estim` facade), else [`run_sequential`](Self::run_sequential). Both
     /// give the same bits; the `Sync` bound is required either way so that code compiles with
     /// and without the feature.
     pub fn run<F>(&self, simulate: F) -> Result<EnsembleStats, MonteCarloError>
