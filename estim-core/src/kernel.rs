@@ -10,8 +10,9 @@
 //!   a register-blocked kernel of our own, compiled per instruction set (faer's general
 //!   product is 2–3× slower there at filter sizes), and so is a Cholesky factor below
 //!   n = 96 (faer's costs up to 2.2× as much there) and, in `f64` on a CPU with AVX-512, the
-//!   lower triangle of a product A Bᵀ for 16 ≤ n ≤ 128 (faer's: up to 1.8×). Nothing allocates (the Cholesky kernel's scratch lives in a
-//!   [`CholeskyScratch`] the caller keeps).
+//!   lower triangle of a product A Bᵀ for 16 ≤ n ≤ 128 (faer's: up to 1.8×). Nothing
+//!   allocates (the Cholesky kernel's scratch lives in a [`CholeskyScratch`] the caller
+//!   keeps).
 //! - runtime sizes with another scalar type: nalgebra (which may allocate temporaries).
 //!
 //! The choice is made per call from the types (a `TypeId` comparison the compiler folds), so
@@ -1247,8 +1248,9 @@ mod tests {
     }
 
     /// The matrix–vector kernel against nalgebra's product, on the instruction set `mul`
-    /// dispatches to, and on scalar, AVX2 and (f64, from 16 rows) AVX-512 if the CPU has them, on shapes around its panels (1–8 vectors and a remainder
-    /// of rows, empty ones), both accumulations, α = 1 and not; the bound is the usual
+    /// dispatches to, and on scalar, AVX2 and (f64, from 16 rows) AVX-512 if the CPU has them,
+    /// on shapes around its panels (1–8 vectors and a remainder of rows, empty ones), both
+    /// accumulations, α = 1 and not; the bound is the usual
     /// dot-product one, |error| ≤ k ε Σ |α aᵢⱼ xⱼ| (+ |y| ε for the accumulation). Also
     /// `kernel::mul` itself, `mul_into_column` in f32 and its any-scalar fallback.
     #[test]
