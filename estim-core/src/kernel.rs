@@ -706,7 +706,14 @@ where
     };
     if dst.ncols() == 1 && !transpose_a && !transpose_b && !lower {
         // A matrix times a vector: faer's general product costs 2–3× the panel kernel here
-        // (see `Matvec`).
+        // (see `Matvec`), which checks only the number of entries.
+        assert!(
+            a.shape() == (dst.nrows(), b.nrows()) && b.ncols() == 1,
+            "matrix × vector: {:?} ← {:?} × {:?}",
+            dst.shape(),
+            a.shape(),
+            b.shape()
+        );
         U::matvec(dst.as_mut_slice(), accum, alpha, a.as_slice(), b.as_slice());
         return true;
     }
@@ -1561,6 +1568,17 @@ mod tests {
                 assert!((xs[(i, j)] - x[(i, j)]).abs() < 1e-12);
             }
         }
+    }
+
+    /// A runtime-size matrix times a vector whose shapes disagree but whose entry counts
+    /// match (4 × 6 times 4 into 6) panics, as every other product does, instead of running.
+    #[test]
+    #[should_panic(expected = "matrix × vector")]
+    fn matrix_vector_shape_mismatch_panics() {
+        let a = DMatrix::<f64>::zeros(4, 6);
+        let x = DVector::<f64>::zeros(4);
+        let mut y = DVector::<f64>::zeros(6);
+        mul(&mut y, Accum::Replace, 1.0, &a, &x);
     }
 
     #[test]

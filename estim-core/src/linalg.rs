@@ -249,9 +249,10 @@ where
         }
         if a[(p, p)] <= tol {
             // The rest has (numerically) zero variance: every remaining covariance must vanish.
+            // Negated so that a NaN covariance fails too.
             for k in j..n {
                 for i in k..n {
-                    if a[(i, k)].abs() > off_tol {
+                    if !(a[(i, k)].abs() <= off_tol) {
                         return Err(());
                     }
                 }
@@ -592,8 +593,9 @@ where
     )
 }
 
-/// `Ok(())` if `m` is symmetric within `√ε · max|mᵢⱼ|`, else [`Error::NotSymmetric`] naming
-/// the worst pair.
+/// `Ok(())` if `m` is symmetric within `√ε · max|mᵢⱼ|` (the largest finite entry), else
+/// [`Error::NotSymmetric`] naming the worst pair. A pair is symmetric if equal (±∞ included)
+/// or within that tolerance; a pair with a NaN never is, and is the worst.
 pub fn ensure_symmetric<T: Real, D: Dim>(
     m: &OMatrix<T, D, D>,
     stage: Stage,
@@ -603,26 +605,36 @@ where
     DefaultAllocator: Allocator<D, D>,
 {
     let n = m.nrows();
-    let scale = m.iter().fold(T::zero(), |a, v| a.max(v.abs()));
+    let scale = m
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold(T::zero(), |a, v| a.max(v.abs()));
     let tol = T::default_epsilon().sqrt() * scale;
-    let mut worst = (T::zero(), 0, 0);
+    // The worst asymmetric pair so far: its gap and position; a NaN gap (a NaN entry)
+    // outranks every other, ∞ included.
+    let is_nan = |x: T| x.partial_cmp(&x).is_none();
+    let mut worst: Option<(T, usize, usize)> = None;
     for j in 0..n {
         for i in (j + 1)..n {
-            let gap = (m[(i, j)] - m[(j, i)]).abs();
-            if gap > worst.0 {
-                worst = (gap, i, j);
+            let (lower, upper) = (m[(i, j)], m[(j, i)]);
+            let gap = (lower - upper).abs();
+            if lower == upper || gap <= tol {
+                continue;
+            }
+            let worse = worst.is_none_or(|(w, _, _)| !is_nan(w) && (is_nan(gap) || gap > w));
+            if worse {
+                worst = Some((gap, i, j));
             }
         }
     }
-    if worst.0 > tol {
-        Err(Error::NotSymmetric {
+    match worst {
+        Some((_, row, col)) => Err(Error::NotSymmetric {
             stage,
             quantity,
-            row: worst.1,
-            col: worst.2,
-        })
-    } else {
-        Ok(())
+            row,
+            col,
+        }),
+        None => Ok(()),
     }
 }
 
@@ -679,6 +691,71 @@ mod tests {
                 assert_eq!(x.to_bits(), y.to_bits(), "n = {n}");
             }
         }
+    }
+
+    /// NaN covariances are rejected on every route of `psd_factor`, also where the pivoted
+    /// fallback meets a zero-variance block (whose covariances must vanish: a NaN does not),
+    /// and by the in-place route of `psd_factor_into` (Cholesky first, then the fallback).
+    #[test]
+    fn psd_factor_rejects_nan_covariances() {
+        let nan = f64::NAN;
+        let two = DMatrix::from_row_slice(2, 2, &[0.0, nan, nan, 0.0]);
+        let three = DMatrix::from_row_slice(3, 3, &[1.0, 0.0, 0.0, 0.0, 0.0, nan, 0.0, nan, 0.0]);
+        let diagonal = DMatrix::from_row_slice(2, 2, &[nan, 0.0, 0.0, 1.0]);
+        let dense = DMatrix::from_row_slice(2, 2, &[2.0, nan, nan, 2.0]);
+        for c in [two, three, diagonal, dense] {
+            let stage = Stage::Propagation;
+            assert!(psd_factor(&c, stage).is_err(), "{c}");
+            let mut out = DMatrix::zeros(c.nrows(), c.ncols());
+            let mut scratch = CholeskyScratch::default();
+            assert!(
+                psd_factor_into(&c, &mut out, &mut scratch, stage).is_err(),
+                "{c}"
+            );
+            assert!(ensure_psd(&c, stage, Quantity::Covariance).is_err(), "{c}");
+        }
+    }
+
+    /// A NaN or an infinite entry makes a pair asymmetric unless both entries are the same
+    /// infinity; a NaN pair is named before a larger finite or infinite gap.
+    #[test]
+    fn ensure_symmetric_sees_non_finite_pairs() {
+        let check = |rows: &[f64]| {
+            let m = DMatrix::from_row_slice(3, 3, rows);
+            match ensure_symmetric(&m, Stage::Construction, Quantity::Covariance) {
+                Ok(()) => None,
+                Err(Error::NotSymmetric { row, col, .. }) => Some((row, col)),
+                Err(e) => panic!("unexpected {e:?}"),
+            }
+        };
+        let (nan, inf) = (f64::NAN, f64::INFINITY);
+        assert_eq!(
+            check(&[1.0, 0.0, 0.0, nan, 1.0, 0.0, 0.0, 0.0, 1.0]),
+            Some((1, 0))
+        );
+        assert_eq!(
+            check(&[1.0, 5.0, 0.0, inf, 1.0, 0.0, 0.0, 0.0, 1.0]),
+            Some((1, 0))
+        );
+        assert_eq!(
+            check(&[1.0, 9.0, nan, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
+            Some((2, 0))
+        );
+        assert_eq!(
+            check(&[1.0, inf, 0.0, 0.0, 1.0, nan, 0.0, 0.0, 1.0]),
+            Some((2, 1))
+        );
+        assert_eq!(check(&[1.0, inf, 0.0, inf, 1.0, 0.0, 0.0, 0.0, 1.0]), None);
+        assert_eq!(check(&[inf, 0.5, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 1.0]), None);
+        // Finite gaps: still against √ε of the largest (finite) entry.
+        assert_eq!(
+            check(&[4.0, 1.0, 0.0, 1.0 + 1e-9, 1.0, 0.0, 0.0, 0.0, 1.0]),
+            None
+        );
+        assert_eq!(
+            check(&[4.0, 1.0, 0.0, 1.0 + 1e-6, 1.0, 0.0, 0.0, 0.0, 1.0]),
+            Some((1, 0))
+        );
     }
 
     #[test]
