@@ -1,5 +1,6 @@
 //! The decorrelated process used when process and measurement noise are correlated.
 
+use estim_core::kernel::is_static;
 use estim_core::linalg::{ensure_finite, ensure_shape, psd_factor, symmetrize};
 use estim_core::nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{
@@ -12,6 +13,12 @@ use estim_core::{
 /// w* = w − D v is uncorrelated with the measurement noise v (see
 /// [`PredictCorrelated`](crate::PredictCorrelated)). Its Jacobian is F − D H and the Hessian of
 /// component k is ∂²fₖ − Σⱼ Dₖⱼ ∂²hⱼ, so it has every capability its two models have.
+///
+/// On runtime sizes [`new`](Self::new) checks the lengths of f(x), h(x) and z ⊖ h(x) at the
+/// estimate (typed errors). The Jacobian and Hessians are not evaluated there: a process
+/// Jacobian of the wrong shape reaches the propagator, which reports it; a measurement
+/// Jacobian that is not m × n, or a measurement Hessian that is not n × n, is a programmer
+/// error and panics (never a silent product over the agreeing part).
 #[derive(Debug)]
 pub struct Decorrelated<'a, P, U, H, T: Real, N: Dim, M: Dim>
 where
@@ -37,8 +44,9 @@ where
     /// Builds the decorrelated process at the estimate `x` and returns it with its noise
     /// Q* = Q − S R⁻¹ Sᵀ (Q and R evaluated at `x`).
     ///
-    /// Errors: R not positive definite, Q* not positive semi-definite, shapes or non-finite
-    /// values.
+    /// Errors: R not positive definite, Q* not positive semi-definite, shapes (on runtime
+    /// sizes also of f(x), h(x) and z ⊖ h(x): a model whose h(x) has another length than z is
+    /// reported as z's length, as by the update) or non-finite values.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         process: &'a P,
@@ -60,6 +68,23 @@ where
         let q = process.process_noise(x, input, dt);
         ensure_shape(&q, n, n, stage, Quantity::ProcessNoise)?;
         ensure_finite(&q, stage, Quantity::ProcessNoise)?;
+        if !(is_static::<N>() && is_static::<M>()) {
+            let fx = process.transition(x, input, dt);
+            ensure_shape(&fx, n, 1, stage, Quantity::FunctionValue)?;
+            let hx = measurement.measure(x);
+            if hx.shape() != (m, 1) {
+                return Err(Error::DimensionMismatch {
+                    stage,
+                    quantity: Quantity::Measurement,
+                    expected_rows: hx.nrows(),
+                    expected_cols: hx.ncols(),
+                    found_rows: m,
+                    found_cols: 1,
+                });
+            }
+            let residual = measurement.residual(z, &hx);
+            ensure_shape(&residual, m, 1, stage, Quantity::Innovation)?;
+        }
         let chol = Cholesky::new(r).ok_or(Error::NotPositiveDefinite {
             stage,
             quantity: Quantity::MeasurementNoise,
@@ -112,9 +137,21 @@ where
     H: MeasurementJacobian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
+    /// # Panics
+    /// If the measurement Jacobian is not m × n (see [`Decorrelated`]).
+    #[track_caller]
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, N, N> {
         let mut jac = self.process.transition_jacobian(x, self.input, self.dt);
+        let (n, m) = self.gain.shape();
+        if jac.shape() != (n, n) {
+            return jac; // the propagator reports its shape
+        }
         let h = self.measurement.measurement_jacobian(x);
+        assert!(
+            h.shape() == (m, n),
+            "measurement Jacobian is {:?}, expected {m} × {n} (m × n)",
+            h.shape()
+        );
         jac.gemm(-T::one(), &self.gain, &h, T::one());
         jac
     }
@@ -129,14 +166,26 @@ where
     H: MeasurementHessian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
+    /// # Panics
+    /// If a measurement Hessian is not n × n (see [`Decorrelated`]).
+    #[track_caller]
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         let mut total = self.process.transition_hessian(x, self.input, self.dt, k);
+        let n = self.gain.nrows();
+        if total.as_ref().is_some_and(|t| t.shape() != (n, n)) {
+            return total; // the propagator reports its shape
+        }
         for j in 0..self.gain.ncols() {
             let d = self.gain[(k, j)];
             if d == T::zero() {
                 continue;
             }
             if let Some(hj) = self.measurement.measurement_hessian(x, j) {
+                assert!(
+                    hj.shape() == (n, n),
+                    "measurement Hessian {j} is {:?}, expected {n} × {n}",
+                    hj.shape()
+                );
                 match &mut total {
                     Some(t) => *t -= hj * d,
                     None => total = Some(hj * (-d)),

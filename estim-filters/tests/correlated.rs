@@ -5,11 +5,14 @@
 mod common;
 
 use common::{UKF_SMALL_ALPHA_STATE_TOL, gaussian_matrix, random_spd, random_stable, rng, sample};
+use core::fmt::Debug;
+
 use estim_core::nalgebra::{
-    Matrix2, Matrix3, Matrix3x2, SMatrix, SVector, U1, U2, U3, U5, Vector1, Vector2, Vector3,
+    DMatrix, DVector, Dyn, Matrix2, Matrix3, Matrix3x2, SMatrix, SVector, U1, U2, U3, U5, Vector1,
+    Vector2, Vector3,
 };
 use estim_core::propagate::Unscented;
-use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+use estim_core::{Error, Gaussian, LinearMeasurement, LinearProcess, Quantity, Stage};
 use estim_filters::{
     Ekf, Estimator, GaussianFilter, KalmanFilter, Predict, PredictCorrelated, SecondOrderEkf, Ukf,
     Update,
@@ -313,4 +316,129 @@ fn ignoring_the_correlation_changes_the_estimate() {
         gap_x > 1e-2 && gap_p > 1e-2,
         "correlation had no effect: {gap_x}, {gap_p}"
     );
+}
+
+/// A runtime-size linear model pair (3 states, 2 measurements) whose outputs can be given
+/// the wrong size: f(x) with `extra_states` more entries, h(x) with `extra_readings` more,
+/// the measurement Jacobian with `extra_columns` more columns.
+#[derive(Clone, Default)]
+struct Misshapen {
+    extra_states: usize,
+    extra_readings: usize,
+    extra_columns: usize,
+}
+
+const DYN_H: [f64; 6] = [1.0, 0.0, 0.5, 0.0, 1.0, 0.0];
+
+impl estim_core::ProcessModel<f64, Dyn> for Misshapen {
+    type Input = ();
+    fn transition(&self, x: &DVector<f64>, _: &(), _: f64) -> DVector<f64> {
+        let mut y = x * 0.9;
+        y.extend(core::iter::repeat_n(0.0, self.extra_states));
+        y
+    }
+    fn process_noise(&self, x: &DVector<f64>, _: &(), _: f64) -> DMatrix<f64> {
+        DMatrix::identity(x.len(), x.len()) * 0.1
+    }
+}
+
+impl estim_core::ProcessJacobian<f64, Dyn> for Misshapen {
+    fn transition_jacobian(&self, x: &DVector<f64>, _: &(), _: f64) -> DMatrix<f64> {
+        DMatrix::identity(x.len(), x.len()) * 0.9
+    }
+}
+
+impl estim_core::MeasurementModel<f64, Dyn, Dyn> for Misshapen {
+    fn measure(&self, x: &DVector<f64>) -> DVector<f64> {
+        let mut y = DMatrix::from_row_slice(2, 3, &DYN_H) * x;
+        y.extend(core::iter::repeat_n(1.0, self.extra_readings));
+        y
+    }
+    fn measurement_noise(&self, _: &DVector<f64>) -> DMatrix<f64> {
+        DMatrix::identity(2, 2) * 0.2
+    }
+}
+
+impl estim_core::MeasurementJacobian<f64, Dyn, Dyn> for Misshapen {
+    fn measurement_jacobian(&self, _: &DVector<f64>) -> DMatrix<f64> {
+        DMatrix::from_row_slice(2, 3, &DYN_H).insert_columns(3, self.extra_columns, 7.0)
+    }
+}
+
+fn dyn_prior() -> Gaussian<f64, Dyn> {
+    Gaussian::new(
+        DVector::from_vec(vec![1.0, 2.0, 3.0]),
+        DMatrix::identity(3, 3),
+    )
+    .unwrap()
+}
+
+/// On runtime sizes `predict_correlated` checks the lengths of f(x), h(x) against the filter
+/// and z (typed errors, filter unchanged), as `predict` and `update` do; before, an h(x) one
+/// too long or an f(x) one too long panicked inside nalgebra.
+#[test]
+fn correlated_prediction_checks_runtime_model_lengths() {
+    fn check<F>(mut filter: F)
+    where
+        F: PredictCorrelated<f64, Dyn, Dyn, Misshapen, Misshapen> + Clone + PartialEq + Debug,
+    {
+        let z = DVector::from_vec(vec![0.5, 1.0]);
+        let cross = DMatrix::from_element(3, 2, 0.01);
+        let run = |f: &mut F, model: &Misshapen| {
+            let before = f.clone();
+            let result = f.predict_correlated(model, &(), 1.0, model, &z, &cross);
+            if result.is_err() {
+                assert!(*f == before, "a failed prediction changed the filter");
+            }
+            result
+        };
+        let long_h = Misshapen {
+            extra_readings: 1,
+            ..Misshapen::default()
+        };
+        assert_eq!(
+            run(&mut filter, &long_h).unwrap_err(),
+            Error::DimensionMismatch {
+                stage: Stage::Prediction,
+                quantity: Quantity::Measurement,
+                expected_rows: 3,
+                expected_cols: 1,
+                found_rows: 2,
+                found_cols: 1,
+            }
+        );
+        let long_f = Misshapen {
+            extra_states: 1,
+            ..Misshapen::default()
+        };
+        assert_eq!(
+            run(&mut filter, &long_f).unwrap_err(),
+            Error::DimensionMismatch {
+                stage: Stage::Prediction,
+                quantity: Quantity::FunctionValue,
+                expected_rows: 3,
+                expected_cols: 1,
+                found_rows: 4,
+                found_cols: 1,
+            }
+        );
+        run(&mut filter, &Misshapen::default()).unwrap();
+    }
+    check(Ekf::new(dyn_prior()));
+    check(Ukf::new(dyn_prior()));
+}
+
+/// A measurement Jacobian with a column too many: before, the EKF's correlated prediction
+/// used its first n columns and returned `Ok` (the update reports the same model as a
+/// `DimensionMismatch`); now it is the documented programmer-error panic.
+#[test]
+#[should_panic(expected = "measurement Jacobian is (2, 4), expected 2 × 3")]
+fn correlated_prediction_rejects_a_misshapen_measurement_jacobian() {
+    let wide = Misshapen {
+        extra_columns: 1,
+        ..Misshapen::default()
+    };
+    let z = DVector::from_vec(vec![0.5, 1.0]);
+    let cross = DMatrix::from_element(3, 2, 0.01);
+    let _ = Ekf::new(dyn_prior()).predict_correlated(&wide, &(), 1.0, &wide, &z, &cross);
 }
