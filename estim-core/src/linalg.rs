@@ -638,6 +638,27 @@ where
     }
 }
 
+/// `Ok(())` unless a diagonal entry of the square `m` is below −[`psd_tolerance`], else
+/// [`Error::NotPositiveSemiDefinite`]. A necessary condition for positive semi-definiteness
+/// (variances are not negative) in O(n): for noise matrices met every step, where
+/// [`ensure_psd`] would cost a factorisation. NaN entries pass (finiteness is checked
+/// separately).
+pub fn ensure_nonnegative_diagonal<T: Real, D: Dim>(
+    m: &OMatrix<T, D, D>,
+    stage: Stage,
+    quantity: Quantity,
+) -> Result<()>
+where
+    DefaultAllocator: Allocator<D, D>,
+{
+    let floor = -psd_tolerance(m);
+    if (0..m.nrows()).any(|i| m[(i, i)] < floor) {
+        Err(Error::NotPositiveSemiDefinite { stage, quantity })
+    } else {
+        Ok(())
+    }
+}
+
 /// `Ok(())` if the symmetric `m` is positive semi-definite within [`psd_tolerance`].
 pub fn ensure_psd<T: Real, D: Dim>(
     m: &OMatrix<T, D, D>,
@@ -714,6 +735,24 @@ mod tests {
             );
             assert!(ensure_psd(&c, stage, Quantity::Covariance).is_err(), "{c}");
         }
+    }
+
+    /// Negative variances are rejected, round-off below the PSD tolerance and NaN are not.
+    #[test]
+    fn ensure_nonnegative_diagonal_rejects_negative_variances() {
+        let check = |d: &[f64]| {
+            let m = DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(d));
+            ensure_nonnegative_diagonal(&m, Stage::Update, Quantity::MeasurementNoise)
+        };
+        let rejected = Err(Error::NotPositiveSemiDefinite {
+            stage: Stage::Update,
+            quantity: Quantity::MeasurementNoise,
+        });
+        assert_eq!(check(&[-0.5, 0.09]), rejected);
+        assert_eq!(check(&[1.0, 2.0, -1e-6]), rejected);
+        assert_eq!(check(&[1.0, 2.0, -1e-17]), Ok(()));
+        assert_eq!(check(&[1.0, 0.0, f64::NAN]), Ok(()));
+        assert_eq!(check(&[]), Ok(()));
     }
 
     /// A NaN or an infinite entry makes a pair asymmetric unless both entries are the same

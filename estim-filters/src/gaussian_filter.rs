@@ -1,7 +1,7 @@
 //! The Kalman family as one filter parameterised by its moment propagator.
 
 use estim_core::kernel;
-use estim_core::linalg::{all_finite, ensure_shape};
+use estim_core::linalg::{all_finite, ensure_nonnegative_diagonal, ensure_shape};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{
     Affine, Linearized, MomentPropagator, SecondOrder, SecondOrderGaussian, Unscented,
@@ -247,6 +247,9 @@ where
         noise: q,
     } = scratch;
     ensure_shape(q, n, n, stage, Quantity::ProcessNoise)?;
+    // A negative variance in Q would make P⁻ indefinite without any other check failing.
+    // Checking all of Q's definiteness would cost a factorisation per step; its diagonal, O(n).
+    ensure_nonnegative_diagonal(q, stage, Quantity::ProcessNoise)?;
     // The propagator checks its own outputs; Q is checked through P⁻ = cov f + Q, and only on
     // failure is it examined to name the culprit.
     propagator

@@ -33,7 +33,9 @@ where
 {
     /// Propagates the estimate through x⁺ = f(x, u, Δt) + w.
     ///
-    /// On error the filter is left exactly as it was.
+    /// On error the filter is left exactly as it was. Q must be finite and have no negative
+    /// variance on its diagonal (checked each step, O(n); its full positive
+    /// semi-definiteness is not, which would cost a factorisation per step).
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()>;
 
     /// Sizes ahead of time every buffer that [`predict`](Self::predict) with this model needs,
@@ -60,7 +62,10 @@ where
     ///
     /// Returns the update report (innovation, its covariance, NIS, log-likelihood); if a gate
     /// is set and the NIS exceeds it, the report says [`Gated`](crate::UpdateOutcome::Gated)
-    /// and the estimate is unchanged. On error the filter is left exactly as it was.
+    /// and the estimate is unchanged. On error the filter is left exactly as it was. R must
+    /// be finite with no negative variance on its diagonal and S = cov ẑ + R positive
+    /// definite (checked each step; R's full positive semi-definiteness is not, which would
+    /// cost a factorisation per step).
     ///
     /// The report is a new value each call; with runtime sizes that is the one allocation of
     /// the step, which [`update_into`](Self::update_into) avoids.

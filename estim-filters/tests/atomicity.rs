@@ -117,10 +117,10 @@ where
         },
         |f| f.update(&m.measurement, &Vector2::new(0.0, f64::NEG_INFINITY)),
     );
-    // R negative definite ⇒ S = H P Hᵀ + R not positive definite.
+    // R indefinite with a positive diagonal ⇒ S = H P Hᵀ + R not positive definite.
     let negative_r = LinearMeasurement {
         observation: m.measurement.observation,
-        noise: -Matrix2::identity() * 1e3,
+        noise: Matrix2::new(1.0, 1e3, 1e3, 1.0),
     };
     assert_fails_atomically(
         &mut filter,
@@ -130,6 +130,30 @@ where
         },
         |f| f.update(&negative_r, &Vector2::new(0.0, 0.0)),
     );
+    // A negative variance in R, named as such: R = −10³ I, and one small enough that S stays
+    // positive definite (accepted before the diagonal check, with a posterior whose variances
+    // went negative).
+    let small = Matrix2::new(-1e-3, 0.0, 0.0, 0.09);
+    let h = m.measurement.observation;
+    let s = h * filter.covariance() * h.transpose() + small;
+    assert!(
+        s.cholesky().is_some(),
+        "S = H P Hᵀ + R stays positive definite"
+    );
+    for noise in [-Matrix2::identity() * 1e3, small] {
+        let model = LinearMeasurement {
+            observation: m.measurement.observation,
+            noise,
+        };
+        assert_fails_atomically(
+            &mut filter,
+            Error::NotPositiveSemiDefinite {
+                stage: Stage::Update,
+                quantity: Quantity::MeasurementNoise,
+            },
+            |f| f.update(&model, &Vector2::new(0.0, 0.0)),
+        );
+    }
     // NaN in R.
     let nan_r = LinearMeasurement {
         observation: m.measurement.observation,
@@ -179,6 +203,17 @@ where
             quantity: Quantity::ProcessNoise,
         },
         |f| f.predict(&nan_q, &u, 0.1),
+    );
+    // A negative variance in Q (P⁻ = F P Fᵀ + Q would lose positive definiteness silently).
+    let mut negative_q = m.process.clone();
+    negative_q.noise = -Matrix3::identity() * 5.0;
+    assert_fails_atomically(
+        &mut filter,
+        Error::NotPositiveSemiDefinite {
+            stage: Stage::Prediction,
+            quantity: Quantity::ProcessNoise,
+        },
+        |f| f.predict(&negative_q, &u, 0.1),
     );
     // A prediction that fails after the moments are computed: F P Fᵀ overflows.
     let mut exploding = m.process.clone();
@@ -456,7 +491,7 @@ fn failed_rls_updates_leave_it_unchanged() {
     );
     let negative_r = LinearMeasurement {
         observation: m.measurement.observation,
-        noise: -Matrix2::identity() * 1e3,
+        noise: Matrix2::new(1.0, 1e3, 1e3, 1.0),
     };
     assert_fails_atomically(
         &mut rls,
@@ -465,6 +500,18 @@ fn failed_rls_updates_leave_it_unchanged() {
             quantity: Quantity::InnovationCovariance,
         },
         |f| f.update(&negative_r, &Vector2::zeros()),
+    );
+    let negative_variance = LinearMeasurement {
+        observation: m.measurement.observation,
+        noise: Matrix2::new(-1e-3, 0.0, 0.0, 0.09),
+    };
+    assert_fails_atomically(
+        &mut rls,
+        Error::NotPositiveSemiDefinite {
+            stage: Stage::Update,
+            quantity: Quantity::MeasurementNoise,
+        },
+        |f| f.update(&negative_variance, &Vector2::zeros()),
     );
     let mut dynamic = FadingMemoryRls::new(
         Gaussian::new(DVector::zeros(2), DMatrix::identity(2, 2)).unwrap(),
