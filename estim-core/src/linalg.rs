@@ -651,8 +651,17 @@ pub fn ensure_nonnegative_diagonal<T: Real, D: Dim>(
 where
     DefaultAllocator: Allocator<D, D>,
 {
-    let floor = -psd_tolerance(m);
-    if (0..m.nrows()).any(|i| m[(i, i)] < floor) {
+    /// The rare case: some variance is negative; is it beyond round-off?
+    #[cold]
+    fn beyond_round_off<T: Real, D: Dim>(m: &OMatrix<T, D, D>) -> bool
+    where
+        DefaultAllocator: Allocator<D, D>,
+    {
+        let floor = -psd_tolerance(m);
+        (0..m.nrows()).any(|i| m[(i, i)] < floor)
+    }
+    let negative = (0..m.nrows()).any(|i| m[(i, i)] < T::zero());
+    if negative && beyond_round_off(m) {
         Err(Error::NotPositiveSemiDefinite { stage, quantity })
     } else {
         Ok(())

@@ -172,8 +172,10 @@ where
     kernel::solve_lower_in_place(factor, whitened);
     let nis = whitened.norm_squared();
     if !nis.is_finite() {
-        // A bad measurement is an error, never a gated outlier. (With finite inputs an
-        // overflowing NIS is gated if a gate is set, else it fails below.)
+        // A bad measurement is an error, never a gated outlier. With finite inputs an
+        // overflowing NIS (‖L⁻¹ν‖² beyond the largest float) is gated if a gate is set;
+        // without one the update applies if the new estimate is finite (reported NIS ∞,
+        // log-likelihood −∞), and fails below if not.
         if let Some(e) = bad_input(&report.innovation, noise) {
             return Err(e);
         }
