@@ -77,29 +77,28 @@ pub fn chi2_sf(x: f64, dof: usize) -> f64 {
     let h = 0.5 * x;
     let ln_h = h.ln();
     // tⱼ = tⱼ₋₁ · h/(j + s) from t₀: s = 0, t₀ = e^{−h} (k even); s = ½, t₀ = e^{−h} √h / Γ(3/2)
-    // with Γ(3/2) = √π/2 (k odd).
-    let (count, shift, ln_first) = if dof.is_multiple_of(2) {
-        (dof / 2, 0.0, -h)
+    // with Γ(3/2) = √π/2, after the erfc head (k odd).
+    let (count, shift, ln_first, head) = if dof.is_multiple_of(2) {
+        (dof / 2, 0.0, -h, 0.0)
     } else {
-        ((dof - 1) / 2, 0.5, -h + 0.5 * ln_h - (0.5 * PI.sqrt()).ln())
+        let ln_first = -h + 0.5 * ln_h - (0.5 * PI.sqrt()).ln();
+        ((dof - 1) / 2, 0.5, ln_first, erfc(h.sqrt()))
     };
-    let ln_terms = core::iter::successors(Some((0usize, ln_first)), |&(j, ln_t)| {
-        let j = j + 1;
-        Some((j, ln_t + ln_h - (j as f64 + shift).ln()))
-    })
-    .take(count)
-    .map(|(_, ln_t)| ln_t);
-    let largest = ln_terms.clone().fold(f64::NEG_INFINITY, f64::max);
-    let sum = if count == 0 {
-        0.0
-    } else {
-        largest.exp() * ln_terms.map(|ln_t| (ln_t - largest).exp()).sum::<f64>()
-    };
-    let head = if dof.is_multiple_of(2) {
-        0.0
-    } else {
-        erfc(h.sqrt())
-    };
+    // One pass: Σ tⱼ = e^{largest} · scaled, rescaled whenever a larger term arrives (no
+    // terms: e^{−∞} · 0 = 0).
+    let (mut largest, mut scaled, mut ln_t) = (f64::NEG_INFINITY, 0.0, ln_first);
+    for j in 0..count {
+        if j > 0 {
+            ln_t += ln_h - (j as f64 + shift).ln();
+        }
+        if ln_t > largest {
+            scaled = scaled * (largest - ln_t).exp() + 1.0;
+            largest = ln_t;
+        } else {
+            scaled += (ln_t - largest).exp();
+        }
+    }
+    let sum = largest.exp() * scaled;
     (head + sum).min(1.0)
 }
 
