@@ -78,6 +78,9 @@ fn chi2_survival_and_quantiles_match_reference() {
     }
     assert_eq!(chi2_sf(0.0, 3), 1.0);
     assert_eq!(chi2_sf(1.0, 0), 0.0);
+    for k in 1..6 {
+        assert_eq!(chi2_sf(f64::INFINITY, k), 0.0, "sf(∞, {k})");
+    }
     assert!(chi2_quantile_upper(0.0, 1).is_nan());
     assert!(chi2_quantile_upper(0.1, 0).is_nan());
 }

@@ -63,7 +63,7 @@ pub fn normal_cdf(x: f64) -> f64 {
 /// ≈ 5 · 10⁻¹² at k = 2000 and 10⁻¹¹ at k = 3000 against mpmath; test `lv2_stats`).
 ///
 /// `dof = 0` (no redundancy) gives 0 for x > 0 (χ²₀ is the point mass at 0) and 1 otherwise;
-/// x ≤ 0 gives 1.
+/// x ≤ 0 gives 1, x = ∞ gives 0.
 pub fn chi2_sf(x: f64, dof: usize) -> f64 {
     if x.is_nan() {
         return f64::NAN;
@@ -71,7 +71,7 @@ pub fn chi2_sf(x: f64, dof: usize) -> f64 {
     if x <= 0.0 {
         return 1.0;
     }
-    if dof == 0 {
+    if dof == 0 || x == f64::INFINITY {
         return 0.0;
     }
     let h = 0.5 * x;
