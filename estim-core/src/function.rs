@@ -4,22 +4,37 @@
 //! - [`Differentiable`]: adds the Jacobian J = ∂g/∂x (m × n) (linearised propagation).
 //! - [`TwiceDifferentiable`]: adds the Hessian Hₖ = ∂²gₖ/∂x² (n × n) of each output
 //!   component k (second-order propagation), where a component may be declared affine.
+//! - [`AffineFunction`]: a marker for g(x) = J x + c, which linear-only algorithms require.
 //!
-//! A propagator states in its bounds which level it needs, so a function without Hessians
-//! fails at compile time when given to a second-order propagator.
+//! Each trait has one required method. A propagator states in its bounds which level it needs,
+//! so a function without Hessians fails at compile time when given to a second-order
+//! propagator.
 //!
-//! Every method also has an `_into` form that writes into a buffer the caller owns (already of
-//! the right shape). By default it stores the owned result there, which for runtime (`Dyn`)
-//! sizes allocates; implement the `_into` forms to make dynamic-size propagation, and the
-//! filter steps built on it, allocation-free. Whatever they write is shape-checked by the
-//! caller, so a wrong size is a typed error, not a wrong answer.
+//! The provided `_into` methods write into a buffer the caller owns (already of the right
+//! shape). By default they store the owned result there, which for runtime (`Dyn`) sizes
+//! allocates; override them to make dynamic-size propagation, and the filter steps built on it,
+//! allocation-free. Whatever they write is shape-checked by the caller, so a wrong size is a
+//! typed error, not a wrong answer.
 
-use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 
 use crate::alloc::Alloc;
 use crate::scalar::Real;
 
 /// y = g(x) from an `N`-dimensional to an `M`-dimensional space.
+///
+/// ```
+/// use estim_core::VectorFunction;
+/// use estim_core::nalgebra::{Const, Vector1, Vector2};
+///
+/// struct Norm2;
+/// impl VectorFunction<f64, Const<2>, Const<1>> for Norm2 {
+///     fn eval(&self, x: &Vector2<f64>) -> Vector1<f64> {
+///         Vector1::new(x.norm_squared())
+///     }
+/// }
+/// assert_eq!(Norm2.eval(&Vector2::new(3.0, 4.0))[0], 25.0);
+/// ```
 pub trait VectorFunction<T: Real, N: Dim, M: Dim>
 where
     DefaultAllocator: Alloc<N, M>,
@@ -29,7 +44,7 @@ where
 
     /// The difference a ⊖ b of two outputs, used wherever outputs are subtracted (deviations
     /// from a mean, innovations). Defaults to a − b; override it for outputs that wrap, such
-    /// as angles, e.g. to return the difference wrapped into (−π, π].
+    /// as angles (see [`wrap_angle`](crate::wrap_angle)).
     fn difference(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
         a - b
     }
@@ -46,14 +61,14 @@ where
         *out = self.difference(a, b);
     }
 
-    /// g at the 2n points μ ± Lⱼ (Lⱼ the columns of the n × n `offsets`), all at once: g(μ + Lⱼ)
-    /// into column j of `plus` and g(μ − Lⱼ) into column j of `minus` (both m × n). `true` if
-    /// done; `false` (the default, nothing written) has the caller evaluate the points one by
-    /// one through [`eval_into`](Self::eval_into). The unscented transform asks for its sigma
-    /// points this way (offsets √c L) when the state size is a runtime one (`Dyn`; at static
-    /// sizes it goes point by point, which measured faster there). Implement it when the points
-    /// map together more cheaply: e.g. for g(x) = A x, A μ 1ᵀ ± A L with one matrix product A L
-    /// for all 2n points ([`LinearProcess`](crate::LinearProcess) does this).
+    /// g at the 2n sigma points μ ± Lⱼ (Lⱼ the columns of the n × n `offsets`): g(μ + Lⱼ)
+    /// into column j of `plus`, g(μ − Lⱼ) into column j of `minus` (both m × n).
+    ///
+    /// The default maps the points one at a time through [`eval_into`](Self::eval_into),
+    /// using `scratch` for the point and the value. Override it when the points map together
+    /// more cheaply: for g(x) = A x, A μ 1ᵀ ± A L is one matrix product A L for all 2n points
+    /// ([`LinearProcess`](crate::LinearProcess) does this). The unscented propagator calls it
+    /// for runtime-sized states.
     #[inline(always)]
     fn eval_sigma_points_into(
         &self,
@@ -61,9 +76,70 @@ where
         offsets: &OMatrix<T, N, N>,
         plus: &mut OMatrix<T, M, N>,
         minus: &mut OMatrix<T, M, N>,
-    ) -> bool {
-        let _ = (mean, offsets, plus, minus);
-        false
+        scratch: &mut SigmaScratch<T, N, M>,
+    ) {
+        sigma_points_one_by_one(mean, offsets, plus, minus, scratch, |x, y| {
+            self.eval_into(x, y)
+        });
+    }
+}
+
+/// The point and value buffers that [`VectorFunction::eval_sigma_points_into`]'s default
+/// (one point at a time) works in. Created by the caller; an implementation that maps all
+/// points at once ignores it.
+#[derive(Clone, Debug)]
+pub struct SigmaScratch<T: Real, N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    point: OVector<T, N>,
+    value: OVector<T, M>,
+}
+
+impl<T: Real, N: Dim, M: Dim> SigmaScratch<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// Buffers for a map from `n` to `m` dimensions.
+    pub fn new(n: N, m: M) -> Self {
+        Self {
+            point: OVector::zeros_generic(n, U1),
+            value: OVector::zeros_generic(m, U1),
+        }
+    }
+}
+
+/// The 2n sigma points μ ± Lⱼ mapped one at a time by `eval_into` into the columns of `plus`
+/// and `minus`: the default of every `*_sigma_points_into` method. A value of the wrong length
+/// leaves its column as it was (the caller's shape check on the values reports it).
+#[inline(always)]
+pub(crate) fn sigma_points_one_by_one<T: Real, N: Dim, M: Dim>(
+    mean: &OVector<T, N>,
+    offsets: &OMatrix<T, N, N>,
+    plus: &mut OMatrix<T, M, N>,
+    minus: &mut OMatrix<T, M, N>,
+    scratch: &mut SigmaScratch<T, N, M>,
+    mut eval_into: impl FnMut(&OVector<T, N>, &mut OVector<T, M>),
+) where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let n = mean.nrows();
+    let m = plus.nrows();
+    if scratch.point.nrows() != n {
+        scratch.point = mean.clone();
+    }
+    for j in 0..n {
+        let column = &offsets.as_slice()[j * n..(j + 1) * n];
+        for (sign, values) in [(T::one(), &mut *plus), (-T::one(), &mut *minus)] {
+            let pairs = scratch.point.as_mut_slice().iter_mut().zip(mean.as_slice());
+            for ((xi, &mi), &li) in pairs.zip(column) {
+                *xi = mi + sign * li;
+            }
+            eval_into(&scratch.point, &mut scratch.value);
+            if scratch.value.nrows() == m {
+                values.as_mut_slice()[j * m..(j + 1) * m].copy_from_slice(scratch.value.as_slice());
+            }
+        }
     }
 }
 
@@ -95,20 +171,34 @@ where
     /// (then `out` is unspecified).
     #[inline(always)]
     fn hessian_into(&self, x: &OVector<T, N>, k: usize, out: &mut OMatrix<T, N, N>) -> bool {
-        match self.hessian(x, k) {
-            Some(h) => {
-                *out = h;
-                true
-            }
-            None => false,
-        }
+        store_hessian(self.hessian(x, k), out)
     }
 }
 
-/// Marker: g is affine, g(x) = J x + c with a constant Jacobian J, so every propagator is exact
-/// for it and its Hessians are zero. Implement it only when that holds; it lets linear-only
-/// algorithms (the Kalman filter) refuse nonlinear functions at compile time.
-pub trait AffineFunction<T: Real, N: Dim, M: Dim>: TwiceDifferentiable<T, N, M>
+/// Stores `Some(h)` into `out` (`true`); `None` leaves it (`false`).
+#[inline(always)]
+pub(crate) fn store_hessian<T: Real, N: Dim>(
+    h: Option<OMatrix<T, N, N>>,
+    out: &mut OMatrix<T, N, N>,
+) -> bool
+where
+    DefaultAllocator: Alloc<N>,
+{
+    match h {
+        Some(h) => {
+            *out = h;
+            true
+        }
+        None => false,
+    }
+}
+
+/// Marker: g is affine, g(x) = J x + c with a constant Jacobian J, so linearisation is exact.
+/// Implement it only when that holds; it lets linear-only algorithms (the Kalman filter)
+/// refuse nonlinear functions at compile time. It implies nothing about Hessians: a
+/// second-order propagator still asks for [`TwiceDifferentiable`], whose `hessian` an affine
+/// function implements as `None`.
+pub trait AffineFunction<T: Real, N: Dim, M: Dim>: Differentiable<T, N, M>
 where
     DefaultAllocator: Alloc<N, M>,
 {

@@ -19,8 +19,8 @@
 //! - [`Error`]: the one error type.
 //!
 //! Sizes are generic: the same code serves `SVector<f64, 6>` (stack only, no heap allocation)
-//! and `DVector<f64>` (heavy kernels on faer; allocation-free once a [`Workspace`] is sized,
-//! for models that implement the `_into` methods). The allocator bounds nalgebra needs are
+//! and `DVector<f64>` (heavy kernels on faer; allocation-free once a propagator's
+//! [workspace](PropagatorWorkspace) is sized, for models that implement the `_into` methods). The allocator bounds nalgebra needs are
 //! gathered in [`Alloc`].
 #![deny(missing_docs)]
 
@@ -38,7 +38,9 @@ pub mod scalar;
 
 pub use alloc::Alloc;
 pub use error::{Error, Parameter, Quantity, Stage};
-pub use function::{AffineFunction, Differentiable, TwiceDifferentiable, VectorFunction};
+pub use function::{
+    AffineFunction, Differentiable, SigmaScratch, TwiceDifferentiable, VectorFunction,
+};
 pub use gaussian::Gaussian;
 pub use linear::{LinearMeasurement, LinearProcess};
 pub use model::{
@@ -46,8 +48,8 @@ pub use model::{
     MeasurementModel, Observation, ProcessHessian, ProcessJacobian, ProcessModel, Transition,
 };
 pub use propagate::{
-    Affine, Linearized, MomentPropagator, Moments, Sampled, SecondOrder, SecondOrderGaussian,
-    Unscented, Workspace,
+    Affine, Linearized, MomentPropagator, Moments, Outputs, PropagatorWorkspace, Sampled,
+    SecondOrder, SecondOrderGaussian, Unscented,
 };
 pub use scalar::Real;
 

@@ -13,10 +13,11 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
+use crate::function::{SigmaScratch, sigma_points_one_by_one};
 use crate::kernel::{self, Accum, is_static};
 use crate::model::{
-    LinearMeasurementModel, LinearProcessModel, MeasurementJacobian, MeasurementModel,
-    ProcessJacobian, ProcessModel,
+    LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
+    MeasurementModel, ProcessHessian, ProcessJacobian, ProcessModel,
 };
 use crate::scalar::Real;
 
@@ -90,10 +91,11 @@ where
         mean: &OVector<T, N>,
         offsets: &OMatrix<T, N, N>,
         u: &OVector<T, U>,
-        _dt: T,
+        dt: T,
         plus: &mut OMatrix<T, N, N>,
         minus: &mut OMatrix<T, N, N>,
-    ) -> bool {
+        scratch: &mut SigmaScratch<T, N, N>,
+    ) {
         let (f, b) = (&self.transition, &self.input);
         let n = mean.nrows();
         let fits = f.shape() == (n, n)
@@ -102,7 +104,9 @@ where
             && plus.shape() == (n, n)
             && minus.shape() == (n, n);
         if !fits {
-            return false; // point by point (where wrong shapes are reported)
+            // Point by point, where the filter reports the wrong shapes.
+            let eval = |x: &OVector<T, N>, y: &mut OVector<T, N>| self.transition_into(x, u, dt, y);
+            return sigma_points_one_by_one::<T, N, N>(mean, offsets, plus, minus, scratch, eval);
         }
         kernel::mul(plus, Accum::Replace, T::one(), f, offsets);
         // The centre F μ + B u in the first column of `minus`, then spread.
@@ -111,7 +115,6 @@ where
             kernel::mul_into_column(minus, 0, Accum::Add, T::one(), b, u);
         }
         centre_plus_minus(n, plus.as_mut_slice(), minus.as_mut_slice());
-        true
     }
 }
 
@@ -178,6 +181,22 @@ where
     }
 }
 
+impl<T: Real, N: Dim, U: Dim> ProcessHessian<T, N> for LinearProcess<T, N, U>
+where
+    DefaultAllocator: Alloc<N, U>,
+{
+    /// `None`: every component is affine.
+    fn transition_hessian(
+        &self,
+        _: &OVector<T, N>,
+        _: &OVector<T, U>,
+        _dt: T,
+        _: usize,
+    ) -> Option<OMatrix<T, N, N>> {
+        None
+    }
+}
+
 impl<T: Real, N: Dim, U: Dim> LinearProcessModel<T, N> for LinearProcess<T, N, U> where
     DefaultAllocator: Alloc<N, U>
 {
@@ -236,7 +255,8 @@ where
         offsets: &OMatrix<T, N, N>,
         plus: &mut OMatrix<T, M, N>,
         minus: &mut OMatrix<T, M, N>,
-    ) -> bool {
+        scratch: &mut SigmaScratch<T, N, M>,
+    ) {
         let h = &self.observation;
         let (m, n) = (h.nrows(), mean.nrows());
         let fits = h.ncols() == n
@@ -244,14 +264,16 @@ where
             && plus.shape() == (m, n)
             && minus.shape() == (m, n);
         if !fits {
-            return false; // point by point (where wrong shapes are reported)
+            // Point by point, where the filter reports the wrong shapes.
+            return sigma_points_one_by_one(mean, offsets, plus, minus, scratch, |x, y| {
+                self.measure_into(x, y)
+            });
         }
         kernel::mul(plus, Accum::Replace, T::one(), h, offsets);
         if n > 0 {
             kernel::mul_into_column(minus, 0, Accum::Replace, T::one(), h, mean);
         }
         centre_plus_minus(m, plus.as_mut_slice(), minus.as_mut_slice());
-        true
     }
 }
 
@@ -266,6 +288,16 @@ where
     #[inline(always)]
     fn measurement_jacobian_into(&self, _: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
         assign(out, &self.observation);
+    }
+}
+
+impl<T: Real, N: Dim, M: Dim> MeasurementHessian<T, N, M> for LinearMeasurement<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// `None`: every component is affine.
+    fn measurement_hessian(&self, _: &OVector<T, N>, _: usize) -> Option<OMatrix<T, N, N>> {
+        None
     }
 }
 

@@ -16,10 +16,12 @@
 //! [`Transition`] and [`Observation`] turn a model into a [`VectorFunction`] (with the same
 //! derivative capabilities), which is what the moment propagators consume.
 //!
-//! **Allocation-free dynamic sizes.** Every method has an `_into` form writing into a buffer
-//! the filter owns (already of the right shape). The defaults store the owned result, which for
-//! `Dyn` sizes allocates; a model meant for large runtime-sized states implements the `_into`
-//! forms (as [`LinearProcess`](crate::LinearProcess) and
+//! Each capability has one required method (the value traits also require their noise).
+//!
+//! **Allocation-free dynamic sizes.** The provided `_into` methods write into a buffer the
+//! filter owns (already of the right shape). The defaults store the owned result, which for
+//! `Dyn` sizes allocates; a model meant for large runtime-sized states overrides the `_into`
+//! methods (as [`LinearProcess`](crate::LinearProcess) and
 //! [`LinearMeasurement`](crate::LinearMeasurement) do), and then a filter step allocates
 //! nothing. What a model writes is shape-checked: a wrong size is a
 //! [`DimensionMismatch`](crate::Error::DimensionMismatch), never a wrong answer.
@@ -27,7 +29,10 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
-use crate::function::{AffineFunction, Differentiable, TwiceDifferentiable, VectorFunction};
+use crate::function::{
+    AffineFunction, Differentiable, SigmaScratch, TwiceDifferentiable, VectorFunction,
+    sigma_points_one_by_one, store_hessian,
+};
 use crate::scalar::Real;
 
 /// A discrete-time process model x⁺ = f(x, u, Δt) + w, w ~ N(0, Q(x, u, Δt)).
@@ -62,12 +67,10 @@ where
         *out = self.process_noise(x, u, dt);
     }
 
-    /// f(·, u, Δt) at the 2n points μ ± Lⱼ into the columns of `plus` and `minus`, all at once:
-    /// `true` if done, `false` (the default, nothing written) for one point at a time through
-    /// [`transition_into`](Self::transition_into). See
-    /// [`VectorFunction::eval_sigma_points_into`]: the unscented prediction asks for its sigma
-    /// points this way, and a model that maps them with one matrix product saves most of its
-    /// cost.
+    /// f(·, u, Δt) at the 2n sigma points μ ± Lⱼ into the columns of `plus` and `minus`:
+    /// see [`VectorFunction::eval_sigma_points_into`]. The default maps them one at a time
+    /// through [`transition_into`](Self::transition_into); a model that maps them with one
+    /// matrix product saves most of the unscented prediction's cost.
     #[inline(always)]
     fn transition_sigma_points_into(
         &self,
@@ -77,9 +80,11 @@ where
         dt: T,
         plus: &mut OMatrix<T, N, N>,
         minus: &mut OMatrix<T, N, N>,
-    ) -> bool {
-        let _ = (mean, offsets, u, dt, plus, minus);
-        false
+        scratch: &mut SigmaScratch<T, N, N>,
+    ) {
+        sigma_points_one_by_one(mean, offsets, plus, minus, scratch, |x, y| {
+            self.transition_into(x, u, dt, y)
+        });
     }
 }
 
@@ -133,56 +138,21 @@ where
     }
 }
 
-/// Stores `Some(h)` into `out` (`true`); `None` leaves it (`false`).
-#[inline(always)]
-fn store_hessian<T: Real, N: Dim>(h: Option<OMatrix<T, N, N>>, out: &mut OMatrix<T, N, N>) -> bool
-where
-    DefaultAllocator: Alloc<N>,
-{
-    match h {
-        Some(h) => {
-            *out = h;
-            true
-        }
-        None => false,
-    }
-}
-
 /// Marker: f is affine in x, f(x, u, Δt) = F(u, Δt) x + b(u, Δt), with F the
-/// [`transition_jacobian`](ProcessJacobian::transition_jacobian). Such a model gets zero
-/// Hessians for free (so it also works with second-order filters) and is accepted by the linear
-/// Kalman filter. Implement it only when it holds (the derivative checker can confirm).
+/// [`transition_jacobian`](ProcessJacobian::transition_jacobian). The linear Kalman filter
+/// accepts only such models. Implement it only when it holds (the derivative checker can
+/// confirm).
+///
+/// A linear model needs no Hessian for the Kalman filter, the EKF or the UKF. For the
+/// second-order filters it implements [`ProcessHessian`] with `None` for every component (one
+/// line, and the second-order propagators then cost nothing extra). That impl is written, not
+/// derived from this marker: a blanket impl would make the Hessian traits impossible to
+/// implement for models generic over their scalar (overlapping impls), and would let a
+/// nonlinear model that forgot its Hessians pass with zeros.
 pub trait LinearProcessModel<T: Real, N: Dim>: ProcessJacobian<T, N>
 where
     DefaultAllocator: Alloc<N>,
 {
-}
-
-impl<T: Real, N: Dim, P: LinearProcessModel<T, N>> ProcessHessian<T, N> for P
-where
-    DefaultAllocator: Alloc<N>,
-{
-    fn transition_hessian(
-        &self,
-        _: &OVector<T, N>,
-        _: &P::Input,
-        _: T,
-        _: usize,
-    ) -> Option<OMatrix<T, N, N>> {
-        None
-    }
-
-    #[inline(always)]
-    fn transition_hessian_into(
-        &self,
-        _: &OVector<T, N>,
-        _: &P::Input,
-        _: T,
-        _: usize,
-        _: &mut OMatrix<T, N, N>,
-    ) -> bool {
-        false
-    }
 }
 
 /// A measurement model z = h(x) + v, v ~ N(0, R(x)), with `M` components.
@@ -216,15 +186,15 @@ where
 
     /// [`residual`](Self::residual) into `out`. The default stores `residual(a, b)`; a model
     /// that keeps the default subtraction can make it allocation-free for `Dyn` sizes with
-    /// `crate::kernel::copy(out, a); *out -= b;`.
+    /// `out.copy_from(a); *out -= b;`.
     #[inline(always)]
     fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
         *out = self.residual(a, b);
     }
 
-    /// h at the 2n points μ ± Lⱼ into the columns of `plus` and `minus` (m × n), all at once:
-    /// `true` if done, `false` (the default, nothing written) for one point at a time through
-    /// [`measure_into`](Self::measure_into). See [`VectorFunction::eval_sigma_points_into`].
+    /// h at the 2n sigma points μ ± Lⱼ into the columns of `plus` and `minus` (m × n): see
+    /// [`VectorFunction::eval_sigma_points_into`]. The default maps them one at a time through
+    /// [`measure_into`](Self::measure_into).
     #[inline(always)]
     fn measure_sigma_points_into(
         &self,
@@ -232,9 +202,11 @@ where
         offsets: &OMatrix<T, N, N>,
         plus: &mut OMatrix<T, M, N>,
         minus: &mut OMatrix<T, M, N>,
-    ) -> bool {
-        let _ = (mean, offsets, plus, minus);
-        false
+        scratch: &mut SigmaScratch<T, N, M>,
+    ) {
+        sigma_points_one_by_one(mean, offsets, plus, minus, scratch, |x, y| {
+            self.measure_into(x, y)
+        });
     }
 }
 
@@ -275,31 +247,13 @@ where
 }
 
 /// Marker: h is affine in x, h(x) = H x + c, with H the
-/// [`measurement_jacobian`](MeasurementJacobian::measurement_jacobian). Such a model gets zero
-/// Hessians for free and is accepted by the linear Kalman filter.
+/// [`measurement_jacobian`](MeasurementJacobian::measurement_jacobian). The linear Kalman filter
+/// accepts only such models. For the second-order filters, implement [`MeasurementHessian`]
+/// with `None` for every component (see [`LinearProcessModel`] for why that is not derived).
 pub trait LinearMeasurementModel<T: Real, N: Dim, M: Dim>: MeasurementJacobian<T, N, M>
 where
     DefaultAllocator: Alloc<N, M>,
 {
-}
-
-impl<T: Real, N: Dim, M: Dim, H: LinearMeasurementModel<T, N, M>> MeasurementHessian<T, N, M> for H
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    fn measurement_hessian(&self, _: &OVector<T, N>, _: usize) -> Option<OMatrix<T, N, N>> {
-        None
-    }
-
-    #[inline(always)]
-    fn measurement_hessian_into(
-        &self,
-        _: &OVector<T, N>,
-        _: usize,
-        _: &mut OMatrix<T, N, N>,
-    ) -> bool {
-        false
-    }
 }
 
 /// The map x ↦ f(x, u, Δt) of a process model at a fixed input and step.
@@ -340,9 +294,10 @@ where
         offsets: &OMatrix<T, N, N>,
         plus: &mut OMatrix<T, N, N>,
         minus: &mut OMatrix<T, N, N>,
-    ) -> bool {
+        scratch: &mut SigmaScratch<T, N, N>,
+    ) {
         self.model
-            .transition_sigma_points_into(mean, offsets, self.input, self.dt, plus, minus)
+            .transition_sigma_points_into(mean, offsets, self.input, self.dt, plus, minus, scratch)
     }
 
     #[inline(always)]
@@ -445,9 +400,10 @@ where
         offsets: &OMatrix<T, N, N>,
         plus: &mut OMatrix<T, M, N>,
         minus: &mut OMatrix<T, M, N>,
-    ) -> bool {
+        scratch: &mut SigmaScratch<T, N, M>,
+    ) {
         self.model
-            .measure_sigma_points_into(mean, offsets, plus, minus)
+            .measure_sigma_points_into(mean, offsets, plus, minus, scratch)
     }
 
     #[inline(always)]

@@ -27,7 +27,6 @@ use crate::function::VectorFunction;
 use crate::gaussian::Gaussian;
 use crate::linalg::{
     ensure_finite, ensure_shape, finite_or_error, mirror_lower_checked, symmetric_map,
-    symmetrize_add_checked,
 };
 use crate::scalar::Real;
 
@@ -39,11 +38,10 @@ mod unscented;
 mod workspace;
 
 pub use affine::Affine;
-pub use linearized::Linearized;
+pub use linearized::{Linearized, LinearizedWorkspace};
 pub use sampled::Sampled;
-pub use second_order::{SecondOrder, SecondOrderGaussian};
-pub use unscented::Unscented;
-pub use workspace::Workspace;
+pub use second_order::{SecondOrder, SecondOrderGaussian, SecondOrderWorkspace};
+pub use unscented::{Unscented, UnscentedWorkspace};
 
 /// E\[y\] and cov(y), as returned by
 /// [`MomentPropagator::propagate_mean_covariance`].
@@ -68,7 +66,7 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     /// Zeros of the shapes for a map from `n` to `m` dimensions: a buffer for
-    /// [`MomentPropagator::propagate_into`].
+    /// [`Outputs::moments`].
     pub fn zeros(n: N, m: M) -> Self {
         Self {
             mean: OVector::zeros_generic(m, nalgebra::U1),
@@ -78,87 +76,118 @@ where
     }
 }
 
+/// Where a propagation writes its results, and the independent noise it adds to cov(y).
+///
+/// The length of `mean` is the output dimension m; the other buffers are reshaped to agree
+/// if they do not. On error the buffers' contents (and shapes) are unspecified.
+#[derive(Debug)]
+pub struct Outputs<'a, T: Real, N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// E\[y\] (m).
+    pub mean: &'a mut OVector<T, M>,
+    /// cov(y) (m × m), plus `noise` if given, symmetric.
+    pub covariance: &'a mut OMatrix<T, M, M>,
+    /// cov(x, y) (n × m), computed only if asked for.
+    pub cross_covariance: Option<&'a mut OMatrix<T, N, M>>,
+    /// The covariance of a noise w independent of x, for y = g(x) + w (a filter's process
+    /// noise Q); must be m × m.
+    pub noise: Option<&'a OMatrix<T, M, M>>,
+}
+
+impl<'a, T: Real, N: Dim, M: Dim> Outputs<'a, T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// All three moments, into `moments`.
+    pub fn moments(moments: &'a mut Moments<T, N, M>) -> Self {
+        Self {
+            mean: &mut moments.mean,
+            covariance: &mut moments.covariance,
+            cross_covariance: Some(&mut moments.cross_covariance),
+            noise: None,
+        }
+    }
+
+    /// E\[y\] and cov(y) only (a filter's prediction needs no cross-covariance).
+    pub fn mean_covariance(
+        mean: &'a mut OVector<T, M>,
+        covariance: &'a mut OMatrix<T, M, M>,
+    ) -> Self {
+        Self {
+            mean,
+            covariance,
+            cross_covariance: None,
+            noise: None,
+        }
+    }
+
+    /// The same outputs for y = g(x) + w, w ~ N(0, `noise`) independent of x: cov(y) gets
+    /// `noise` added (P⁻ = cov f + Q in a prediction).
+    pub fn with_noise(mut self, noise: &'a OMatrix<T, M, M>) -> Self {
+        self.noise = Some(noise);
+        self
+    }
+}
+
+/// Names the buffers a moment propagator keeps between calls, for each pair of dimensions
+/// (n, m). A filter keeps one per shape it sees, so repeated runtime-size propagation
+/// allocates nothing after the first call; for static sizes the buffers live inline.
+///
+/// Every [`MomentPropagator`] implements it; a propagator that needs no buffers says
+/// `type Workspace<N: Dim, M: Dim> = () where DefaultAllocator: Alloc<N, M>;`.
+pub trait PropagatorWorkspace<T: Real> {
+    /// The buffers for maps from N to M dimensions. `Default` is empty: a propagator sizes
+    /// its buffers on first use. Contents between calls are unspecified.
+    type Workspace<N: Dim, M: Dim>: Default
+    where
+        DefaultAllocator: Alloc<N, M>;
+}
+
 /// Computes the [`Moments`] of y = g(x), x ~ N(μ, C).
 ///
 /// Generic over the function type `G`, so each propagator bounds only the capability it
 /// needs: `Linearized` implements this for every `G: Differentiable`, `Unscented` for every
-/// `G: VectorFunction`.
+/// `G: VectorFunction`. One method is required,
+/// [`propagate_into`](Self::propagate_into); the others wrap it for one-off use.
 ///
-/// The `_into` methods are the primitives: they write into caller-owned buffers and keep their
-/// scratch in a [`Workspace`], so repeated propagation with runtime sizes allocates nothing
-/// after the first call (given a function that implements the `_into` forms of
-/// [`VectorFunction`]). The owned methods wrap them for one-off use.
-pub trait MomentPropagator<T: Real, N: Dim, M: Dim, G: VectorFunction<T, N, M> + ?Sized>
+/// ```
+/// use estim_core::{MomentPropagator, Unscented, VectorFunction};
+/// use estim_core::nalgebra::{Const, Matrix1, Vector1};
+///
+/// struct Square;
+/// impl VectorFunction<f64, Const<1>, Const<1>> for Square {
+///     fn eval(&self, x: &Vector1<f64>) -> Vector1<f64> {
+///         x.map(|v| v * v)
+///     }
+/// }
+/// // x ~ N(1, 0.5): E[x²] = 1.5 (the unscented transform is exact for a quadratic).
+/// let y = Unscented::default()
+///     .propagate(&Vector1::new(1.0), &Matrix1::new(0.5), &Square)
+///     .unwrap();
+/// assert!((y.mean[0] - 1.5).abs() < 1e-9);
+/// ```
+pub trait MomentPropagator<T: Real, N: Dim, M: Dim, G: VectorFunction<T, N, M> + ?Sized>:
+    PropagatorWorkspace<T>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     /// The moments of g(x) for x with mean `mean` and covariance `covariance` (symmetric
-    /// positive semi-definite; a propagator that factorises it reports when it is not), written
-    /// into `out`, for the dimensions n and m of `workspace`.
+    /// positive semi-definite; a propagator that factorises it reports when it is not), into
+    /// `out` (which also says whether the cross-covariance is wanted and what noise to add),
+    /// with scratch in `workspace`.
     ///
-    /// Errors: a non-finite result, a shape mismatch between g, x and the workspace's
-    /// dimensions, or a covariance that cannot be factorised. On error `out` is unspecified.
+    /// Errors: a non-finite result, a shape mismatch between g, x and the outputs, or a
+    /// covariance that cannot be factorised. On error `out` is unspecified.
     fn propagate_into(
         &self,
         mean: &OVector<T, N>,
         covariance: &OMatrix<T, N, N>,
         g: &G,
-        out: &mut Moments<T, N, M>,
-        workspace: &mut Workspace<T, N, M>,
+        out: Outputs<'_, T, N, M>,
+        workspace: &mut Self::Workspace<N, M>,
     ) -> Result<()>;
-
-    /// E\[y\] and cov(y) only, for callers that do not need cov(x, y) (a filter's
-    /// prediction). The default calls [`propagate_into`](Self::propagate_into) with a fresh
-    /// [`Moments`] buffer; the built-in propagators skip the cross-covariance instead.
-    fn propagate_mean_covariance_into(
-        &self,
-        mean: &OVector<T, N>,
-        covariance: &OMatrix<T, N, N>,
-        g: &G,
-        out_mean: &mut OVector<T, M>,
-        out_covariance: &mut OMatrix<T, M, M>,
-        workspace: &mut Workspace<T, N, M>,
-    ) -> Result<()> {
-        let mut out = Moments::zeros(workspace.n, workspace.m);
-        self.propagate_into(mean, covariance, g, &mut out, workspace)?;
-        *out_mean = out.mean;
-        *out_covariance = out.covariance;
-        Ok(())
-    }
-
-    /// E\[y\] and cov(y) + `noise` for y = g(x) + w, w ~ N(0, `noise`) independent of x: what
-    /// a filter's prediction needs (P⁻ = cov f + Q), symmetrised, in `out_covariance`. The
-    /// default adds the noise after
-    /// [`propagate_mean_covariance_into`](Self::propagate_mean_covariance_into); the built-in
-    /// propagators add it in the pass that symmetrises their covariance (one sweep of the
-    /// matrix fewer). `noise` must be m × m (else a dimension error naming it as
-    /// `ProcessNoise`); a non-finite sum is an error
-    /// ([`Error::NonFinite`](crate::Error::NonFinite), stage `Propagation`, quantity
-    /// `Covariance`).
-    fn propagate_with_noise_into(
-        &self,
-        mean: &OVector<T, N>,
-        covariance: &OMatrix<T, N, N>,
-        g: &G,
-        noise: &OMatrix<T, M, M>,
-        out_mean: &mut OVector<T, M>,
-        out_covariance: &mut OMatrix<T, M, M>,
-        workspace: &mut Workspace<T, N, M>,
-    ) -> Result<()> {
-        self.propagate_mean_covariance_into(
-            mean,
-            covariance,
-            g,
-            out_mean,
-            out_covariance,
-            workspace,
-        )?;
-        let stage = Stage::Propagation;
-        let m = out_mean.nrows();
-        ensure_shape(noise, m, m, stage, Quantity::ProcessNoise)?;
-        let finite = symmetrize_add_checked(out_covariance, noise);
-        finite_or_error(finite, stage, Quantity::Covariance)
-    }
 
     /// The moments of g(x) for x with mean `mean` and covariance `covariance`: see
     /// [`propagate_into`](Self::propagate_into).
@@ -170,7 +199,14 @@ where
     ) -> Result<Moments<T, N, M>> {
         let (n, m) = dimensions(mean, g);
         let mut out = Moments::zeros(n, m);
-        self.propagate_into(mean, covariance, g, &mut out, &mut Workspace::new(n, m))?;
+        let mut workspace = Default::default();
+        self.propagate_into(
+            mean,
+            covariance,
+            g,
+            Outputs::moments(&mut out),
+            &mut workspace,
+        )?;
         Ok(out)
     }
 
@@ -179,24 +215,23 @@ where
         self.propagate(x.mean(), x.covariance(), g)
     }
 
-    /// E\[y\] and cov(y) only: see
-    /// [`propagate_mean_covariance_into`](Self::propagate_mean_covariance_into).
+    /// E\[y\] and cov(y) only, for callers that do not need cov(x, y).
     fn propagate_mean_covariance(
         &self,
         mean: &OVector<T, N>,
         covariance: &OMatrix<T, N, N>,
         g: &G,
     ) -> Result<MeanCovariance<T, M>> {
-        let (n, m) = dimensions(mean, g);
+        let (_, m) = dimensions(mean, g);
         let mut out_mean = OVector::zeros_generic(m, nalgebra::U1);
         let mut out_covariance = OMatrix::zeros_generic(m, m);
-        self.propagate_mean_covariance_into(
+        let mut workspace = Default::default();
+        self.propagate_into(
             mean,
             covariance,
             g,
-            &mut out_mean,
-            &mut out_covariance,
-            &mut Workspace::new(n, m),
+            Outputs::mean_covariance(&mut out_mean, &mut out_covariance),
+            &mut workspace,
         )?;
         Ok((out_mean, out_covariance))
     }
@@ -214,75 +249,72 @@ where
     (x.shape_generic().0, M::from_usize(m))
 }
 
-/// Checks that x and C have the workspace's n, and resets output buffers of the wrong shape
-/// (left by an earlier failure), so the kernels only ever see agreeing shapes.
+/// Checks that C is n × n for the n of x, and reshapes output buffers that disagree with the
+/// mean buffer's m (left by an earlier failure), so the kernels only ever see agreeing shapes.
+/// Returns (n, m).
 #[inline(always)]
 fn check_inputs<T: Real, N: Dim, M: Dim>(
     mean: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
-    out_mean: &mut OVector<T, M>,
-    out_covariance: &mut OMatrix<T, M, M>,
-    cross: Option<&mut OMatrix<T, N, M>>,
-    workspace: &Workspace<T, N, M>,
-) -> Result<()>
+    out: &mut Outputs<'_, T, N, M>,
+) -> Result<(N, M)>
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    let (n, m) = (workspace.n, workspace.m);
-    let stage = Stage::Propagation;
-    ensure_shape(mean, n.value(), 1, stage, Quantity::Mean)?;
+    let n = mean.shape_generic().0;
+    let m = out.mean.shape_generic().0;
     ensure_shape(
         covariance,
         n.value(),
         n.value(),
-        stage,
+        Stage::Propagation,
         Quantity::Covariance,
     )?;
-    if out_covariance.shape() != (m.value(), m.value()) {
-        *out_covariance = OMatrix::zeros_generic(m, m);
+    if out.covariance.shape() != (m.value(), m.value()) {
+        *out.covariance = OMatrix::zeros_generic(m, m);
     }
-    if out_mean.shape() != (m.value(), 1) {
-        *out_mean = OVector::zeros_generic(m, nalgebra::U1);
-    }
-    if let Some(cross) = cross
+    if let Some(cross) = out.cross_covariance.as_deref_mut()
         && cross.shape() != (n.value(), m.value())
     {
         *cross = OMatrix::zeros_generic(n, m);
     }
-    Ok(())
+    Ok((n, m))
 }
 
-/// Makes the covariance symmetric from its lower triangle (the propagators compute only that
-/// triangle of their symmetric products: [`crate::kernel::mul_lower`]) and checks the results
-/// are finite.
+impl<T: Real, N: Dim, M: Dim> Outputs<'_, T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// The last step of every propagation, for custom propagators too: once `mean`, the lower
+    /// triangle of `covariance` and (if asked for) `cross_covariance` are written, makes the
+    /// covariance symmetric from its lower triangle, adds `noise` if given, and checks that
+    /// every result is finite ([`Error::NonFinite`](crate::Error::NonFinite), stage
+    /// `Propagation`; a noise of the wrong shape is a dimension error naming `ProcessNoise`).
+    #[inline(always)]
+    pub fn finish(self) -> Result<()> {
+        finish(self)
+    }
+}
+
+/// [`Outputs::finish`].
 #[inline(always)]
-fn finish<T: Real, N: Dim, M: Dim>(
-    mean: &OVector<T, M>,
-    covariance: &mut OMatrix<T, M, M>,
-    cross: Option<&OMatrix<T, N, M>>,
-    noise: Option<&OMatrix<T, M, M>>,
-) -> Result<()>
+fn finish<T: Real, N: Dim, M: Dim>(out: Outputs<'_, T, N, M>) -> Result<()>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     let stage = Stage::Propagation;
-    ensure_finite(mean, stage, Quantity::Mean)?;
-    let finite = match noise {
+    ensure_finite(&*out.mean, stage, Quantity::Mean)?;
+    let covariance = out.covariance;
+    let finite = match out.noise {
         None => mirror_lower_checked(covariance),
         Some(noise) => {
             // cov + noise, symmetrised, from cov's lower triangle: the arithmetic of
             // mirroring it, adding the noise and averaging the triangles, in one pass.
-            ensure_shape(
-                noise,
-                mean.nrows(),
-                mean.nrows(),
-                stage,
-                Quantity::ProcessNoise,
-            )?;
+            let m = out.mean.nrows();
+            ensure_shape(noise, m, m, stage, Quantity::ProcessNoise)?;
             let half = crate::scalar::real::<T>(0.5);
-            let n = covariance.nrows();
             symmetric_map(
-                n,
+                m,
                 covariance.as_mut_slice(),
                 [noise.as_slice()],
                 |c_ij, [q_ij], _, [q_ji]| ((c_ij + q_ij) + (c_ij + q_ji)) * half,
@@ -290,87 +322,8 @@ where
         }
     };
     finite_or_error(finite, stage, Quantity::Covariance)?;
-    if let Some(cross) = cross {
-        ensure_finite(cross, stage, Quantity::CrossCovariance)?;
+    if let Some(cross) = out.cross_covariance {
+        ensure_finite(&*cross, stage, Quantity::CrossCovariance)?;
     }
     Ok(())
 }
-
-/// Implements [`MomentPropagator`]'s three `_into` methods for a propagator with an inherent
-/// `moments_into(mean, covariance, g, out_mean, out_covariance, cross: Option<..>,
-/// noise: Option<..>, workspace)`.
-macro_rules! impl_propagator_via_moments_into {
-    () => {
-        #[inline(always)]
-        fn propagate_into(
-            &self,
-            mean: &OVector<T, N>,
-            covariance: &OMatrix<T, N, N>,
-            g: &G,
-            out: &mut super::Moments<T, N, M>,
-            workspace: &mut super::Workspace<T, N, M>,
-        ) -> Result<()> {
-            let super::Moments {
-                mean: out_mean,
-                covariance: out_covariance,
-                cross_covariance,
-            } = out;
-            self.moments_into(
-                mean,
-                covariance,
-                g,
-                out_mean,
-                out_covariance,
-                Some(cross_covariance),
-                None,
-                workspace,
-            )
-        }
-
-        #[inline(always)]
-        fn propagate_mean_covariance_into(
-            &self,
-            mean: &OVector<T, N>,
-            covariance: &OMatrix<T, N, N>,
-            g: &G,
-            out_mean: &mut OVector<T, M>,
-            out_covariance: &mut OMatrix<T, M, M>,
-            workspace: &mut super::Workspace<T, N, M>,
-        ) -> Result<()> {
-            self.moments_into(
-                mean,
-                covariance,
-                g,
-                out_mean,
-                out_covariance,
-                None,
-                None,
-                workspace,
-            )
-        }
-
-        #[inline(always)]
-        fn propagate_with_noise_into(
-            &self,
-            mean: &OVector<T, N>,
-            covariance: &OMatrix<T, N, N>,
-            g: &G,
-            noise: &OMatrix<T, M, M>,
-            out_mean: &mut OVector<T, M>,
-            out_covariance: &mut OMatrix<T, M, M>,
-            workspace: &mut super::Workspace<T, N, M>,
-        ) -> Result<()> {
-            self.moments_into(
-                mean,
-                covariance,
-                g,
-                out_mean,
-                out_covariance,
-                None,
-                Some(noise),
-                workspace,
-            )
-        }
-    };
-}
-use impl_propagator_via_moments_into;

@@ -4,7 +4,8 @@ use estim_core::kernel;
 use estim_core::linalg::{all_finite, ensure_nonnegative_diagonal, ensure_shape};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{
-    Affine, Linearized, MomentPropagator, SecondOrder, SecondOrderGaussian, Unscented,
+    Affine, Linearized, MomentPropagator, Outputs, PropagatorWorkspace, SecondOrder,
+    SecondOrderGaussian, Unscented,
 };
 use estim_core::{
     AffineFunction, Alloc, Error, Gaussian, LinearMeasurementModel, LinearProcessModel,
@@ -14,7 +15,7 @@ use estim_core::{
 
 use crate::correlated::Decorrelated;
 use crate::report::UpdateReport;
-use crate::scratch::{PredictScratch, ScratchCache, UpdateScratch};
+use crate::scratch::{PredictScratch, RuntimeSized, ScratchCache, UpdateScratch};
 use crate::traits::{Estimator, Predict, PredictCorrelated, Update};
 use crate::update::{self, CovarianceUpdate, UpdateSettings};
 
@@ -49,8 +50,8 @@ use crate::update::{self, CovarianceUpdate, UpdateSettings};
 /// (n ≤ 6; no heap); runtime sizes from n ≈ 12 (there the KF and EKF are already 1.2–1.3×
 /// faster and the UKF breaks even); at n = 24 static steps are 1.2–2.7× slower (nalgebra's
 /// fixed-size products are not blocked).
-#[derive(Clone, Debug, PartialEq)]
-pub struct GaussianFilter<T: Real, N: Dim, Pr>
+#[derive(Debug)]
+pub struct GaussianFilter<T: Real, N: Dim, Pr: PropagatorWorkspace<T>>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -58,7 +59,37 @@ where
     covariance: OMatrix<T, N, N>,
     propagator: Pr,
     settings: UpdateSettings<T>,
-    scratch: ScratchCache<T>,
+    scratch: ScratchCache<T, Pr>,
+}
+
+/// A copy of the estimate and the settings; the runtime-size buffers are not copied (the
+/// clone sizes its own on first use).
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T> + Clone> Clone for GaussianFilter<T, N, Pr>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    fn clone(&self) -> Self {
+        Self {
+            state: self.state.clone(),
+            covariance: self.covariance.clone(),
+            propagator: self.propagator.clone(),
+            settings: self.settings,
+            scratch: ScratchCache::default(),
+        }
+    }
+}
+
+/// Equal estimates, propagators and settings (the runtime-size buffers are not compared).
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T> + PartialEq> PartialEq for GaussianFilter<T, N, Pr>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    fn eq(&self, other: &Self) -> bool {
+        self.state == other.state
+            && self.covariance == other.covariance
+            && self.propagator == other.propagator
+            && self.settings == other.settings
+    }
 }
 
 /// The linear Kalman filter (Kalman 1960): exact for linear models and accepts only those
@@ -91,7 +122,7 @@ pub type GaussianSecondOrderEkf<T, N> = GaussianFilter<T, N, SecondOrderGaussian
 /// cubature Kalman filter). Requirements on the model: values only.
 pub type Ukf<T, N> = GaussianFilter<T, N, Unscented<T>>;
 
-impl<T: Real, N: Dim, Pr: Default> GaussianFilter<T, N, Pr>
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T> + Default> GaussianFilter<T, N, Pr>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -101,7 +132,7 @@ where
     }
 }
 
-impl<T: Real, N: Dim, Pr> GaussianFilter<T, N, Pr>
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>> GaussianFilter<T, N, Pr>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -147,7 +178,7 @@ where
     }
 }
 
-impl<T: Real, N: Dim, Pr> Estimator<T, N> for GaussianFilter<T, N, Pr>
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>> Estimator<T, N> for GaussianFilter<T, N, Pr>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -174,7 +205,7 @@ where
 #[inline(always)]
 fn predict_step<T, N, Pr, G>(
     propagator: &Pr,
-    cache: &mut ScratchCache<T>,
+    cache: &mut ScratchCache<T, Pr>,
     state: &mut OVector<T, N>,
     covariance: &mut OMatrix<T, N, N>,
     g: &G,
@@ -186,7 +217,7 @@ where
     N: Dim,
     G: VectorFunction<T, N, N>,
     Pr: MomentPropagator<T, N, N, G>,
-    DefaultAllocator: Alloc<N>,
+    DefaultAllocator: Alloc<N> + RuntimeSized<N>,
 {
     let n = state.shape_generic().0;
     // Chosen here rather than through a closure over the whole step: a local the compiler
@@ -229,7 +260,7 @@ fn predicted<T, N, Pr, G>(
     state: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
     g: &G,
-    scratch: &mut PredictScratch<T, N>,
+    scratch: &mut PredictScratch<T, N, Pr>,
 ) -> Result<()>
 where
     T: Real,
@@ -252,8 +283,9 @@ where
     ensure_nonnegative_diagonal(q, stage, Quantity::ProcessNoise)?;
     // The propagator checks its own outputs; Q is checked through P⁻ = cov f + Q, and only on
     // failure is it examined to name the culprit.
+    let out = Outputs::mean_covariance(mean, p).with_noise(q);
     propagator
-        .propagate_with_noise_into(state, covariance, g, q, mean, p, propagation)
+        .propagate_into(state, covariance, g, out, propagation)
         .map_err(|e| match e {
             Error::NonFinite {
                 quantity: Quantity::Covariance,
@@ -298,7 +330,7 @@ where
     N: Dim,
     P: ProcessModel<T, N>,
     Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T>>,
-    DefaultAllocator: Alloc<N>,
+    DefaultAllocator: Alloc<N> + RuntimeSized<N>,
 {
     #[inline(always)]
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
@@ -310,7 +342,7 @@ where
     }
 }
 
-impl<T: Real, N: Dim, Pr> GaussianFilter<T, N, Pr>
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>> GaussianFilter<T, N, Pr>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -320,6 +352,7 @@ where
     where
         P: ProcessModel<T, N>,
         Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T>>,
+        DefaultAllocator: RuntimeSized<N>,
     {
         ensure_time_step(dt)?;
         let Self {
@@ -344,7 +377,7 @@ where
     P: ProcessModel<T, N>,
     H: MeasurementModel<T, N, M>,
     Pr: for<'a> MomentPropagator<T, N, N, Decorrelated<'a, P, P::Input, H, T, N, M>>,
-    DefaultAllocator: Alloc<N, M>,
+    DefaultAllocator: Alloc<N, M> + RuntimeSized<N>,
 {
     /// Runs through the same prediction code; building the decorrelated map allocates for
     /// runtime sizes (it solves with R once per call).
@@ -391,7 +424,7 @@ pub(crate) fn measurement_update<T, N, M, Pr, H>(
     model: &H,
     z: &OVector<T, M>,
     settings: UpdateSettings<T>,
-    scratch: &mut UpdateScratch<T, N, M>,
+    scratch: &mut UpdateScratch<T, N, M, Pr>,
     report: &mut UpdateReport<T, M>,
 ) -> Result<bool>
 where
@@ -408,7 +441,7 @@ where
             state,
             covariance,
             &Observation::new(model),
-            &mut scratch.predicted,
+            Outputs::moments(&mut scratch.predicted),
             &mut scratch.propagation,
         )
         .map_err(|e| measurement_length_error(e, m))?;
@@ -449,7 +482,7 @@ where
     M: Dim,
     H: MeasurementModel<T, N, M>,
     Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
-    DefaultAllocator: Alloc<N, M>,
+    DefaultAllocator: Alloc<N, M> + RuntimeSized<N, M>,
 {
     #[inline(always)]
     fn update_into(
@@ -458,25 +491,27 @@ where
         z: &OVector<T, M>,
         report: &mut UpdateReport<T, M>,
     ) -> Result<()> {
-        self.measurement_step(model, z, report, Step::Apply)
+        self.measurement_step(model, z, None, report, Step::Apply)
     }
 
     fn prepare_update(&mut self, model: &H, report: &mut UpdateReport<T, M>) -> Result<()> {
         let z = model.measure(&self.state);
-        self.measurement_step(model, &z, report, Step::Prepare)
+        self.measurement_step(model, &z, None, report, Step::Prepare)
     }
 }
 
-impl<T: Real, N: Dim, Pr> GaussianFilter<T, N, Pr>
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>> GaussianFilter<T, N, Pr>
 where
     DefaultAllocator: Alloc<N>,
 {
-    /// An update with `model` and `z` (or its preparation).
+    /// An update with `model` and `z` (or its preparation); with `forgetting` = Some(γ) from
+    /// the prior γ⁻¹P (the fading-memory filter).
     #[inline(always)]
-    fn measurement_step<M, H>(
+    pub(crate) fn measurement_step<M, H>(
         &mut self,
         model: &H,
         z: &OVector<T, M>,
+        forgetting: Option<T>,
         report: &mut UpdateReport<T, M>,
         step: Step,
     ) -> Result<()>
@@ -484,7 +519,7 @@ where
         M: Dim,
         H: MeasurementModel<T, N, M>,
         Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
-        DefaultAllocator: Alloc<N, M>,
+        DefaultAllocator: Alloc<N, M> + RuntimeSized<N, M>,
     {
         let Self {
             state,
@@ -494,7 +529,7 @@ where
             scratch,
         } = self;
         update_step(
-            propagator, scratch, state, covariance, None, model, z, *settings, report, step,
+            propagator, scratch, state, covariance, forgetting, model, z, *settings, report, step,
         )
     }
 }
@@ -505,7 +540,7 @@ where
 #[inline(always)]
 pub(crate) fn update_step<T, N, M, Pr, H>(
     propagator: &Pr,
-    cache: &mut ScratchCache<T>,
+    cache: &mut ScratchCache<T, Pr>,
     state: &mut OVector<T, N>,
     covariance: &mut OMatrix<T, N, N>,
     forgetting: Option<T>,
@@ -521,7 +556,7 @@ where
     M: Dim,
     H: MeasurementModel<T, N, M>,
     Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
-    DefaultAllocator: Alloc<N, M>,
+    DefaultAllocator: Alloc<N, M> + RuntimeSized<N, M>,
 {
     let (n, m) = (state.shape_generic().0, z.shape_generic().0);
     let mut local;

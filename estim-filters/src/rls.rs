@@ -1,14 +1,13 @@
 //! Fading-memory recursive least squares: Lee & Huang's own-ship trajectory estimator.
 
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
-use estim_core::propagate::Linearized;
 use estim_core::{Alloc, Error, Gaussian, MeasurementJacobian, Parameter, Real, error::Result};
 
-use crate::gaussian_filter::{Step, update_step};
+use crate::gaussian_filter::{Ekf, Step};
 use crate::report::UpdateReport;
-use crate::scratch::ScratchCache;
+use crate::scratch::RuntimeSized;
 use crate::traits::{Estimator, Update};
-use crate::update::{CovarianceUpdate, UpdateSettings};
+use crate::update::CovarianceUpdate;
 
 /// Recursive least squares with exponential forgetting (the own-ship trajectory estimator,
 /// OTE, of Lee & Huang 2002, eq 46-48), for observations z = B θ + v, v ~ N(0, S):
@@ -37,11 +36,9 @@ pub struct FadingMemoryRls<T: Real, N: Dim>
 where
     DefaultAllocator: Alloc<N>,
 {
-    state: OVector<T, N>,
-    covariance: OMatrix<T, N, N>,
+    /// The estimate, settings and buffers: an EKF whose updates start from γ⁻¹P.
+    filter: Ekf<T, N>,
     forgetting: T,
-    settings: UpdateSettings<T>,
-    scratch: ScratchCache<T>,
 }
 
 impl<T: Real, N: Dim> FadingMemoryRls<T, N>
@@ -57,25 +54,21 @@ where
                 value: estim_core::nalgebra::try_convert::<T, f64>(forgetting).unwrap_or(f64::NAN),
             });
         }
-        let (state, covariance) = prior.into_parts();
         Ok(Self {
-            state,
-            covariance,
+            filter: Ekf::new(prior),
             forgetting,
-            settings: UpdateSettings::new(),
-            scratch: ScratchCache::default(),
         })
     }
 
     /// Uses `form` for the covariance update (default: Joseph).
     pub fn with_covariance_update(mut self, form: CovarianceUpdate) -> Self {
-        self.settings.form = form;
+        self.filter = self.filter.with_covariance_update(form);
         self
     }
 
     /// Rejects updates whose NIS exceeds `threshold` (finite, > 0).
     pub fn with_gate(mut self, threshold: T) -> Result<Self> {
-        self.settings = self.settings.with_gate(threshold)?;
+        self.filter = self.filter.with_gate(threshold)?;
         Ok(self)
     }
 
@@ -90,19 +83,15 @@ where
     DefaultAllocator: Alloc<N>,
 {
     fn state(&self) -> &OVector<T, N> {
-        &self.state
+        self.filter.state()
     }
 
     fn covariance(&self) -> &OMatrix<T, N, N> {
-        &self.covariance
+        self.filter.covariance()
     }
 
     fn reset(&mut self, prior: Gaussian<T, N>) {
-        let n = self.state.nrows();
-        (self.state, self.covariance) = prior.into_parts();
-        if self.state.nrows() != n {
-            self.scratch.clear();
-        }
+        self.filter.reset(prior);
     }
 }
 
@@ -112,7 +101,7 @@ where
     N: Dim,
     M: Dim,
     H: MeasurementJacobian<T, N, M>,
-    DefaultAllocator: Alloc<N, M>,
+    DefaultAllocator: Alloc<N, M> + RuntimeSized<N, M>,
 {
     #[inline(always)]
     fn update_into(
@@ -121,51 +110,15 @@ where
         z: &OVector<T, M>,
         report: &mut UpdateReport<T, M>,
     ) -> Result<()> {
-        self.step(model, z, report, Step::Apply)
+        let forgetting = Some(self.forgetting);
+        self.filter
+            .measurement_step(model, z, forgetting, report, Step::Apply)
     }
 
     fn prepare_update(&mut self, model: &H, report: &mut UpdateReport<T, M>) -> Result<()> {
-        let z = model.measure(&self.state);
-        self.step(model, &z, report, Step::Prepare)
-    }
-}
-
-impl<T: Real, N: Dim> FadingMemoryRls<T, N>
-where
-    DefaultAllocator: Alloc<N>,
-{
-    /// One update (or its preparation), through the shared update step with γ⁻¹P.
-    #[inline(always)]
-    fn step<M, H>(
-        &mut self,
-        model: &H,
-        z: &OVector<T, M>,
-        report: &mut UpdateReport<T, M>,
-        step: Step,
-    ) -> Result<()>
-    where
-        M: Dim,
-        H: MeasurementJacobian<T, N, M>,
-        DefaultAllocator: Alloc<N, M>,
-    {
-        let Self {
-            state,
-            covariance,
-            forgetting,
-            settings,
-            scratch,
-        } = self;
-        update_step(
-            &Linearized,
-            scratch,
-            state,
-            covariance,
-            Some(*forgetting),
-            model,
-            z,
-            *settings,
-            report,
-            step,
-        )
+        let z = model.measure(self.filter.state());
+        let forgetting = Some(self.forgetting);
+        self.filter
+            .measurement_step(model, &z, forgetting, report, Step::Prepare)
     }
 }

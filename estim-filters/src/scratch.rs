@@ -5,18 +5,18 @@
 //! it is created by `prepare_*` or the first step with each (n, m) and kept in the filter's [`ScratchCache`],
 //! so every later step allocates nothing.
 
-use core::any::Any;
+use core::marker::PhantomData;
 
 use estim_core::kernel::is_static;
-use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
-use estim_core::{Alloc, Real, Workspace};
+use estim_core::nalgebra::{Const, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
+use estim_core::{Alloc, PropagatorWorkspace, Real};
 
-/// Buffers of one prediction over an `N`-dimensional state.
-pub(crate) struct PredictScratch<T: Real, N: Dim>
+/// Buffers of one prediction over an `N`-dimensional state with propagator `Pr`.
+pub(crate) struct PredictScratch<T: Real, N: Dim, Pr: PropagatorWorkspace<T>>
 where
     DefaultAllocator: Alloc<N>,
 {
-    pub(crate) propagation: Workspace<T, N, N>,
+    pub(crate) propagation: Pr::Workspace<N, N>,
     /// The predicted mean, then the committed state's old buffer.
     pub(crate) state: OVector<T, N>,
     /// The predicted covariance, then the committed covariance's old buffer.
@@ -24,14 +24,14 @@ where
     pub(crate) noise: OMatrix<T, N, N>,
 }
 
-impl<T: Real, N: Dim> PredictScratch<T, N>
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>> PredictScratch<T, N, Pr>
 where
     DefaultAllocator: Alloc<N>,
 {
     #[inline(always)]
     pub(crate) fn new(n: N) -> Self {
         Self {
-            propagation: Workspace::new(n, n),
+            propagation: Default::default(),
             state: OVector::zeros_generic(n, U1),
             covariance: OMatrix::zeros_generic(n, n),
             noise: OMatrix::zeros_generic(n, n),
@@ -39,12 +39,12 @@ where
     }
 }
 
-/// Buffers of one measurement update with `M` components.
-pub(crate) struct UpdateScratch<T: Real, N: Dim, M: Dim>
+/// Buffers of one measurement update with `M` components and propagator `Pr`.
+pub(crate) struct UpdateScratch<T: Real, N: Dim, M: Dim, Pr: PropagatorWorkspace<T>>
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    pub(crate) propagation: Workspace<T, N, M>,
+    pub(crate) propagation: Pr::Workspace<N, M>,
     pub(crate) predicted: estim_core::Moments<T, N, M>,
     pub(crate) noise: OMatrix<T, M, M>,
     /// The Cholesky factor L of S.
@@ -67,14 +67,14 @@ where
     pub(crate) cholesky: estim_core::kernel::CholeskyScratch,
 }
 
-impl<T: Real, N: Dim, M: Dim> UpdateScratch<T, N, M>
+impl<T: Real, N: Dim, M: Dim, Pr: PropagatorWorkspace<T>> UpdateScratch<T, N, M, Pr>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     #[inline(always)]
     pub(crate) fn new(n: N, m: M) -> Self {
         Self {
-            propagation: Workspace::new(n, m),
+            propagation: Default::default(),
             predicted: estim_core::Moments::zeros(n, m),
             noise: OMatrix::zeros_generic(m, m),
             factor: OMatrix::zeros_generic(m, m),
@@ -94,17 +94,93 @@ where
     }
 }
 
+/// Reaches the buffers a filter keeps for runtime sizes from code generic over the
+/// dimensions, without a type-erased downcast: `x`, made for (`Dyn`, `Dyn`), as the same
+/// buffers for (N, M) when both are `Dyn`, and `None` when either is static.
+///
+/// Implemented by `DefaultAllocator` for every pair of static (`Const<R>`) and runtime (`Dyn`)
+/// dimensions, so it holds for any concrete filter; only code generic over the dimensions of a
+/// concrete filter type (a function taking `Ekf<f64, N>` for any `N`, say) needs to state it:
+/// `DefaultAllocator: RuntimeSized<N, M>` (and `RuntimeSized<N, N>` for a prediction).
+pub trait RuntimeSized<N: Dim, M: Dim = N> {
+    /// `x` at (N, M) if both are `Dyn`.
+    #[doc(hidden)]
+    fn runtime_sized<F: SizeFamily>(x: &mut F::Of<Dyn, Dyn>) -> Option<&mut F::Of<N, M>>
+    where
+        DefaultAllocator: Alloc<N, M>;
+}
+
+/// A type constructor over a pair of dimensions (a filter's buffers for an n-state,
+/// m-measurement step), for [`RuntimeSized`].
+#[doc(hidden)]
+pub trait SizeFamily {
+    /// The type at dimensions (N, M).
+    type Of<N: Dim, M: Dim>
+    where
+        DefaultAllocator: Alloc<N, M>;
+}
+
+impl RuntimeSized<Dyn, Dyn> for DefaultAllocator {
+    #[inline(always)]
+    fn runtime_sized<F: SizeFamily>(x: &mut F::Of<Dyn, Dyn>) -> Option<&mut F::Of<Dyn, Dyn>> {
+        Some(x)
+    }
+}
+
+impl<const R: usize> RuntimeSized<Const<R>, Dyn> for DefaultAllocator {
+    #[inline(always)]
+    fn runtime_sized<F: SizeFamily>(_: &mut F::Of<Dyn, Dyn>) -> Option<&mut F::Of<Const<R>, Dyn>> {
+        None
+    }
+}
+
+impl<const C: usize> RuntimeSized<Dyn, Const<C>> for DefaultAllocator {
+    #[inline(always)]
+    fn runtime_sized<F: SizeFamily>(_: &mut F::Of<Dyn, Dyn>) -> Option<&mut F::Of<Dyn, Const<C>>> {
+        None
+    }
+}
+
+impl<const R: usize, const C: usize> RuntimeSized<Const<R>, Const<C>> for DefaultAllocator {
+    #[inline(always)]
+    fn runtime_sized<F: SizeFamily>(
+        _: &mut F::Of<Dyn, Dyn>,
+    ) -> Option<&mut F::Of<Const<R>, Const<C>>> {
+        None
+    }
+}
+
+/// [`PredictScratch`] as a function of the dimensions (M unused), for [`RuntimeSized`].
+struct PredictFamily<T, Pr>(PhantomData<(T, Pr)>);
+
+impl<T: Real, Pr: PropagatorWorkspace<T>> SizeFamily for PredictFamily<T, Pr> {
+    type Of<N: Dim, M: Dim>
+        = PredictScratch<T, N, Pr>
+    where
+        DefaultAllocator: Alloc<N, M>;
+}
+
+/// [`UpdateScratch`] as a function of the dimensions, for [`RuntimeSized`].
+struct UpdateFamily<T, Pr>(PhantomData<(T, Pr)>);
+
+impl<T: Real, Pr: PropagatorWorkspace<T>> SizeFamily for UpdateFamily<T, Pr> {
+    type Of<N: Dim, M: Dim>
+        = UpdateScratch<T, N, M, Pr>
+    where
+        DefaultAllocator: Alloc<N, M>;
+}
+
 /// What a filter keeps between steps for runtime sizes: the scratch of its prediction and one
 /// per measurement length, created on first use. Only fully dynamic scratch (n and m both
 /// `Dyn`) is kept; mixed static/dynamic shapes run the same code with a fresh scratch per step.
-/// Cloning a filter does not clone it (it is scratch, not state), and it never takes part in
+/// It is scratch, not state: a cloned filter starts with an empty one, and it takes no part in
 /// equality.
-pub(crate) struct ScratchCache<T: Real> {
-    predict: Option<PredictScratch<T, Dyn>>,
-    update: Vec<UpdateScratch<T, Dyn, Dyn>>,
+pub(crate) struct ScratchCache<T: Real, Pr: PropagatorWorkspace<T>> {
+    predict: Option<PredictScratch<T, Dyn, Pr>>,
+    update: Vec<UpdateScratch<T, Dyn, Dyn, Pr>>,
 }
 
-impl<T: Real> Default for ScratchCache<T> {
+impl<T: Real, Pr: PropagatorWorkspace<T>> Default for ScratchCache<T, Pr> {
     fn default() -> Self {
         Self {
             predict: None,
@@ -113,19 +189,7 @@ impl<T: Real> Default for ScratchCache<T> {
     }
 }
 
-impl<T: Real> Clone for ScratchCache<T> {
-    fn clone(&self) -> Self {
-        Self::default()
-    }
-}
-
-impl<T: Real> PartialEq for ScratchCache<T> {
-    fn eq(&self, _: &Self) -> bool {
-        true
-    }
-}
-
-impl<T: Real> core::fmt::Debug for ScratchCache<T> {
+impl<T: Real, Pr: PropagatorWorkspace<T>> core::fmt::Debug for ScratchCache<T, Pr> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("ScratchCache")
             .field("predict", &self.predict.is_some())
@@ -134,7 +198,7 @@ impl<T: Real> core::fmt::Debug for ScratchCache<T> {
     }
 }
 
-impl<T: Real> ScratchCache<T> {
+impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
     /// Drops every scratch (after the state dimension changed).
     pub(crate) fn clear(&mut self) {
         *self = Self::default();
@@ -145,9 +209,9 @@ impl<T: Real> ScratchCache<T> {
     /// registers. (Returning the choice rather than taking a closure keeps the whole static
     /// step in one function, where that optimisation can see it.)
     #[inline(always)]
-    pub(crate) fn predict<N: Dim>(&mut self, n: N) -> Option<&mut PredictScratch<T, N>>
+    pub(crate) fn predict<N: Dim>(&mut self, n: N) -> Option<&mut PredictScratch<T, N, Pr>>
     where
-        DefaultAllocator: Alloc<N>,
+        DefaultAllocator: Alloc<N> + RuntimeSized<N>,
     {
         if is_static::<N>() {
             return None;
@@ -161,8 +225,8 @@ impl<T: Real> ScratchCache<T> {
         }
         let cached = self
             .predict
-            .get_or_insert_with(|| PredictScratch::<T, Dyn>::new(Dyn(n.value())));
-        (cached as &mut dyn Any).downcast_mut()
+            .get_or_insert_with(|| PredictScratch::<T, Dyn, Pr>::new(Dyn(n.value())));
+        <DefaultAllocator as RuntimeSized<N>>::runtime_sized::<PredictFamily<T, Pr>>(cached)
     }
 
     /// Drops the cached prediction scratch, after a failed step: a model's default `_into`
@@ -178,9 +242,9 @@ impl<T: Real> ScratchCache<T> {
         &mut self,
         n: N,
         m: M,
-    ) -> Option<(&mut UpdateScratch<T, N, M>, usize)>
+    ) -> Option<(&mut UpdateScratch<T, N, M, Pr>, usize)>
     where
-        DefaultAllocator: Alloc<N, M>,
+        DefaultAllocator: Alloc<N, M> + RuntimeSized<N, M>,
     {
         if is_static::<N>() || is_static::<M>() {
             return None;
@@ -189,14 +253,15 @@ impl<T: Real> ScratchCache<T> {
         let index = match self.update.iter().position(|s| s.dimensions() == dims) {
             Some(index) => index,
             None => {
-                self.update
-                    .push(UpdateScratch::<T, Dyn, Dyn>::new(Dyn(dims.0), Dyn(dims.1)));
+                self.update.push(UpdateScratch::<T, Dyn, Dyn, Pr>::new(
+                    Dyn(dims.0),
+                    Dyn(dims.1),
+                ));
                 self.update.len() - 1
             }
         };
         let cached = &mut self.update[index];
-        (cached as &mut dyn Any)
-            .downcast_mut()
+        <DefaultAllocator as RuntimeSized<N, M>>::runtime_sized::<UpdateFamily<T, Pr>>(cached)
             .map(|scratch| (scratch, index))
     }
 

@@ -30,6 +30,7 @@ use estim_core::{Alloc, Error, Parameter, Quantity, Real, Stage, error::Result};
 
 use crate::report::{UpdateOutcome, UpdateReport};
 use crate::scratch::UpdateScratch;
+use estim_core::PropagatorWorkspace;
 
 /// How the covariance is updated after a measurement.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -107,10 +108,10 @@ where
 ///
 /// The gain is solved in place from the right, K = Pₓᵤ L⁻ᵀ L⁻¹ (two triangular solves).
 #[inline(always)]
-pub(crate) fn apply<T: Real, N: Dim, M: Dim>(
+pub(crate) fn apply<T: Real, N: Dim, M: Dim, Pr: PropagatorWorkspace<T>>(
     state: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
-    scratch: &mut UpdateScratch<T, N, M>,
+    scratch: &mut UpdateScratch<T, N, M, Pr>,
     report: &mut UpdateReport<T, M>,
     settings: UpdateSettings<T>,
 ) -> Result<bool>

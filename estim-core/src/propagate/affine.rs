@@ -2,51 +2,25 @@
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
-use super::{Linearized, MomentPropagator, Workspace, impl_propagator_via_moments_into};
+use super::linearized::linear_moments_into;
+use super::{LinearizedWorkspace, MomentPropagator, Outputs, PropagatorWorkspace};
 use crate::alloc::Alloc;
 use crate::error::Result;
 use crate::function::AffineFunction;
 use crate::scalar::Real;
 
 /// ȳ = g(μ), cov(y) = J C Jᵀ, cov(x, y) = C Jᵀ for an affine g: the same arithmetic as
-/// [`Linearized`], but only accepted for functions marked
+/// [`Linearized`](super::Linearized), but only accepted for functions marked
 /// [`AffineFunction`], where it is exact. This is what makes the linear Kalman filter refuse
 /// a nonlinear model at compile time.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Affine;
 
-impl Affine {
-    #[inline(always)]
-    fn moments_into<T, N, M, G>(
-        &self,
-        mean: &OVector<T, N>,
-        covariance: &OMatrix<T, N, N>,
-        g: &G,
-        out_mean: &mut OVector<T, M>,
-        out_covariance: &mut OMatrix<T, M, M>,
-        cross: Option<&mut OMatrix<T, N, M>>,
-        noise: Option<&OMatrix<T, M, M>>,
-        workspace: &mut Workspace<T, N, M>,
-    ) -> Result<()>
+impl<T: Real> PropagatorWorkspace<T> for Affine {
+    type Workspace<N: Dim, M: Dim>
+        = LinearizedWorkspace<T, N, M>
     where
-        T: Real,
-        N: Dim,
-        M: Dim,
-        G: AffineFunction<T, N, M> + ?Sized,
-        DefaultAllocator: Alloc<N, M>,
-    {
-        // Linearisation is exact here: the same arithmetic, restricted to affine g.
-        Linearized.moments_into(
-            mean,
-            covariance,
-            g,
-            out_mean,
-            out_covariance,
-            cross,
-            noise,
-            workspace,
-        )
-    }
+        DefaultAllocator: Alloc<N, M>;
 }
 
 impl<T, N, M, G> MomentPropagator<T, N, M, G> for Affine
@@ -57,5 +31,16 @@ where
     G: AffineFunction<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    impl_propagator_via_moments_into!();
+    #[inline(always)]
+    fn propagate_into(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+        mut out: Outputs<'_, T, N, M>,
+        workspace: &mut LinearizedWorkspace<T, N, M>,
+    ) -> Result<()> {
+        linear_moments_into(mean, covariance, g, &mut out, workspace)?;
+        out.finish()
+    }
 }

@@ -3,7 +3,7 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use super::workspace::buffer;
-use super::{MomentPropagator, Workspace, check_inputs, finish, impl_propagator_via_moments_into};
+use super::{MomentPropagator, Outputs, PropagatorWorkspace, check_inputs};
 use crate::alloc::Alloc;
 use crate::error::{Quantity, Result, Stage};
 use crate::function::Differentiable;
@@ -17,18 +17,37 @@ use crate::scalar::Real;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Linearized;
 
-/// g(μ), J(μ), J C Jᵀ and C Jᵀ (if `cross` is given): the part every derivative-based
-/// propagator shares. Only the lower triangle of J C Jᵀ is written; not finished (mirrored,
-/// checked) yet.
+/// [`Linearized`]'s buffers: the Jacobian J and, without a cross-covariance, J C.
+#[derive(Debug)]
+pub struct LinearizedWorkspace<T: Real, N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    jacobian: Option<OMatrix<T, M, N>>,
+    jacobian_covariance: Option<OMatrix<T, M, N>>,
+}
+
+impl<T: Real, N: Dim, M: Dim> Default for LinearizedWorkspace<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn default() -> Self {
+        Self {
+            jacobian: None,
+            jacobian_covariance: None,
+        }
+    }
+}
+
+/// g(μ), J(μ), J C Jᵀ and C Jᵀ (if asked for): the part every derivative-based propagator
+/// shares. Only the lower triangle of J C Jᵀ is written; not finished (mirrored, checked) yet.
 #[inline(always)]
 pub(super) fn linear_moments_into<T, N, M, G>(
     mean: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
     g: &G,
-    out_mean: &mut OVector<T, M>,
-    out_covariance: &mut OMatrix<T, M, M>,
-    mut cross: Option<&mut OMatrix<T, N, M>>,
-    workspace: &mut Workspace<T, N, M>,
+    out: &mut Outputs<'_, T, N, M>,
+    workspace: &mut LinearizedWorkspace<T, N, M>,
 ) -> Result<()>
 where
     T: Real,
@@ -37,65 +56,30 @@ where
     G: Differentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    check_inputs(
-        mean,
-        covariance,
-        out_mean,
-        out_covariance,
-        cross.as_deref_mut(),
-        workspace,
-    )?;
-    let (n, m) = (workspace.n, workspace.m);
+    let (n, m) = check_inputs(mean, covariance, out)?;
     let stage = Stage::Propagation;
-    g.eval_into(mean, out_mean);
-    ensure_shape(out_mean, m.value(), 1, stage, Quantity::FunctionValue)?;
+    g.eval_into(mean, out.mean);
+    ensure_shape(&*out.mean, m.value(), 1, stage, Quantity::FunctionValue)?;
     let j = buffer(&mut workspace.jacobian, m, n);
     g.jacobian_into(mean, j);
     ensure_shape(j, m.value(), n.value(), stage, Quantity::Jacobian)?;
-    // Only the lower triangle of the symmetric J C Jᵀ is computed ([`finish`] mirrors it).
-    if let Some(cross) = cross {
+    // Only the lower triangle of the symmetric J C Jᵀ is computed (`finish` mirrors it).
+    if let Some(cross) = out.cross_covariance.as_deref_mut() {
         mul_tr(cross, Accum::Replace, T::one(), covariance, j);
-        mul_lower(out_covariance, Accum::Replace, T::one(), j, cross);
+        mul_lower(out.covariance, Accum::Replace, T::one(), j, cross);
     } else {
         let jc = buffer(&mut workspace.jacobian_covariance, m, n);
         mul(jc, Accum::Replace, T::one(), j, covariance);
-        mul_tr_lower(out_covariance, Accum::Replace, T::one(), jc, j);
+        mul_tr_lower(out.covariance, Accum::Replace, T::one(), jc, j);
     }
     Ok(())
 }
 
-impl Linearized {
-    #[inline(always)]
-    pub(super) fn moments_into<T, N, M, G>(
-        &self,
-        mean: &OVector<T, N>,
-        covariance: &OMatrix<T, N, N>,
-        g: &G,
-        out_mean: &mut OVector<T, M>,
-        out_covariance: &mut OMatrix<T, M, M>,
-        cross: Option<&mut OMatrix<T, N, M>>,
-        noise: Option<&OMatrix<T, M, M>>,
-        workspace: &mut Workspace<T, N, M>,
-    ) -> Result<()>
+impl<T: Real> PropagatorWorkspace<T> for Linearized {
+    type Workspace<N: Dim, M: Dim>
+        = LinearizedWorkspace<T, N, M>
     where
-        T: Real,
-        N: Dim,
-        M: Dim,
-        G: Differentiable<T, N, M> + ?Sized,
-        DefaultAllocator: Alloc<N, M>,
-    {
-        let mut cross = cross;
-        linear_moments_into(
-            mean,
-            covariance,
-            g,
-            out_mean,
-            out_covariance,
-            cross.as_deref_mut(),
-            workspace,
-        )?;
-        finish(out_mean, out_covariance, cross.as_deref(), noise)
-    }
+        DefaultAllocator: Alloc<N, M>;
 }
 
 impl<T, N, M, G> MomentPropagator<T, N, M, G> for Linearized
@@ -106,5 +90,16 @@ where
     G: Differentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    impl_propagator_via_moments_into!();
+    #[inline(always)]
+    fn propagate_into(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+        mut out: Outputs<'_, T, N, M>,
+        workspace: &mut LinearizedWorkspace<T, N, M>,
+    ) -> Result<()> {
+        linear_moments_into(mean, covariance, g, &mut out, workspace)?;
+        out.finish()
+    }
 }

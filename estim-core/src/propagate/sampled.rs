@@ -5,7 +5,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
 
-use super::{MomentPropagator, Moments, Workspace, finish};
+use super::{MomentPropagator, Outputs, PropagatorWorkspace, check_inputs};
 use crate::alloc::Alloc;
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
 use crate::function::VectorFunction;
@@ -49,6 +49,13 @@ impl Sampled {
     }
 }
 
+impl<T: Real> PropagatorWorkspace<T> for Sampled {
+    type Workspace<N: Dim, M: Dim>
+        = ()
+    where
+        DefaultAllocator: Alloc<N, M>;
+}
+
 impl<T, N, M, G> MomentPropagator<T, N, M, G> for Sampled
 where
     T: Real,
@@ -64,13 +71,11 @@ where
         mean: &OVector<T, N>,
         covariance: &OMatrix<T, N, N>,
         g: &G,
-        out: &mut Moments<T, N, M>,
-        workspace: &mut Workspace<T, N, M>,
+        mut out: Outputs<'_, T, N, M>,
+        _: &mut (),
     ) -> Result<()> {
-        let (n_dim, m_dim) = (workspace.n, workspace.m);
-        let (n, m) = (n_dim.value(), m_dim.value());
-        ensure_shape(mean, n, 1, Stage::Propagation, Quantity::Mean)?;
-        ensure_shape(covariance, n, n, Stage::Propagation, Quantity::Covariance)?;
+        let (n_dim, m_dim) = check_inputs(mean, covariance, &mut out)?;
+        let m = m_dim.value();
         let l = psd_factor(covariance, Stage::Propagation)?;
         let y0 = g.eval(mean);
         ensure_shape(&y0, m, 1, Stage::Propagation, Quantity::FunctionValue)?;
@@ -109,21 +114,14 @@ where
         covariance_y.ger(-count * scale, &d_bar, &d_bar, T::one());
         let mut cross = sum_xd * scale;
         cross.ger(-count * scale, &dx_bar, &d_bar, T::one());
-        let mut moments = Moments {
-            mean: y0 + d_bar,
-            covariance: covariance_y,
-            cross_covariance: cross,
-        };
+        *out.mean = y0 + d_bar;
+        *out.covariance = covariance_y;
         // Σ d dᵀ is symmetric only up to round-off: average the triangles before `finish`
         // takes the lower one.
-        symmetrize(&mut moments.covariance);
-        finish(
-            &moments.mean,
-            &mut moments.covariance,
-            Some(&moments.cross_covariance),
-            None,
-        )?;
-        *out = moments;
-        Ok(())
+        symmetrize(out.covariance);
+        if let Some(out_cross) = out.cross_covariance.as_deref_mut() {
+            *out_cross = cross;
+        }
+        out.finish()
     }
 }

@@ -5,7 +5,7 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use super::linearized::linear_moments_into;
 use super::workspace::buffer;
-use super::{MomentPropagator, Workspace, finish, impl_propagator_via_moments_into};
+use super::{LinearizedWorkspace, MomentPropagator, Outputs, PropagatorWorkspace};
 use crate::alloc::Alloc;
 use crate::error::{Quantity, Result, Stage};
 use crate::function::TwiceDifferentiable;
@@ -37,7 +37,7 @@ pub struct SecondOrder;
 /// both exact for quadratic g when x is Gaussian. Cost on top of the Jacobian product: two
 /// n × n products per nonlinear component and O(m² n²) inner products; to stay allocation-free
 /// for static sizes, Hessians are re-evaluated per pair (m + m(m−1)/2 evaluations) rather than
-/// stored. With runtime sizes the products run on faer in the caller's [`Workspace`].
+/// stored. With runtime sizes the products run on faer in the caller's workspace.
 /// Requirements on g:
 /// [`TwiceDifferentiable`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -67,47 +67,40 @@ where
     }
 }
 
-impl SecondOrder {
-    /// Linear moments plus the ½ Σᵢⱼ (Hₖ ∘ C)ᵢⱼ mean correction.
-    #[inline(always)]
-    fn moments_into<T, N, M, G>(
-        &self,
-        mean: &OVector<T, N>,
-        covariance: &OMatrix<T, N, N>,
-        g: &G,
-        out_mean: &mut OVector<T, M>,
-        out_covariance: &mut OMatrix<T, M, M>,
-        mut cross: Option<&mut OMatrix<T, N, M>>,
-        noise: Option<&OMatrix<T, M, M>>,
-        workspace: &mut Workspace<T, N, M>,
-    ) -> Result<()>
-    where
-        T: Real,
-        N: Dim,
-        M: Dim,
-        G: TwiceDifferentiable<T, N, M> + ?Sized,
-        DefaultAllocator: Alloc<N, M>,
-    {
-        linear_moments_into(
-            mean,
-            covariance,
-            g,
-            out_mean,
-            out_covariance,
-            cross.as_deref_mut(),
-            workspace,
-        )?;
-        let half = real::<T>(0.5);
-        let n = workspace.n;
-        let h = buffer(&mut workspace.hessian, n, n);
-        for k in 0..out_mean.nrows() {
-            if hessian_into(g, mean, k, h)? {
-                // Σᵢⱼ (Hₖ ∘ C)ᵢⱼ is the Frobenius inner product ⟨Hₖ, C⟩.
-                out_mean[k] += half * h.dot(covariance);
-            }
+/// The buffers of [`SecondOrder`] and [`SecondOrderGaussian`]: the linearised part's, and
+/// the Hessians and products of the second-order terms.
+#[derive(Debug)]
+pub struct SecondOrderWorkspace<T: Real, N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    linear: LinearizedWorkspace<T, N, M>,
+    hessian: Option<OMatrix<T, N, N>>,
+    other_hessian: Option<OMatrix<T, N, N>>,
+    product: Option<OMatrix<T, N, N>>,
+    sandwich: Option<OMatrix<T, N, N>>,
+}
+
+impl<T: Real, N: Dim, M: Dim> Default for SecondOrderWorkspace<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn default() -> Self {
+        Self {
+            linear: LinearizedWorkspace::default(),
+            hessian: None,
+            other_hessian: None,
+            product: None,
+            sandwich: None,
         }
-        finish(out_mean, out_covariance, cross.as_deref(), noise)
     }
+}
+
+impl<T: Real> PropagatorWorkspace<T> for SecondOrder {
+    type Workspace<N: Dim, M: Dim>
+        = SecondOrderWorkspace<T, N, M>
+    where
+        DefaultAllocator: Alloc<N, M>;
 }
 
 impl<T, N, M, G> MomentPropagator<T, N, M, G> for SecondOrder
@@ -118,64 +111,35 @@ where
     G: TwiceDifferentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    impl_propagator_via_moments_into!();
-}
-
-impl SecondOrderGaussian {
+    /// Linear moments plus the ½ Σᵢⱼ (Hₖ ∘ C)ᵢⱼ mean correction.
     #[inline(always)]
-    fn moments_into<T, N, M, G>(
+    fn propagate_into(
         &self,
         mean: &OVector<T, N>,
         covariance: &OMatrix<T, N, N>,
         g: &G,
-        out_mean: &mut OVector<T, M>,
-        out_covariance: &mut OMatrix<T, M, M>,
-        mut cross: Option<&mut OMatrix<T, N, M>>,
-        noise: Option<&OMatrix<T, M, M>>,
-        workspace: &mut Workspace<T, N, M>,
-    ) -> Result<()>
-    where
-        T: Real,
-        N: Dim,
-        M: Dim,
-        G: TwiceDifferentiable<T, N, M> + ?Sized,
-        DefaultAllocator: Alloc<N, M>,
-    {
-        linear_moments_into(
-            mean,
-            covariance,
-            g,
-            out_mean,
-            out_covariance,
-            cross.as_deref_mut(),
-            workspace,
-        )?;
+        mut out: Outputs<'_, T, N, M>,
+        workspace: &mut SecondOrderWorkspace<T, N, M>,
+    ) -> Result<()> {
+        linear_moments_into(mean, covariance, g, &mut out, &mut workspace.linear)?;
         let half = real::<T>(0.5);
-        let n = workspace.n;
-        let hk = buffer(&mut workspace.hessian, n, n);
-        let hl = buffer(&mut workspace.other_hessian, n, n);
-        let product = buffer(&mut workspace.product, n, n);
-        let bk = buffer(&mut workspace.sandwich, n, n);
-        // tr(Hₖ C Hₗ C) = ⟨C Hₖ C, Hₗ⟩ (Frobenius, Hₗ symmetric): one O(n³) product pair per k,
-        // O(n²) per pair. Hessians of earlier components are re-evaluated rather than stored
-        // (m + m(m−1)/2 evaluations in all), so the workspace holds two n × n Hessians, not m.
-        for k in 0..out_mean.nrows() {
-            if !hessian_into(g, mean, k, hk)? {
-                continue;
-            }
-            out_mean[k] += half * hk.dot(covariance);
-            mul(product, Accum::Replace, T::one(), covariance, hk);
-            mul(bk, Accum::Replace, T::one(), product, covariance);
-            out_covariance[(k, k)] += half * bk.dot(hk);
-            // The lower triangle only (k > l): `finish` mirrors it.
-            for l in 0..k {
-                if hessian_into(g, mean, l, hl)? {
-                    out_covariance[(k, l)] += half * bk.dot(hl);
-                }
+        let n = mean.shape_generic().0;
+        let h = buffer(&mut workspace.hessian, n, n);
+        for k in 0..out.mean.nrows() {
+            if hessian_into(g, mean, k, h)? {
+                // Σᵢⱼ (Hₖ ∘ C)ᵢⱼ is the Frobenius inner product ⟨Hₖ, C⟩.
+                out.mean[k] += half * h.dot(covariance);
             }
         }
-        finish(out_mean, out_covariance, cross.as_deref(), noise)
+        out.finish()
     }
+}
+
+impl<T: Real> PropagatorWorkspace<T> for SecondOrderGaussian {
+    type Workspace<N: Dim, M: Dim>
+        = SecondOrderWorkspace<T, N, M>
+    where
+        DefaultAllocator: Alloc<N, M>;
 }
 
 impl<T, N, M, G> MomentPropagator<T, N, M, G> for SecondOrderGaussian
@@ -186,5 +150,40 @@ where
     G: TwiceDifferentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    impl_propagator_via_moments_into!();
+    #[inline(always)]
+    fn propagate_into(
+        &self,
+        mean: &OVector<T, N>,
+        covariance: &OMatrix<T, N, N>,
+        g: &G,
+        mut out: Outputs<'_, T, N, M>,
+        workspace: &mut SecondOrderWorkspace<T, N, M>,
+    ) -> Result<()> {
+        linear_moments_into(mean, covariance, g, &mut out, &mut workspace.linear)?;
+        let half = real::<T>(0.5);
+        let n = mean.shape_generic().0;
+        let hk = buffer(&mut workspace.hessian, n, n);
+        let hl = buffer(&mut workspace.other_hessian, n, n);
+        let product = buffer(&mut workspace.product, n, n);
+        let bk = buffer(&mut workspace.sandwich, n, n);
+        // tr(Hₖ C Hₗ C) = ⟨C Hₖ C, Hₗ⟩ (Frobenius, Hₗ symmetric): one O(n³) product pair per k,
+        // O(n²) per pair. Hessians of earlier components are re-evaluated rather than stored
+        // (m + m(m−1)/2 evaluations in all), so the workspace holds two n × n Hessians, not m.
+        for k in 0..out.mean.nrows() {
+            if !hessian_into(g, mean, k, hk)? {
+                continue;
+            }
+            out.mean[k] += half * hk.dot(covariance);
+            mul(product, Accum::Replace, T::one(), covariance, hk);
+            mul(bk, Accum::Replace, T::one(), product, covariance);
+            out.covariance[(k, k)] += half * bk.dot(hk);
+            // The lower triangle only (k > l): `finish` mirrors it.
+            for l in 0..k {
+                if hessian_into(g, mean, l, hl)? {
+                    out.covariance[(k, l)] += half * bk.dot(hl);
+                }
+            }
+        }
+        out.finish()
+    }
 }

@@ -3,11 +3,11 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 
 use super::workspace::buffer;
-use super::{MomentPropagator, Workspace, check_inputs, finish, impl_propagator_via_moments_into};
+use super::{MomentPropagator, Outputs, PropagatorWorkspace, check_inputs};
 use crate::alloc::Alloc;
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
-use crate::function::VectorFunction;
-use crate::kernel::{Accum, is_static, mul_tr, mul_tr_lower};
+use crate::function::{SigmaScratch, VectorFunction};
+use crate::kernel::{Accum, CholeskyScratch, is_static, mul_tr, mul_tr_lower};
 use crate::linalg::{ensure_shape, psd_factor_into};
 use crate::scalar::{Real, real};
 
@@ -34,7 +34,7 @@ use crate::scalar::{Real, real};
 /// ([`psd_factor`](crate::linalg::psd_factor); for runtime sizes a plain Cholesky factor first), so directions with zero variance
 /// are allowed. The deviations are collected as the columns of two m × n matrices and the sums
 /// are matrix products (faer for runtime sizes); all buffers live in the caller's
-/// [`Workspace`], so nothing is allocated for static sizes, nor for runtime sizes after the
+/// [`UnscentedWorkspace`], so nothing is allocated for static sizes, nor for runtime sizes after the
 /// first call.
 ///
 /// Requirements on g: [`VectorFunction`] only.
@@ -108,41 +108,73 @@ impl<T: Real> Default for Unscented<T> {
     }
 }
 
-impl<T: Real> Unscented<T> {
-    /// The transform, into the caller's buffers; the cross-covariance only if `cross` is given.
-    ///
+/// [`Unscented`]'s buffers: the scaled factor √c L, the deviations D₊ and D₋, their mean, and
+/// the point and value of one sigma point at a time.
+#[derive(Debug)]
+pub struct UnscentedWorkspace<T: Real, N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    factor: Option<OMatrix<T, N, N>>,
+    cholesky: CholeskyScratch,
+    point: Option<OMatrix<T, N, U1>>,
+    value: Option<OMatrix<T, M, U1>>,
+    deviation: Option<OMatrix<T, M, U1>>,
+    mean_deviation: Option<OMatrix<T, M, U1>>,
+    plus: Option<OMatrix<T, M, N>>,
+    minus: Option<OMatrix<T, M, N>>,
+    sigma: Option<SigmaScratch<T, N, M>>,
+}
+
+impl<T: Real, N: Dim, M: Dim> Default for UnscentedWorkspace<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn default() -> Self {
+        Self {
+            factor: None,
+            cholesky: CholeskyScratch::default(),
+            point: None,
+            value: None,
+            deviation: None,
+            mean_deviation: None,
+            plus: None,
+            minus: None,
+            sigma: None,
+        }
+    }
+}
+
+impl<T: Real> PropagatorWorkspace<T> for Unscented<T> {
+    type Workspace<N: Dim, M: Dim>
+        = UnscentedWorkspace<T, N, M>
+    where
+        DefaultAllocator: Alloc<N, M>;
+}
+
+impl<T, N, M, G> MomentPropagator<T, N, M, G> for Unscented<T>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    G: VectorFunction<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
     /// The deviations are stored column by column in D₊ and D₋ (m × n, in the workspace), so
     /// the sums are matrix products: cov(y) = w (D₊D₊ᵀ + D₋D₋ᵀ) + (β − α²) d̄ d̄ᵀ and, since
-    /// χ±ⱼ − μ = ±√c Lⱼ, cov(x, y) = w √c L (D₊ − D₋)ᵀ. The 2n points go to g together
-    /// ([`VectorFunction::eval_sigma_points_into`]) where g supports it and n is a runtime size,
-    /// else one by one.
+    /// χ±ⱼ − μ = ±√c Lⱼ, cov(x, y) = w √c L (D₊ − D₋)ᵀ. For runtime sizes the 2n points go to g
+    /// together ([`VectorFunction::eval_sigma_points_into`]); for static sizes one at a time
+    /// here, which measured faster there.
     #[inline(always)]
-    fn moments_into<N, M, G>(
+    fn propagate_into(
         &self,
         mean: &OVector<T, N>,
         covariance: &OMatrix<T, N, N>,
         g: &G,
-        out_mean: &mut OVector<T, M>,
-        out_covariance: &mut OMatrix<T, M, M>,
-        mut cross: Option<&mut OMatrix<T, N, M>>,
-        noise: Option<&OMatrix<T, M, M>>,
-        workspace: &mut Workspace<T, N, M>,
-    ) -> Result<()>
-    where
-        N: Dim,
-        M: Dim,
-        G: VectorFunction<T, N, M> + ?Sized,
-        DefaultAllocator: Alloc<N, M>,
-    {
-        check_inputs(
-            mean,
-            covariance,
-            out_mean,
-            out_covariance,
-            cross.as_deref_mut(),
-            workspace,
-        )?;
-        let (n_dim, m_dim) = (workspace.n, workspace.m);
+        mut out: Outputs<'_, T, N, M>,
+        workspace: &mut UnscentedWorkspace<T, N, M>,
+    ) -> Result<()> {
+        let (n_dim, m_dim) = check_inputs(mean, covariance, &mut out)?;
         let (n, m) = (n_dim.value(), m_dim.value());
         let stage = Stage::Propagation;
         let c = self.alpha * self.alpha * (real::<T>(n as f64) + self.kappa);
@@ -156,7 +188,8 @@ impl<T: Real> Unscented<T> {
         psd_factor_into(covariance, l, &mut workspace.cholesky, stage)?;
         *l *= c.sqrt();
 
-        // ȳ is accumulated as g(μ) + d̄: out_mean holds g(μ) until the end.
+        // ȳ is accumulated as g(μ) + d̄: out.mean holds g(μ) until the end.
+        let out_mean = &mut *out.mean;
         g.eval_into(mean, out_mean);
         ensure_shape(out_mean, m, 1, stage, Quantity::FunctionValue)?;
         let x = buffer(&mut workspace.point, n_dim, U1);
@@ -164,10 +197,12 @@ impl<T: Real> Unscented<T> {
         let d = buffer(&mut workspace.deviation, m_dim, U1);
         let plus = buffer(&mut workspace.plus, m_dim, n_dim);
         let minus = buffer(&mut workspace.minus, m_dim, n_dim);
-        // All 2n points together where g can (eval_sigma_points_into; runtime sizes only: at
-        // static sizes the per-point loop below measured faster), ...
-        let together = !is_static::<N>() && g.eval_sigma_points_into(mean, l, plus, minus);
-        if together {
+        if !is_static::<N>() {
+            // All 2n points together, then their deviations from g(μ) column by column.
+            let sigma = workspace
+                .sigma
+                .get_or_insert_with(|| SigmaScratch::new(n_dim, m_dim));
+            g.eval_sigma_points_into(mean, l, plus, minus, sigma);
             for deviations in [&mut *plus, &mut *minus] {
                 ensure_shape(deviations, m, n, stage, Quantity::FunctionValue)?;
                 for j in 0..n {
@@ -179,8 +214,8 @@ impl<T: Real> Unscented<T> {
                 }
             }
         } else {
-            // ... else one at a time. Columns of column-major storage are contiguous slices:
-            // plain slice loops here, where nalgebra's generic column views cost measurably on
+            // One at a time. Columns of column-major storage are contiguous slices: plain
+            // slice loops here, where nalgebra's generic column views cost measurably on
             // small static sizes.
             for j in 0..n {
                 let column = &l.as_slice()[j * n..(j + 1) * n];
@@ -208,7 +243,8 @@ impl<T: Real> Unscented<T> {
             }
         }
         *d_bar *= w;
-        // The lower triangle of the symmetric sums only ([`finish`] mirrors it).
+        // The lower triangle of the symmetric sums only (`finish` mirrors it).
+        let out_covariance = &mut *out.covariance;
         mul_tr_lower(out_covariance, Accum::Replace, w, plus, plus);
         mul_tr_lower(out_covariance, Accum::Add, w, minus, minus);
         let centre = self.beta - self.alpha * self.alpha;
@@ -218,23 +254,12 @@ impl<T: Real> Unscented<T> {
                 out_covariance[(i, j)] += d_bar[i] * dj;
             }
         }
-        if let Some(cross) = cross.as_deref_mut() {
+        if let Some(cross) = out.cross_covariance.as_deref_mut() {
             // D₋ ← D₊ − D₋; l already carries the √c.
             minus.zip_apply(plus, |dm, dp| *dm = dp - *dm);
             mul_tr(cross, Accum::Replace, w, l, minus);
         }
-        *out_mean += &*d_bar;
-        finish(out_mean, out_covariance, cross.as_deref(), noise)
+        *out.mean += &*d_bar;
+        out.finish()
     }
-}
-
-impl<T, N, M, G> MomentPropagator<T, N, M, G> for Unscented<T>
-where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    G: VectorFunction<T, N, M> + ?Sized,
-    DefaultAllocator: Alloc<N, M>,
-{
-    impl_propagator_via_moments_into!();
 }
