@@ -41,6 +41,18 @@ impl ProcessJacobian<f64, U4> for ConstantVelocity {
     }
 }
 impl LinearProcessModel<f64, U4> for ConstantVelocity {}
+// The second-order filters ask for Hessians; an affine model says so with `None`.
+impl ProcessHessian<f64, U4> for ConstantVelocity {
+    fn transition_hessian(
+        &self,
+        _: &Vector4<f64>,
+        _: &(),
+        _: f64,
+        _: usize,
+    ) -> Option<Matrix4<f64>> {
+        None
+    }
+}
 
 /// Range and bearing from a radar at the origin.
 struct Radar {

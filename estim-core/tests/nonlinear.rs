@@ -371,12 +371,12 @@ fn boje_matrix_form_matches_trig_sum_form() {
     }
 }
 
-/// `propagate_with_noise_into`: the built-in propagators add the noise in their symmetrising
-/// pass; that must be the trait's default route (moments, then cov + Q symmetrised) bit for
-/// bit, and Sampled (which uses the default) must add exactly Q's symmetric part.
+/// `Outputs::with_noise`: the propagators add the noise in their symmetrising pass; that must
+/// be the plain route (moments, then cov + Q symmetrised) bit for bit, and add exactly Q's
+/// symmetric part.
 #[test]
 fn propagating_with_additive_noise_matches_the_default_route() {
-    use estim_core::Workspace;
+    use estim_core::Outputs;
     use estim_core::nalgebra::Matrix3;
 
     fn check<P: MomentPropagator<f64, U3, U3, TrigSum<f64, U3, U3>>>(name: &str, p: &P) {
@@ -385,10 +385,10 @@ fn propagating_with_additive_noise_matches_the_default_route() {
         let c = spd(U3, &[0.5, 0.1, -0.2, 0.3, 0.05, 0.4, -0.6, 0.9, 0.2], 1.0);
         // Not exactly symmetric, to see that only its symmetric part is added.
         let q = Matrix3::new(0.2, 0.01, 0.0, 0.011, 0.3, 0.02, 0.0, 0.019, 0.1);
-        let mut ws = Workspace::new(U3, U3);
+        let mut ws = Default::default();
         let (mut mean, mut cov) = (OVector::<f64, U3>::zeros(), Matrix3::zeros());
-        p.propagate_with_noise_into(&mu, &c, &g, &q, &mut mean, &mut cov, &mut ws)
-            .unwrap();
+        let out = Outputs::mean_covariance(&mut mean, &mut cov).with_noise(&q);
+        p.propagate_into(&mu, &c, &g, out, &mut ws).unwrap();
         let (mean0, mut cov0) = p.propagate_mean_covariance(&mu, &c, &g).unwrap();
         assert!(estim_core::linalg::symmetrize_add_checked(&mut cov0, &q));
         for (a, b) in mean

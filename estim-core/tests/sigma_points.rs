@@ -16,12 +16,13 @@ use estim_core::nalgebra::{
 };
 use estim_core::{
     Alloc, Error, LinearMeasurement, LinearProcess, MeasurementModel, MomentPropagator, Moments,
-    Observation, ProcessModel, Quantity, Stage, Transition, Unscented, VectorFunction,
+    Observation, ProcessModel, Quantity, SigmaScratch, Stage, Transition, Unscented,
+    VectorFunction,
 };
 
 /// g(x) = A x + ε sin x (componentwise on the first m components), either evaluated one
-/// point at a time (`together = false`) or in `eval_sigma_points_into` by the same per-point
-/// code on the same points μ ± Lⱼ.
+/// point at a time by the trait's default `eval_sigma_points_into` (`together = false`) or in
+/// its own `eval_sigma_points_into` by the same per-point code on the same points μ ± Lⱼ.
 struct SineMap<N: Dim, M: Dim>
 where
     DefaultAllocator: Alloc<N, M>,
@@ -48,9 +49,10 @@ where
         offsets: &OMatrix<f64, N, N>,
         plus: &mut OMatrix<f64, M, N>,
         minus: &mut OMatrix<f64, M, N>,
-    ) -> bool {
+        scratch: &mut SigmaScratch<f64, N, M>,
+    ) {
         if !self.together {
-            return false;
+            return OneByOne(self).eval_sigma_points_into(mean, offsets, plus, minus, scratch);
         }
         for j in 0..offsets.ncols() {
             for (sign, out) in [(1.0, &mut *plus), (-1.0, &mut *minus)] {
@@ -58,7 +60,18 @@ where
                 out.set_column(j, &self.eval(&point));
             }
         }
-        true
+    }
+}
+
+/// A function's values with the trait's default (one point at a time) sigma-point route.
+struct OneByOne<'a, F>(&'a F);
+
+impl<N: Dim, M: Dim, F: VectorFunction<f64, N, M>> VectorFunction<f64, N, M> for OneByOne<'_, F>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn eval(&self, x: &OVector<f64, N>) -> OVector<f64, M> {
+        self.0.eval(x)
     }
 }
 
@@ -169,7 +182,8 @@ fn linear_models_map_sigma_points_as_they_map_points() {
     let bound = |scale: DMatrix<f64>, k: usize| scale * (2.0 * gamma(k + 2));
 
     let (mut plus, mut minus) = (DMatrix::zeros(n, n), DMatrix::zeros(n, n));
-    assert!(process.transition_sigma_points_into(&mu, &l, &u, 0.1, &mut plus, &mut minus));
+    let mut scratch = SigmaScratch::new(Dyn(n), Dyn(n));
+    process.transition_sigma_points_into(&mu, &l, &u, 0.1, &mut plus, &mut minus, &mut scratch);
     let (process_ref, u_ref, point_ref) = (&process, &u, &point);
     let single = move |sign: f64| {
         move |j: usize| {
@@ -184,7 +198,7 @@ fn linear_models_map_sigma_points_as_they_map_points() {
     // Through the adapter the unscented transform uses: the same values.
     let map = Transition::new(&process, &u, 0.1);
     let (mut plus2, mut minus2) = (DMatrix::zeros(n, n), DMatrix::zeros(n, n));
-    assert!(map.eval_sigma_points_into(&mu, &l, &mut plus2, &mut minus2));
+    map.eval_sigma_points_into(&mu, &l, &mut plus2, &mut minus2, &mut scratch);
     assert_eq!((&plus2, &minus2), (&plus, &minus));
     // No inputs.
     let no_input = LinearProcess {
@@ -193,24 +207,27 @@ fn linear_models_map_sigma_points_as_they_map_points() {
         noise: DMatrix::identity(n, n),
     };
     let none = DVector::zeros(0);
-    assert!(no_input.transition_sigma_points_into(&mu, &l, &none, 0.1, &mut plus, &mut minus));
+    no_input.transition_sigma_points_into(&mu, &l, &none, 0.1, &mut plus, &mut minus, &mut scratch);
     let f_bound = bound(magnitude(&f, DMatrix::zeros(n, n)), n);
     assert_columns_within(&plus, |j| &f * point(j, 1.0), &f_bound);
     assert_columns_within(&minus, |j| &f * point(j, -1.0), &f_bound);
 
     let (mut plus, mut minus) = (DMatrix::zeros(m, n), DMatrix::zeros(m, n));
-    assert!(sensor.measure_sigma_points_into(&mu, &l, &mut plus, &mut minus));
+    let mut scratch = SigmaScratch::new(Dyn(n), Dyn(m));
+    sensor.measure_sigma_points_into(&mu, &l, &mut plus, &mut minus, &mut scratch);
     let h_bound = bound(magnitude(&h, DMatrix::zeros(m, n)), n);
     assert_columns_within(&plus, |j| &h * point(j, 1.0), &h_bound);
     assert_columns_within(&minus, |j| &h * point(j, -1.0), &h_bound);
     let observation = Observation::new(&sensor);
     let (mut plus2, mut minus2) = (DMatrix::zeros(m, n), DMatrix::zeros(m, n));
-    assert!(observation.eval_sigma_points_into(&mu, &l, &mut plus2, &mut minus2));
+    observation.eval_sigma_points_into(&mu, &l, &mut plus2, &mut minus2, &mut scratch);
     assert_eq!((&plus2, &minus2), (&plus, &minus));
 
-    // Shapes that do not fit: left to the per-point route, which reports them.
+    // Shapes that do not fit: left to the per-point route, which cannot write an m-vector
+    // into a column of m + 1 (the propagator then reports the shape).
     let mut wrong = DMatrix::zeros(m + 1, n);
-    assert!(!sensor.measure_sigma_points_into(&mu, &l, &mut wrong, &mut minus));
+    sensor.measure_sigma_points_into(&mu, &l, &mut wrong, &mut minus, &mut scratch);
+    assert_eq!(wrong, DMatrix::zeros(m + 1, n));
 }
 
 /// Claims to have mapped the points but leaves its outputs a row short.
@@ -227,10 +244,10 @@ impl VectorFunction<f64, Dyn, Dyn> for ShortBatch {
         offsets: &DMatrix<f64>,
         plus: &mut DMatrix<f64>,
         minus: &mut DMatrix<f64>,
-    ) -> bool {
+        _: &mut SigmaScratch<f64, Dyn, Dyn>,
+    ) {
         *plus = DMatrix::zeros(1, offsets.ncols());
         *minus = DMatrix::zeros(1, offsets.ncols());
-        true
     }
 }
 

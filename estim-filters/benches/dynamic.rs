@@ -526,8 +526,12 @@ where
     {
         let (x, p) = (f.state(), f.covariance());
         (
-            DVector::from_column_slice(x.as_slice()),
-            DMatrix::from_column_slice(p.nrows(), p.ncols(), p.as_slice()),
+            DVector::<f64>::from_column_slice_generic(
+                Dyn(x.nrows()),
+                estim_core::nalgebra::U1,
+                x.as_slice(),
+            ),
+            DMatrix::<f64>::from_column_slice_generic(Dyn(p.nrows()), Dyn(p.ncols()), p.as_slice()),
         )
     }
     let m = models;

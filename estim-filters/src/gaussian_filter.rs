@@ -15,7 +15,7 @@ use estim_core::{
 
 use crate::correlated::Decorrelated;
 use crate::report::UpdateReport;
-use crate::scratch::{PredictScratch, RuntimeSized, ScratchCache, UpdateScratch};
+use crate::scratch::{PredictScratch, ScratchCache, UpdateScratch};
 use crate::traits::{Estimator, Predict, PredictCorrelated, Update};
 use crate::update::{self, CovarianceUpdate, UpdateSettings};
 
@@ -217,7 +217,7 @@ where
     N: Dim,
     G: VectorFunction<T, N, N>,
     Pr: MomentPropagator<T, N, N, G>,
-    DefaultAllocator: Alloc<N> + RuntimeSized<N>,
+    DefaultAllocator: Alloc<N>,
 {
     let n = state.shape_generic().0;
     // Chosen here rather than through a closure over the whole step: a local the compiler
@@ -330,7 +330,7 @@ where
     N: Dim,
     P: ProcessModel<T, N>,
     Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T>>,
-    DefaultAllocator: Alloc<N> + RuntimeSized<N>,
+    DefaultAllocator: Alloc<N>,
 {
     #[inline(always)]
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
@@ -352,7 +352,6 @@ where
     where
         P: ProcessModel<T, N>,
         Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T>>,
-        DefaultAllocator: RuntimeSized<N>,
     {
         ensure_time_step(dt)?;
         let Self {
@@ -377,7 +376,7 @@ where
     P: ProcessModel<T, N>,
     H: MeasurementModel<T, N, M>,
     Pr: for<'a> MomentPropagator<T, N, N, Decorrelated<'a, P, P::Input, H, T, N, M>>,
-    DefaultAllocator: Alloc<N, M> + RuntimeSized<N>,
+    DefaultAllocator: Alloc<N, M>,
 {
     /// Runs through the same prediction code; building the decorrelated map allocates for
     /// runtime sizes (it solves with R once per call).
@@ -482,7 +481,7 @@ where
     M: Dim,
     H: MeasurementModel<T, N, M>,
     Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
-    DefaultAllocator: Alloc<N, M> + RuntimeSized<N, M>,
+    DefaultAllocator: Alloc<N, M>,
 {
     #[inline(always)]
     fn update_into(
@@ -519,7 +518,7 @@ where
         M: Dim,
         H: MeasurementModel<T, N, M>,
         Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
-        DefaultAllocator: Alloc<N, M> + RuntimeSized<N, M>,
+        DefaultAllocator: Alloc<N, M>,
     {
         let Self {
             state,
@@ -556,7 +555,7 @@ where
     M: Dim,
     H: MeasurementModel<T, N, M>,
     Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
-    DefaultAllocator: Alloc<N, M> + RuntimeSized<N, M>,
+    DefaultAllocator: Alloc<N, M>,
 {
     let (n, m) = (state.shape_generic().0, z.shape_generic().0);
     let mut local;

@@ -68,6 +68,5 @@ pub use gaussian_filter::{
 pub use monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Recorder};
 pub use report::{UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
-pub use scratch::RuntimeSized;
 pub use traits::{Estimator, Predict, PredictCorrelated, Update};
 pub use update::CovarianceUpdate;

@@ -5,7 +5,6 @@ use estim_core::{Alloc, Error, Gaussian, MeasurementJacobian, Parameter, Real, e
 
 use crate::gaussian_filter::{Ekf, Step};
 use crate::report::UpdateReport;
-use crate::scratch::RuntimeSized;
 use crate::traits::{Estimator, Update};
 use crate::update::CovarianceUpdate;
 
@@ -101,7 +100,7 @@ where
     N: Dim,
     M: Dim,
     H: MeasurementJacobian<T, N, M>,
-    DefaultAllocator: Alloc<N, M> + RuntimeSized<N, M>,
+    DefaultAllocator: Alloc<N, M>,
 {
     #[inline(always)]
     fn update_into(

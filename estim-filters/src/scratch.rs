@@ -7,8 +7,9 @@
 
 use core::marker::PhantomData;
 
+use estim_core::alloc::{DimAlloc, SizeFamily};
 use estim_core::kernel::is_static;
-use estim_core::nalgebra::{Const, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
+use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
 use estim_core::{Alloc, PropagatorWorkspace, Real};
 
 /// Buffers of one prediction over an `N`-dimensional state with propagator `Pr`.
@@ -94,80 +95,34 @@ where
     }
 }
 
-/// Reaches the buffers a filter keeps for runtime sizes from code generic over the
-/// dimensions, without a type-erased downcast: `x`, made for (`Dyn`, `Dyn`), as the same
-/// buffers for (N, M) when both are `Dyn`, and `None` when either is static.
-///
-/// Implemented by `DefaultAllocator` for every pair of static (`Const<R>`) and runtime (`Dyn`)
-/// dimensions, so it holds for any concrete filter; only code generic over the dimensions of a
-/// concrete filter type (a function taking `Ekf<f64, N>` for any `N`, say) needs to state it:
-/// `DefaultAllocator: RuntimeSized<N, M>` (and `RuntimeSized<N, N>` for a prediction).
-pub trait RuntimeSized<N: Dim, M: Dim = N> {
-    /// `x` at (N, M) if both are `Dyn`.
-    #[doc(hidden)]
-    fn runtime_sized<F: SizeFamily>(x: &mut F::Of<Dyn, Dyn>) -> Option<&mut F::Of<N, M>>
-    where
-        DefaultAllocator: Alloc<N, M>;
-}
-
-/// A type constructor over a pair of dimensions (a filter's buffers for an n-state,
-/// m-measurement step), for [`RuntimeSized`].
-#[doc(hidden)]
-pub trait SizeFamily {
-    /// The type at dimensions (N, M).
-    type Of<N: Dim, M: Dim>
-    where
-        DefaultAllocator: Alloc<N, M>;
-}
-
-impl RuntimeSized<Dyn, Dyn> for DefaultAllocator {
-    #[inline(always)]
-    fn runtime_sized<F: SizeFamily>(x: &mut F::Of<Dyn, Dyn>) -> Option<&mut F::Of<Dyn, Dyn>> {
-        Some(x)
-    }
-}
-
-impl<const R: usize> RuntimeSized<Const<R>, Dyn> for DefaultAllocator {
-    #[inline(always)]
-    fn runtime_sized<F: SizeFamily>(_: &mut F::Of<Dyn, Dyn>) -> Option<&mut F::Of<Const<R>, Dyn>> {
-        None
-    }
-}
-
-impl<const C: usize> RuntimeSized<Dyn, Const<C>> for DefaultAllocator {
-    #[inline(always)]
-    fn runtime_sized<F: SizeFamily>(_: &mut F::Of<Dyn, Dyn>) -> Option<&mut F::Of<Dyn, Const<C>>> {
-        None
-    }
-}
-
-impl<const R: usize, const C: usize> RuntimeSized<Const<R>, Const<C>> for DefaultAllocator {
-    #[inline(always)]
-    fn runtime_sized<F: SizeFamily>(
-        _: &mut F::Of<Dyn, Dyn>,
-    ) -> Option<&mut F::Of<Const<R>, Const<C>>> {
-        None
-    }
-}
-
-/// [`PredictScratch`] as a function of the dimensions (M unused), for [`RuntimeSized`].
+/// [`PredictScratch`] as a function of the state dimension, for [`DimAlloc::runtime_sized`].
 struct PredictFamily<T, Pr>(PhantomData<(T, Pr)>);
 
-impl<T: Real, Pr: PropagatorWorkspace<T>> SizeFamily for PredictFamily<T, Pr> {
-    type Of<N: Dim, M: Dim>
-        = PredictScratch<T, N, Pr>
+impl<T: Real, Pr: PropagatorWorkspace<T>> SizeFamily<Dyn> for PredictFamily<T, Pr> {
+    type Of<Z: Dim>
+        = PredictScratch<T, Z, Pr>
     where
-        DefaultAllocator: Alloc<N, M>;
+        DefaultAllocator: Alloc<Z, Dyn>;
 }
 
-/// [`UpdateScratch`] as a function of the dimensions, for [`RuntimeSized`].
-struct UpdateFamily<T, Pr>(PhantomData<(T, Pr)>);
+/// [`UpdateScratch`] with a runtime-size measurement, as a function of the state dimension.
+struct UpdateOfStates<T, Pr>(PhantomData<(T, Pr)>);
 
-impl<T: Real, Pr: PropagatorWorkspace<T>> SizeFamily for UpdateFamily<T, Pr> {
-    type Of<N: Dim, M: Dim>
-        = UpdateScratch<T, N, M, Pr>
+impl<T: Real, Pr: PropagatorWorkspace<T>> SizeFamily<Dyn> for UpdateOfStates<T, Pr> {
+    type Of<Z: Dim>
+        = UpdateScratch<T, Z, Dyn, Pr>
     where
-        DefaultAllocator: Alloc<N, M>;
+        DefaultAllocator: Alloc<Z, Dyn>;
+}
+
+/// [`UpdateScratch`] with N states, as a function of the measurement dimension.
+struct UpdateOfMeasurements<T, N, Pr>(PhantomData<(T, N, Pr)>);
+
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>> SizeFamily<N> for UpdateOfMeasurements<T, N, Pr> {
+    type Of<Z: Dim>
+        = UpdateScratch<T, N, Z, Pr>
+    where
+        DefaultAllocator: Alloc<Z, N>;
 }
 
 /// What a filter keeps between steps for runtime sizes: the scratch of its prediction and one
@@ -211,7 +166,7 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
     #[inline(always)]
     pub(crate) fn predict<N: Dim>(&mut self, n: N) -> Option<&mut PredictScratch<T, N, Pr>>
     where
-        DefaultAllocator: Alloc<N> + RuntimeSized<N>,
+        DefaultAllocator: Alloc<N>,
     {
         if is_static::<N>() {
             return None;
@@ -226,7 +181,7 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
         let cached = self
             .predict
             .get_or_insert_with(|| PredictScratch::<T, Dyn, Pr>::new(Dyn(n.value())));
-        <DefaultAllocator as RuntimeSized<N>>::runtime_sized::<PredictFamily<T, Pr>>(cached)
+        <DefaultAllocator as DimAlloc<N>>::runtime_sized::<Dyn, PredictFamily<T, Pr>>(cached)
     }
 
     /// Drops the cached prediction scratch, after a failed step: a model's default `_into`
@@ -244,7 +199,7 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
         m: M,
     ) -> Option<(&mut UpdateScratch<T, N, M, Pr>, usize)>
     where
-        DefaultAllocator: Alloc<N, M> + RuntimeSized<N, M>,
+        DefaultAllocator: Alloc<N, M>,
     {
         if is_static::<N>() || is_static::<M>() {
             return None;
@@ -261,8 +216,14 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
             }
         };
         let cached = &mut self.update[index];
-        <DefaultAllocator as RuntimeSized<N, M>>::runtime_sized::<UpdateFamily<T, Pr>>(cached)
-            .map(|scratch| (scratch, index))
+        // Both dimensions are runtime sizes here: the cached (Dyn, Dyn) scratch, seen as
+        // (N, Dyn), then as (N, M).
+        let by_states =
+            <DefaultAllocator as DimAlloc<N>>::runtime_sized::<Dyn, UpdateOfStates<T, Pr>>(cached)?;
+        <DefaultAllocator as DimAlloc<M>>::runtime_sized::<N, UpdateOfMeasurements<T, N, Pr>>(
+            by_states,
+        )
+        .map(|scratch| (scratch, index))
     }
 
     /// Drops the cached update scratch in `slot`, after a failed step.

@@ -701,7 +701,7 @@ impl Agreement {
 }
 
 /// Static and dynamic runs of `GaussianFilter<_, _, Pr>` on the scenario.
-fn compare_propagator<Pr: Clone>(
+fn compare_propagator<Pr: Clone + estim_core::PropagatorWorkspace<f64>>(
     s: &Scenario,
     propagator: Pr,
     jitter_seed: Option<u64>,

@@ -173,6 +173,21 @@ impl MeasurementJacobian<f64, U6, U1> for RateSquaredAbout {
 }
 impl LinearMeasurementModel<f64, U6, U1> for RateSquaredAbout {}
 
+/// Affine: every Hessian is zero (the second-order filters and the derivative checker ask).
+impl estim_core::MeasurementHessian<f64, estim_core::nalgebra::U6, estim_core::nalgebra::U1>
+    for RateSquaredAbout
+{
+    fn measurement_hessian(
+        &self,
+        _: &estim_core::nalgebra::OVector<f64, estim_core::nalgebra::U6>,
+        _: usize,
+    ) -> Option<
+        estim_core::nalgebra::OMatrix<f64, estim_core::nalgebra::U6, estim_core::nalgebra::U6>,
+    > {
+        None
+    }
+}
+
 /// Runs 400 steps (three fixes) of the circle data through eq 16 by hand and through estim's
 /// Ekf, and returns the largest difference, each entry scaled by its size (1 + |x̂ⱼ| for the
 /// state, √(Pⱼⱼ Pₗₗ) for the covariance). `linearised_decorrelation`: pass the θ̇² model

@@ -140,6 +140,19 @@ impl ProcessJacobian<f64, U6> for PlanarProcess {
 
 impl estim_core::LinearProcessModel<f64, U6> for PlanarProcess {}
 
+/// Affine: no curvature, so the second-order filters run it as the EKF does.
+impl estim_core::ProcessHessian<f64, U6> for PlanarProcess {
+    fn transition_hessian(
+        &self,
+        _: &Vector6<f64>,
+        _: &PlanarInput,
+        _: f64,
+        _: usize,
+    ) -> Option<Matrix6<f64>> {
+        None
+    }
+}
+
 /// A process driven by the accelerometers, as [`filter_step`] needs it: how to build the
 /// step's input from a sample and the current estimate, and the noise cross-covariance S with
 /// the θ̇² measurement of the same sample.
@@ -403,6 +416,13 @@ impl MeasurementJacobian<f64, U6, U3> for PositionHeadingMeasurement {
 }
 
 impl LinearMeasurementModel<f64, U6, U3> for PositionHeadingMeasurement {}
+
+/// Affine: no curvature.
+impl estim_core::MeasurementHessian<f64, U6, U3> for PositionHeadingMeasurement {
+    fn measurement_hessian(&self, _: &Vector6<f64>, _: usize) -> Option<Matrix6<f64>> {
+        None
+    }
+}
 
 /// What one [`filter_step`] reports.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -55,6 +55,21 @@ impl ProcessJacobian<f64, U1> for ScalarRateProcess {
 
 impl LinearProcessModel<f64, U1> for ScalarRateProcess {}
 
+/// Affine: every Hessian is zero (the second-order filters and the derivative checker ask).
+impl estim_core::ProcessHessian<f64, estim_core::nalgebra::U1> for ScalarRateProcess {
+    fn transition_hessian(
+        &self,
+        _: &estim_core::nalgebra::OVector<f64, estim_core::nalgebra::U1>,
+        _: &f64,
+        _: f64,
+        _: usize,
+    ) -> Option<
+        estim_core::nalgebra::OMatrix<f64, estim_core::nalgebra::U1, estim_core::nalgebra::U1>,
+    > {
+        None
+    }
+}
+
 /// Scalar θ̇² measurement y = ω², R = λ44.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ScalarRateSquared {

@@ -264,6 +264,21 @@ impl ProcessJacobian<f64, U6> for CkfProcess {
 
 impl LinearProcessModel<f64, U6> for CkfProcess {}
 
+/// Affine: every Hessian is zero (the second-order filters and the derivative checker ask).
+impl estim_core::ProcessHessian<f64, estim_core::nalgebra::U6> for CkfProcess {
+    fn transition_hessian(
+        &self,
+        _: &estim_core::nalgebra::OVector<f64, estim_core::nalgebra::U6>,
+        _: &CkfInput,
+        _: f64,
+        _: usize,
+    ) -> Option<
+        estim_core::nalgebra::OMatrix<f64, estim_core::nalgebra::U6, estim_core::nalgebra::U6>,
+    > {
+        None
+    }
+}
+
 /// Wraps an angle into (−π, π].
 pub fn wrap_angle(a: f64) -> f64 {
     use core::f64::consts::PI;
@@ -300,3 +315,18 @@ impl MeasurementJacobian<f64, U6, U1> for AttitudeMeasurement {
 }
 
 impl LinearMeasurementModel<f64, U6, U1> for AttitudeMeasurement {}
+
+/// Affine: every Hessian is zero (the second-order filters and the derivative checker ask).
+impl estim_core::MeasurementHessian<f64, estim_core::nalgebra::U6, estim_core::nalgebra::U1>
+    for AttitudeMeasurement
+{
+    fn measurement_hessian(
+        &self,
+        _: &estim_core::nalgebra::OVector<f64, estim_core::nalgebra::U6>,
+        _: usize,
+    ) -> Option<
+        estim_core::nalgebra::OMatrix<f64, estim_core::nalgebra::U6, estim_core::nalgebra::U6>,
+    > {
+        None
+    }
+}

@@ -289,6 +289,21 @@ impl ProcessJacobian<f64, U3> for ErrorStateProcess {
 
 impl LinearProcessModel<f64, U3> for ErrorStateProcess {}
 
+/// Affine: every Hessian is zero (the second-order filters and the derivative checker ask).
+impl estim_core::ProcessHessian<f64, estim_core::nalgebra::U3> for ErrorStateProcess {
+    fn transition_hessian(
+        &self,
+        _: &estim_core::nalgebra::OVector<f64, estim_core::nalgebra::U3>,
+        _: &(),
+        _: f64,
+        _: usize,
+    ) -> Option<
+        estim_core::nalgebra::OMatrix<f64, estim_core::nalgebra::U3, estim_core::nalgebra::U3>,
+    > {
+        None
+    }
+}
+
 /// The GPS fix as an error-state measurement: δz = (z_p − p_c, z_v − v_c) = H δx + η,
 /// H = \[\[1, 0, 0\], \[0, 1, 0\]\], η ~ N(0, diag(position, velocity variance)).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -328,6 +343,21 @@ impl MeasurementJacobian<f64, U3, U2> for GpsMeasurement {
 }
 
 impl LinearMeasurementModel<f64, U3, U2> for GpsMeasurement {}
+
+/// Affine: every Hessian is zero (the second-order filters and the derivative checker ask).
+impl estim_core::MeasurementHessian<f64, estim_core::nalgebra::U3, estim_core::nalgebra::U2>
+    for GpsMeasurement
+{
+    fn measurement_hessian(
+        &self,
+        _: &estim_core::nalgebra::OVector<f64, estim_core::nalgebra::U3>,
+        _: usize,
+    ) -> Option<
+        estim_core::nalgebra::OMatrix<f64, estim_core::nalgebra::U3, estim_core::nalgebra::U3>,
+    > {
+        None
+    }
+}
 
 /// The accelerometer mechanisation (§2.2), open loop, never reset:
 ///

@@ -560,3 +560,13 @@ impl<T: Real, N: Dim, M: Dim> LinearMeasurementModel<T, N, M> for RedundantAxes<
     DefaultAllocator: Alloc<N, M>
 {
 }
+
+/// Affine: every Hessian is zero.
+impl<T: Real, N: Dim, M: Dim> estim_core::MeasurementHessian<T, N, M> for RedundantAxes<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn measurement_hessian(&self, _: &OVector<T, N>, _: usize) -> Option<OMatrix<T, N, N>> {
+        None
+    }
+}
