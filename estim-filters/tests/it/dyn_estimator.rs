@@ -2,7 +2,7 @@
 //! trait combining `Estimator`, `Predict` and `Update` for fixed model types is object safe
 //! too, so the filter can be chosen at run time.
 
-mod common;
+use crate::common;
 
 use common::{StaticSystem, UKF_SMALL_ALPHA_STATE_TOL, random_static_system, rng, simulate};
 use estim_core::nalgebra::{Matrix4, U1, U2, U4, Vector4};

@@ -14,7 +14,7 @@
 //!
 //! with SE the standard error of the 10⁵-draw estimate (from a pilot run) and Z = 5.
 
-mod common;
+use crate::common;
 
 use common::*;
 use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U3, U4, U5, Vector5};

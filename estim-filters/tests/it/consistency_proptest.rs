@@ -1,7 +1,7 @@
 //! The `proptest-support` strategies and assertions.
 #![cfg(feature = "proptest-support")]
 
-mod consistency_common;
+use crate::consistency_common;
 
 use consistency_common::*;
 use estim_core::nalgebra::{Dyn, U1, U2, U3, Vector1};

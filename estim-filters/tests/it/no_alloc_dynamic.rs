@@ -7,8 +7,8 @@
 // See tests/counting: the counting allocator implements the unsafe `GlobalAlloc` trait.
 #![allow(unsafe_code)]
 
-mod common;
-mod counting;
+use crate::common;
+use crate::counting;
 use common::assert_bitwise_eq;
 use counting::allocations_during;
 

@@ -2,7 +2,7 @@
 //! ones and round-off-level negative pivots) and rejects, with the documented error, wrong
 //! shapes, non-finite entries, asymmetry (naming the worst pair) and indefiniteness.
 
-mod common;
+use crate::common;
 
 use common::*;
 use estim_core::nalgebra::{

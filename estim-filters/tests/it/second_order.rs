@@ -1,7 +1,7 @@
 //! The second-order EKF against the EKF: identical when every Hessian is zero, different —
 //! and better in RMS error — when the curvature of the model matters.
 
-mod common;
+use crate::common;
 
 use common::{gaussian_matrix, normal, random_spd, random_stable, rng, sample};
 use estim_core::derivative::{check_measurement_model, check_process_model};

@@ -1,6 +1,6 @@
 //! The single-run consistency statistics: NEES/NIS, χ² bands, whiteness, log-likelihood.
 
-mod consistency_common;
+use crate::consistency_common;
 
 use consistency_common::*;
 use estim_core::nalgebra::{DMatrix, DVector, Matrix2, Vector1, Vector2, Vector3};

@@ -8,7 +8,7 @@
 //!   ≤ γₖ Σ |aᵢbᵢ|, per side; the point μ ± Lⱼ itself rounds once more);
 //! - a batch written in the wrong shape is a typed error, not a wrong answer.
 
-mod common;
+use crate::common;
 
 use common::*;
 use estim_core::nalgebra::{

@@ -13,7 +13,7 @@
 //! f32: h = ε₃₂^⅓ max(1, |x|) ≤ 9.8·10⁻³ for |x| ≤ 2, so h²M₃/6 ≲ 1.6·10⁻³ and ε₃₂M₀/h ≲
 //! 2.4·10⁻³ with M ≲ 100: `is_accurate(1e-2)` (the documented f32 level) has a ≈ 2.5× margin.
 
-mod common;
+use crate::common;
 
 use common::*;
 use estim_core::derivative::{self, DerivativeCheck, Entry};

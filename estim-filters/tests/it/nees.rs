@@ -1,7 +1,7 @@
 //! Monte Carlo consistency of the Kalman filter on a linear-Gaussian system: the average
 //! NEES (and NIS) over runs falls in its two-sided 95% χ² band.
 
-mod common;
+use crate::common;
 
 use common::{
     StaticSystem, Z_975, chi2_quantile_wilson_hilferty, random_static_system, rng, simulate,

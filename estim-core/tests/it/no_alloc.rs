@@ -10,7 +10,7 @@
 // forwards to `System` and bumps a counter) is the only unsafe code here.
 #![allow(unsafe_code)]
 
-mod common;
+use crate::common;
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;

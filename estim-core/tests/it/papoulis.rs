@@ -31,7 +31,7 @@
 //! reverse); every other λ is as printed. (Both agree with docs/paper-notes/boje.md, errata E1
 //! and E11; E11, "E{x₁x₂} ≈ x̄₁x̄₂ + cov" being exact, is checked in quadratic.rs.)
 
-mod common;
+use crate::common;
 
 use approx::assert_abs_diff_eq;
 use common::*;

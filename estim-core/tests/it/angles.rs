@@ -4,7 +4,7 @@
 //! mean): wrapping is invisible as long as every deviation is below π. Without the wrapping
 //! `difference`, the same function gives a variance of order π² (the control).
 
-mod common;
+use crate::common;
 
 use std::f64::consts::PI;
 

@@ -2,7 +2,7 @@
 //! sensors (every 10 and every 25 steps) gives exactly the hand-written sequence of Kalman
 //! updates; independent sensors updated in sequence equal one stacked update.
 
-mod common;
+use crate::common;
 
 use common::{ReferenceKf, UKF_SMALL_ALPHA_STATE_TOL, rng, sample};
 use estim_core::nalgebra::{

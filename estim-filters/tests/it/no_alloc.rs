@@ -21,7 +21,7 @@ use estim_filters::{
     PredictCorrelated, SecondOrderEkf, Ukf, Update,
 };
 
-mod counting;
+use crate::counting;
 use counting::allocations_during;
 
 /// A nonlinear 6-state process with analytic Hessians: two coupled pendulum-like axes plus a

@@ -2,7 +2,7 @@
 //! against (a) Boje's one-step predictor (eq 16) written by hand and (b) a Kalman filter on
 //! the state augmented with the measurement noise.
 
-mod common;
+use crate::common;
 
 use common::{UKF_SMALL_ALPHA_STATE_TOL, gaussian_matrix, random_spd, random_stable, rng, sample};
 use core::fmt::Debug;

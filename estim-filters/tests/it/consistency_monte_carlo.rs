@@ -2,7 +2,7 @@
 //! filter passes, a mistuned one and one with a wrong Jacobian are flagged, the statistics
 //! match a brute-force computation, and the sequential and parallel runners agree bit for bit.
 
-mod consistency_common;
+use crate::consistency_common;
 
 use std::sync::Mutex;
 
@@ -97,8 +97,8 @@ fn tuned_kalman_filter_passes_in_most_seeds() {
     );
 }
 
-/// The measured rates quoted above. `cargo test -p estim-filters --release --test
-/// consistency_monte_carlo -- --ignored --nocapture` (≈ 5 s).
+/// The measured rates quoted above. `cargo test -p estim-filters --release --test it --
+/// --ignored --nocapture consistency_monte_carlo::` (≈ 5 s).
 #[test]
 #[ignore]
 fn calibration_over_200_seeds() {

@@ -3,7 +3,7 @@
 //! and the Joseph, standard and symmetrised covariance updates agree. Property tests over
 //! random stable systems, for static and runtime sizes.
 
-mod common;
+use crate::common;
 
 use common::{
     DynSystem, LinearSystem, ReferenceKf, StaticSystem, Trajectory, UKF_SMALL_ALPHA_STATE_TOL,

@@ -1,7 +1,7 @@
 //! The covariance update forms over long runs: Joseph and Symmetrized keep P exactly
 //! symmetric; Standard agrees with Joseph to round-off on a well-conditioned problem.
 
-mod common;
+use crate::common;
 
 use common::{LinearSystem, Trajectory, random_dyn_system, random_static_system, rng, simulate};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};

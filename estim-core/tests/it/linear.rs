@@ -5,7 +5,7 @@
 //! reproduce these to round-off, with the round-off bound derived from Higham's model
 //! |fl(Σᵢ aᵢbᵢ) − Σᵢ aᵢbᵢ| ≤ γₖ Σᵢ|aᵢbᵢ| (k the number of terms; see `common::gamma`).
 
-mod common;
+use crate::common;
 
 use common::*;
 use estim_core::linalg::psd_factor;

@@ -3,7 +3,7 @@
 //! indefinite covariances, non-finite results, and — with dynamic sizes — functions,
 //! Jacobians, Hessians or covariances of the wrong shape: always an `Error`, never a panic.
 
-mod common;
+use crate::common;
 
 use common::*;
 use estim_core::nalgebra::{

@@ -2,7 +2,7 @@
 //! was, and the error names the right stage and quantity. Also gating and the statistics of
 //! the update report (innovation, S, NIS, log-likelihood) against hand computation.
 
-mod common;
+use crate::common;
 
 use core::fmt::Debug;
 

@@ -12,7 +12,7 @@
 //!
 //! Static (3 → 2, 6 → 4) and dynamic sizes, f64 and f32.
 
-mod common;
+use crate::common;
 
 use common::*;
 use estim_core::linalg::psd_factor;

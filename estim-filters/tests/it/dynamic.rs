@@ -14,7 +14,7 @@
 //!
 //! The whole file runs in well under a second at the test profile's opt-level 2.
 
-mod common;
+use crate::common;
 
 use std::cell::Cell;
 
@@ -957,7 +957,7 @@ proptest! {
 
 /// Measures the premises and the worst differences over 2000 seeds, against the tolerances
 /// (for the comments above):
-/// `cargo test -p estim-filters --test dynamic -- --ignored --nocapture survey`.
+/// `cargo test -p estim-filters --test it -- --ignored --nocapture dynamic::survey`.
 #[test]
 #[ignore]
 fn survey_static_dynamic_differences() {
@@ -1182,7 +1182,7 @@ fn ekf_and_cubature_ukf_with_100_states_match_the_reference() {
 }
 
 /// The large runs' worst differences against their bounds, over a few seeds:
-/// `cargo test -p estim-filters --test dynamic -- --ignored --nocapture survey_large`.
+/// `cargo test -p estim-filters --test it -- --ignored --nocapture dynamic::survey_large`.
 #[test]
 #[ignore]
 fn survey_large_filters() {

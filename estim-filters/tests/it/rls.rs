@@ -2,7 +2,7 @@
 //! exponentially weighted batch least squares, and for B = I the gain and covariance reach
 //! their steady state (1 − γ) I and (1 − γ) S.
 
-mod common;
+use crate::common;
 
 use common::{gaussian_matrix, random_spd, rng};
 use estim_core::nalgebra::{

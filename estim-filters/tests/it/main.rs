@@ -1,0 +1,28 @@
+//! estim-filters' integration tests, built as one binary (one module per topic) so that the
+//! workspace links one test executable per crate instead of one per file.
+//!
+//! Run one topic with `cargo test -p estim-filters --test it <module>::`, e.g.
+//! `cargo test -p estim-filters --test it equivalence::`.
+
+mod common;
+mod consistency_common;
+// The counting `#[global_allocator]` implements the unsafe `GlobalAlloc` trait; the workspace
+// denies `unsafe_code` and this module is the one place in the tests that needs it.
+#[allow(unsafe_code)]
+mod counting;
+
+mod atomicity;
+mod consistency_monte_carlo;
+mod consistency_proptest;
+mod consistency_statistics;
+mod correlated;
+mod covariance_forms;
+mod dyn_estimator;
+mod dynamic;
+mod equivalence;
+mod multirate;
+mod nees;
+mod no_alloc;
+mod no_alloc_dynamic;
+mod rls;
+mod second_order;
