@@ -88,12 +88,6 @@ pub enum Parameter {
     DegreesOfFreedom,
     /// Number of Monte Carlo runs or of averaged terms (at least 1).
     RunCount,
-    /// A time-slot index of a Monte Carlo runner (below the number of slots).
-    Slot,
-    /// A correlation lag (below the number of samples).
-    Lag,
-    /// A number of work chunks (at least 1).
-    ChunkCount,
 }
 
 /// Every error an estim algorithm returns.
@@ -215,9 +209,6 @@ impl fmt::Display for Parameter {
             Parameter::Confidence => "confidence",
             Parameter::DegreesOfFreedom => "degrees of freedom",
             Parameter::RunCount => "run count",
-            Parameter::Slot => "slot",
-            Parameter::Lag => "lag",
-            Parameter::ChunkCount => "chunk count",
         })
     }
 }

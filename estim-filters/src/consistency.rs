@@ -30,12 +30,14 @@
 //! // The average NEES of 50 runs of a 2-state filter lies in this band with probability 95%:
 //! let band = ChiSquareBand::two_sided(2, 50, 0.95)?;
 //! assert!(band.lower < 2.0 && 2.0 < band.upper);
-//! # Ok::<(), estim_core::Error>(())
+//! # Ok::<(), estim_filters::ValidationError>(())
 //! ```
 
 use estim_core::linalg::ensure_shape;
 use estim_core::nalgebra::{self, DefaultAllocator, Dim, OMatrix, OVector, allocator::Allocator};
-use estim_core::{Error, Parameter, Quantity, Real, Stage, error::Result};
+use estim_core::{Error, Parameter, Quantity, Real, Stage};
+
+use crate::validation::{Result, Setting, ValidationError};
 
 use crate::report::UpdateReport;
 
@@ -60,7 +62,8 @@ pub(crate) fn validate_confidence(confidence: f64) -> Result<f64> {
         Err(Error::InvalidParameter {
             parameter: Parameter::Confidence,
             value: confidence,
-        })
+        }
+        .into())
     }
 }
 
@@ -78,16 +81,16 @@ pub(crate) mod dist {
 
     fn chi2(dof: usize) -> Result<ChiSquared> {
         if dof == 0 {
-            return Err(dof_error(0.0));
+            return Err(dof_error(0.0).into());
         }
-        ChiSquared::new(dof as f64).map_err(|_| dof_error(dof as f64))
+        ChiSquared::new(dof as f64).map_err(|_| dof_error(dof as f64).into())
     }
 
     fn student(dof: usize) -> Result<StudentsT> {
         if dof == 0 {
-            return Err(dof_error(0.0));
+            return Err(dof_error(0.0).into());
         }
-        StudentsT::new(0.0, 1.0, dof as f64).map_err(|_| dof_error(dof as f64))
+        StudentsT::new(0.0, 1.0, dof as f64).map_err(|_| dof_error(dof as f64).into())
     }
 
     /// The `p` quantile of χ²_dof; `p` must be in (0, 1).
@@ -185,18 +188,22 @@ where
         return Err(Error::NonFinite {
             stage: STAGE,
             quantity: vector,
-        });
+        }
+        .into());
     }
     if !a.iter().all(|t| t.is_finite()) {
         return Err(Error::NonFinite {
             stage: STAGE,
             quantity: matrix,
-        });
+        }
+        .into());
     }
-    cholesky_quadratic_form(&mut a, &mut x, n).ok_or(Error::NotPositiveDefinite {
-        stage: STAGE,
-        quantity: matrix,
-    })
+    cholesky_quadratic_form(&mut a, &mut x, n).ok_or(ValidationError::Estimation(
+        Error::NotPositiveDefinite {
+            stage: STAGE,
+            quantity: matrix,
+        },
+    ))
 }
 
 /// The normalised estimation error squared ε = eᵀ P⁻¹ e of an error e = x − x̂ and the
@@ -268,7 +275,8 @@ impl ChiSquareBand {
             return Err(Error::InvalidParameter {
                 parameter: Parameter::DegreesOfFreedom,
                 value: 0.0,
-            });
+            }
+            .into());
         }
         let total = dof.checked_mul(runs).ok_or(Error::InvalidParameter {
             parameter: Parameter::RunCount,
@@ -286,7 +294,8 @@ impl ChiSquareBand {
             return Err(Error::InvalidParameter {
                 parameter: Parameter::RunCount,
                 value: 0.0,
-            });
+            }
+            .into());
         }
         let alpha = 1.0 - confidence;
         let n = terms as f64;
@@ -327,7 +336,7 @@ impl ChiSquareBand {
 /// assert_eq!(avg.mean(), Some(1.0));
 /// // Σ ~ χ²₄ when consistent: the average lies in [χ²₄(0.025), χ²₄(0.975)]/4 = [0.12, 2.79].
 /// assert!(avg.band(0.95)?.contains(1.0));
-/// # Ok::<(), estim_core::Error>(())
+/// # Ok::<(), estim_filters::ValidationError>(())
 /// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ChiSquareAverage {
@@ -348,13 +357,15 @@ impl ChiSquareAverage {
             return Err(Error::NonFinite {
                 stage: STAGE,
                 quantity: Quantity::Innovation,
-            });
+            }
+            .into());
         }
         if dof == 0 {
             return Err(Error::InvalidParameter {
                 parameter: Parameter::DegreesOfFreedom,
                 value: 0.0,
-            });
+            }
+            .into());
         }
         self.sum += value;
         self.terms += 1;
@@ -419,7 +430,7 @@ impl ChiSquareAverage {
 /// tr(S²) / (K (tr S)²) ≤ 1/K, so the bound is conservative; whiten them first
 /// (νₖ ↦ Lₖ⁻¹ νₖ with Sₖ = Lₖ Lₖᵀ) to make all components count equally.
 ///
-/// Errors: `lag` ≥ K ([`Parameter::Lag`]), innovations of different lengths, non-finite
+/// Errors: `lag` ≥ K ([`Setting::Lag`](crate::validation::Setting::Lag)), innovations of different lengths, non-finite
 /// values, or an all-zero sequence (ρ undefined: [`Error::NonFinite`]).
 pub fn normalized_autocorrelation<T: Real, M: Dim>(
     innovations: &[OVector<T, M>],
@@ -430,10 +441,7 @@ where
 {
     let k = innovations.len();
     if lag >= k {
-        return Err(Error::InvalidParameter {
-            parameter: Parameter::Lag,
-            value: lag as f64,
-        });
+        return Err(ValidationError::setting(Setting::Lag, lag));
     }
     let m = innovations[0].nrows();
     for nu in innovations {
@@ -459,7 +467,8 @@ where
         Err(Error::NonFinite {
             stage: STAGE,
             quantity: Quantity::Innovation,
-        })
+        }
+        .into())
     }
 }
 
@@ -471,7 +480,8 @@ pub fn autocorrelation_bound(samples: usize, confidence: f64) -> Result<f64> {
         return Err(Error::InvalidParameter {
             parameter: Parameter::RunCount,
             value: 0.0,
-        });
+        }
+        .into());
     }
     Ok(dist::normal_two_sided(confidence) / (samples as f64).sqrt())
 }
@@ -516,7 +526,7 @@ pub struct Whiteness {
 /// let test = whiteness(&seq, [1, 2, 3], 0.95)?;
 /// assert!(test.lags.iter().all(|l| !l.inside()));
 /// assert!(!test.check(FamilyRule::Simes)?.passed());
-/// # Ok::<(), estim_core::Error>(())
+/// # Ok::<(), estim_filters::ValidationError>(())
 /// ```
 pub fn whiteness<T: Real, M: Dim>(
     innovations: &[OVector<T, M>],
@@ -531,10 +541,7 @@ where
     let mut out = Vec::new();
     for lag in lags {
         if lag == 0 {
-            return Err(Error::InvalidParameter {
-                parameter: Parameter::Lag,
-                value: 0.0,
-            });
+            return Err(ValidationError::setting(Setting::Lag, 0));
         }
         out.push(LagCorrelation {
             lag,

@@ -59,6 +59,7 @@ mod rls;
 mod scratch;
 mod traits;
 pub mod update;
+pub mod validation;
 
 pub use consistency::Verdict;
 pub use correlated::Decorrelated;
@@ -70,3 +71,4 @@ pub use report::{UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
 pub use traits::{Estimator, Predict, PredictCorrelated, Update};
 pub use update::CovarianceUpdate;
+pub use validation::ValidationError;

@@ -87,7 +87,9 @@ use core::ops::Range;
 
 use estim_core::linalg::ensure_shape;
 use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector};
-use estim_core::{Alloc, Error, Parameter, Quantity, Real, error::Result};
+use estim_core::{Alloc, Error, Parameter, Quantity, Real};
+
+use crate::validation::{Result, Setting, ValidationError};
 
 use crate::consistency::{
     Check, ChiSquareBand, FamilyRule, FamilyTest, Location, STAGE, Verdict,
@@ -123,18 +125,18 @@ pub enum MonteCarloError {
         /// Its seed ([`run_seed`]).
         seed: u64,
         /// The error.
-        error: Error,
+        error: ValidationError,
     },
     /// Runs in different chunks recorded different shapes at the same slot or residual pair.
     Shape {
-        /// The [`Error::DimensionMismatch`].
-        error: Error,
+        /// The [`Error::DimensionMismatch`], wrapped.
+        error: ValidationError,
     },
 }
 
 impl MonteCarloError {
     /// The underlying error.
-    pub fn error(&self) -> Error {
+    pub fn error(&self) -> ValidationError {
         match *self {
             MonteCarloError::Run { error, .. } | MonteCarloError::Shape { error } => error,
         }
@@ -162,7 +164,7 @@ impl std::error::Error for MonteCarloError {
     }
 }
 
-impl From<MonteCarloError> for Error {
+impl From<MonteCarloError> for ValidationError {
     fn from(e: MonteCarloError) -> Self {
         e.error()
     }
@@ -189,15 +191,15 @@ struct SlotAcc {
     sum_ll: f64,
 }
 
-fn mismatch(quantity: Quantity, expected: usize, found: usize) -> Error {
-    Error::DimensionMismatch {
+fn mismatch(quantity: Quantity, expected: usize, found: usize) -> ValidationError {
+    ValidationError::Estimation(Error::DimensionMismatch {
         stage: STAGE,
         quantity,
         expected_rows: expected,
         expected_cols: 1,
         found_rows: found,
         found_cols: 1,
-    }
+    })
 }
 
 impl SlotAcc {
@@ -474,7 +476,7 @@ impl Recorder {
     /// covariance, and (e, x̂) the orthogonality statistics.
     ///
     /// At most once per slot and run. Errors: slot out of range or recorded twice
-    /// ([`Parameter::Slot`]), shapes, non-finite values, P not positive definite.
+    /// ([`Setting::Slot`](crate::validation::Setting::Slot)), shapes, non-finite values, P not positive definite.
     pub fn record_estimate<T: Real, N: Dim>(
         &mut self,
         slot: usize,
@@ -506,13 +508,15 @@ impl Recorder {
             return Err(Error::NonFinite {
                 stage: STAGE,
                 quantity: Quantity::Mean,
-            });
+            }
+            .into());
         }
         if !self.p.iter().all(|v| v.is_finite()) {
             return Err(Error::NonFinite {
                 stage: STAGE,
                 quantity: Quantity::Covariance,
-            });
+            }
+            .into());
         }
         self.chol.clone_from(&self.p);
         self.de.clone_from(&self.e);
@@ -564,7 +568,8 @@ impl Recorder {
             return Err(Error::NonFinite {
                 stage: STAGE,
                 quantity: Quantity::Innovation,
-            });
+            }
+            .into());
         }
         let acc = &mut self.acc.slots[slot];
         acc.nis_count += 1;
@@ -602,7 +607,8 @@ impl Recorder {
             return Err(Error::NonFinite {
                 stage: STAGE,
                 quantity: Quantity::Residual,
-            });
+            }
+            .into());
         }
         fill(&mut pending.values, residual.iter().map(|&v| to_f64(v)));
         pending.set = true;
@@ -615,11 +621,8 @@ fn fill(buffer: &mut Vec<f64>, values: impl Iterator<Item = f64>) {
     buffer.extend(values);
 }
 
-fn slot_error(slot: usize) -> Error {
-    Error::InvalidParameter {
-        parameter: Parameter::Slot,
-        value: slot as f64,
-    }
+fn slot_error(slot: usize) -> ValidationError {
+    ValidationError::setting(Setting::Slot, slot)
 }
 
 /// A Monte Carlo consistency experiment: how many runs, how many time slots, the master seed,
@@ -644,7 +647,8 @@ impl MonteCarlo {
             return Err(Error::InvalidParameter {
                 parameter: Parameter::RunCount,
                 value: 0.0,
-            });
+            }
+            .into());
         }
         if slots == 0 {
             return Err(slot_error(0));
@@ -684,10 +688,7 @@ impl MonteCarlo {
     /// more chunks let more threads work, at (2 × threads + 1) × slots accumulators of memory.
     pub fn with_chunks(mut self, chunks: usize) -> Result<Self> {
         if chunks == 0 {
-            return Err(Error::InvalidParameter {
-                parameter: Parameter::ChunkCount,
-                value: 0.0,
-            });
+            return Err(ValidationError::setting(Setting::ChunkCount, 0));
         }
         self.chunks = chunks;
         Ok(self)

@@ -2,7 +2,7 @@
 
 use core::fmt;
 
-use estim_core::error::Result;
+use crate::validation::Result;
 use statrs::function::gamma::ln_gamma;
 
 use super::validate_confidence;

@@ -7,12 +7,13 @@ use crate::consistency_common;
 use std::sync::Mutex;
 
 use consistency_common::*;
+use estim_core::Error;
 use estim_core::derivative::check_process_jacobian;
 use estim_core::nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Vector1, Vector3};
-use estim_core::{Error, Parameter};
 use estim_filters::Estimator;
 use estim_filters::consistency::{Check, FamilyRule, Outcome, Verdict, nees};
 use estim_filters::monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, run_seed};
+use estim_filters::validation::{Setting, ValidationError};
 use estim_filters::{Ekf, KalmanFilter};
 
 /// 300 runs of 100 steps (10 s); statistics every 5th step (20 slots, 0.5 s apart); Lu's
@@ -459,10 +460,10 @@ fn the_first_failing_run_is_reported() {
     let mc = MonteCarlo::new(200, 2).unwrap().with_seed(9);
     let fail = |run: usize, _: u64, _: &mut estim_filters::Recorder| {
         if run == 37 || run == 150 {
-            Err(Error::InvalidParameter {
-                parameter: Parameter::Tolerance,
+            Err(ValidationError::Estimation(Error::InvalidParameter {
+                parameter: estim_core::Parameter::Tolerance,
                 value: run as f64,
-            })
+            }))
         } else {
             Ok(())
         }
@@ -470,17 +471,19 @@ fn the_first_failing_run_is_reported() {
     let expected = MonteCarloError::Run {
         run: 37,
         seed: run_seed(9, 37),
-        error: Error::InvalidParameter {
-            parameter: Parameter::Tolerance,
+        error: ValidationError::Estimation(Error::InvalidParameter {
+            parameter: estim_core::Parameter::Tolerance,
             value: 37.0,
-        },
+        }),
     };
     assert_eq!(mc.run_sequential(fail).unwrap_err(), expected);
     assert_eq!(mc.run(fail).unwrap_err(), expected);
     assert_eq!(mc.run_seed(37), run_seed(9, 37));
-    // Into estim_core::Error for `?` in functions returning it.
-    let e: Error = expected.into();
-    assert!(matches!(e, Error::InvalidParameter { value, .. } if value == 37.0));
+    // Into ValidationError for `?` in functions returning it.
+    let e: ValidationError = expected.into();
+    assert!(
+        matches!(e, ValidationError::Estimation(Error::InvalidParameter { value, .. }) if value == 37.0)
+    );
     assert!(format!("{expected}").contains("run 37"));
 }
 
@@ -489,8 +492,8 @@ fn the_first_failing_run_is_reported() {
 #[test]
 fn recording_errors_are_typed() {
     use estim_core::nalgebra::{Const, DVector as DV, Dyn};
-    let slot_error = |slot: usize| Error::InvalidParameter {
-        parameter: Parameter::Slot,
+    let slot_error = |slot: usize| ValidationError::InvalidSetting {
+        setting: Setting::Slot,
         value: slot as f64,
     };
     let mc = MonteCarlo::new(4, 2)
@@ -514,7 +517,10 @@ fn recording_errors_are_typed() {
     });
     assert_eq!(run_err(twice_r), slot_error(0));
     let not_pd = mc.run_sequential(|_, _, rec| rec.record_estimate(0, &x, &x, &(p * -1.0)));
-    assert!(matches!(run_err(not_pd), Error::NotPositiveDefinite { .. }));
+    assert!(matches!(
+        run_err(not_pd),
+        ValidationError::Estimation(Error::NotPositiveDefinite { .. })
+    ));
 
     // Runtime sizes that change between runs of one chunk: a Run error at the second run.
     let one_chunk = MonteCarlo::new(4, 1).unwrap().with_chunks(1).unwrap();
@@ -532,7 +538,7 @@ fn recording_errors_are_typed() {
         err,
         MonteCarloError::Run {
             run: 1,
-            error: Error::DimensionMismatch { .. },
+            error: ValidationError::Estimation(Error::DimensionMismatch { .. }),
             ..
         }
     ));
@@ -542,7 +548,7 @@ fn recording_errors_are_typed() {
     assert!(matches!(
         err,
         MonteCarloError::Shape {
-            error: Error::DimensionMismatch { .. }
+            error: ValidationError::Estimation(Error::DimensionMismatch { .. })
         }
     ));
     let _ = (Const::<1>, Dyn(1));

@@ -4,11 +4,12 @@ use crate::consistency_common;
 
 use consistency_common::*;
 use estim_core::nalgebra::{DMatrix, DVector, Matrix2, Vector1, Vector2, Vector3};
-use estim_core::{Error, Parameter, Quantity, Stage};
+use estim_core::{Error, Quantity, Stage};
 use estim_filters::consistency::{
     ChiSquareAverage, ChiSquareBand, FamilyRule, LogLikelihood, autocorrelation_bound, nees, nis,
     normalized_autocorrelation, whiteness,
 };
+use estim_filters::validation::{Setting, ValidationError};
 use estim_filters::{KalmanFilter, Update};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -28,18 +29,18 @@ fn nees_and_nis_by_cholesky() {
     let indefinite = Matrix2::new(1.0, 2.0, 2.0, 1.0);
     assert_eq!(
         nees(&e, &indefinite),
-        Err(Error::NotPositiveDefinite {
+        Err(ValidationError::Estimation(Error::NotPositiveDefinite {
             stage: Stage::ConsistencyCheck,
             quantity: Quantity::Covariance
-        })
+        }))
     );
     assert!(matches!(
         nees(&Vector2::new(f64::NAN, 0.0), &p),
-        Err(Error::NonFinite { .. })
+        Err(ValidationError::Estimation(Error::NonFinite { .. }))
     ));
     assert!(matches!(
         nees(&DVector::from_element(3, 1.0), &DMatrix::identity(2, 2)),
-        Err(Error::DimensionMismatch { .. })
+        Err(ValidationError::Estimation(Error::DimensionMismatch { .. }))
     ));
 }
 
@@ -71,9 +72,11 @@ fn chi_square_bands_match_tables() {
     assert!(band.p_value(band.expected()).unwrap() > 0.9);
     assert!(band.contains(3.0) && !band.contains(f64::NAN));
     // Invalid parameters.
-    let conf = |c: f64| Error::InvalidParameter {
-        parameter: Parameter::Confidence,
-        value: c,
+    let conf = |c: f64| {
+        ValidationError::Estimation(Error::InvalidParameter {
+            parameter: estim_core::Parameter::Confidence,
+            value: c,
+        })
     };
     assert_eq!(ChiSquareBand::two_sided(3, 20, 1.0), Err(conf(1.0)));
     assert_eq!(ChiSquareBand::two_sided(3, 20, 0.0), Err(conf(0.0)));
@@ -93,8 +96,8 @@ fn autocorrelation_formula_and_bound() {
     assert!((normalized_autocorrelation(&seq, 0).unwrap() - 1.0).abs() < 1e-15);
     assert_eq!(
         normalized_autocorrelation(&seq, 4),
-        Err(Error::InvalidParameter {
-            parameter: Parameter::Lag,
+        Err(ValidationError::InvalidSetting {
+            setting: Setting::Lag,
             value: 4.0
         })
     );

@@ -8,9 +8,8 @@
 use estim_core::nalgebra::{
     Matrix2, Matrix2x3, Matrix3, Matrix3x1, U1, U2, U3, Vector1, Vector2, Vector3,
 };
-use estim_core::{
-    Error, Gaussian, LinearMeasurement, LinearProcess, ProcessJacobian, ProcessModel,
-};
+use estim_core::{Gaussian, LinearMeasurement, LinearProcess, ProcessJacobian, ProcessModel};
+use estim_filters::ValidationError;
 use estim_filters::monte_carlo::Recorder;
 use estim_filters::{Estimator, Predict, Update, UpdateReport};
 use rand::rngs::StdRng;
@@ -107,8 +106,13 @@ pub fn simulate<P, F>(
     steps: usize,
     every: usize,
     seed: u64,
-    mut on_slot: impl FnMut(usize, &Vector3<f64>, &F, &UpdateReport<f64, U2>) -> Result<(), Error>,
-) -> Result<(), Error>
+    mut on_slot: impl FnMut(
+        usize,
+        &Vector3<f64>,
+        &F,
+        &UpdateReport<f64, U2>,
+    ) -> Result<(), ValidationError>,
+) -> Result<(), ValidationError>
 where
     P: ProcessModel<f64, U3, Input = Vector1<f64>>,
     F: Estimator<f64, U3>
@@ -142,7 +146,7 @@ pub fn realization<P, F>(
     every: usize,
     seed: u64,
     rec: &mut Recorder,
-) -> Result<(), Error>
+) -> Result<(), ValidationError>
 where
     P: ProcessModel<f64, U3, Input = Vector1<f64>>,
     F: Estimator<f64, U3>

@@ -1,0 +1,71 @@
+//! The errors of the validation tooling: the [consistency](crate::consistency) statistics and
+//! the [Monte Carlo](crate::monte_carlo) runner.
+//!
+//! Their own settings (a time slot, a correlation lag, a number of work chunks) are checked
+//! here and reported as [`ValidationError::InvalidSetting`]; everything else (shapes,
+//! non-finite values, a covariance that is not positive definite, a confidence level) is an
+//! [`estim_core::Error`], wrapped. A realization's own filter errors convert with `?`.
+//!
+//! ```
+//! use estim_filters::monte_carlo::MonteCarlo;
+//! use estim_filters::validation::{Setting, ValidationError};
+//!
+//! let e = MonteCarlo::new(10, 5).unwrap().with_chunks(0).unwrap_err();
+//! assert_eq!(e, ValidationError::InvalidSetting { setting: Setting::ChunkCount, value: 0.0 });
+//! ```
+
+use core::fmt;
+
+/// A setting of the validation tooling that was out of range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum Setting {
+    /// A time-slot index of a Monte Carlo runner (below the number of slots; a pair of
+    /// residual slots must differ).
+    Slot,
+    /// A correlation lag (at least 1, and below the number of samples).
+    Lag,
+    /// A number of work chunks (at least 1).
+    ChunkCount,
+}
+
+impl fmt::Display for Setting {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Setting::Slot => "slot",
+            Setting::Lag => "lag",
+            Setting::ChunkCount => "chunk count",
+        })
+    }
+}
+
+/// Every error the validation tooling returns.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ValidationError {
+    /// A setting of the tooling was out of range.
+    #[error("invalid {setting}: {value}")]
+    InvalidSetting {
+        /// Which.
+        setting: Setting,
+        /// The value given.
+        value: f64,
+    },
+    /// An estimation error: a filter step, a shape, a non-finite value, a covariance that is
+    /// not positive definite, a statistical parameter.
+    #[error(transparent)]
+    Estimation(#[from] estim_core::Error),
+}
+
+impl ValidationError {
+    /// An invalid `setting` of value `value`.
+    pub(crate) fn setting(setting: Setting, value: usize) -> Self {
+        ValidationError::InvalidSetting {
+            setting,
+            value: value as f64,
+        }
+    }
+}
+
+/// Shorthand for `Result<T, ValidationError>`.
+pub type Result<T, E = ValidationError> = core::result::Result<T, E>;
