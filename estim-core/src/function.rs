@@ -87,6 +87,23 @@ where
 /// The point and value buffers that [`VectorFunction::eval_sigma_points_into`]'s default
 /// (one point at a time) works in. Created by the caller; an implementation that maps all
 /// points at once ignores it.
+///
+/// ```
+/// use estim_core::{SigmaScratch, VectorFunction};
+/// use estim_core::nalgebra::{Const, Matrix2, Matrix1x2, Vector1, Vector2};
+///
+/// struct Sum;
+/// impl VectorFunction<f64, Const<2>, Const<1>> for Sum {
+///     fn eval(&self, x: &Vector2<f64>) -> Vector1<f64> {
+///         Vector1::new(x.sum())
+///     }
+/// }
+/// let (mut plus, mut minus) = (Matrix1x2::zeros(), Matrix1x2::zeros());
+/// let mut scratch = SigmaScratch::new(Const::<2>, Const::<1>);
+/// let offsets = Matrix2::identity();
+/// Sum.eval_sigma_points_into(&Vector2::new(1.0, 2.0), &offsets, &mut plus, &mut minus, &mut scratch);
+/// assert_eq!((plus, minus), (Matrix1x2::new(4.0, 4.0), Matrix1x2::new(2.0, 2.0)));
+/// ```
 #[derive(Clone, Debug)]
 pub struct SigmaScratch<T: Real, N: Dim, M: Dim>
 where

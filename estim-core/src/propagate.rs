@@ -80,6 +80,30 @@ where
 ///
 /// The length of `mean` is the output dimension m; the other buffers are reshaped to agree
 /// if they do not. On error the buffers' contents (and shapes) are unspecified.
+///
+/// Repeated propagation into the same buffers, with the propagator's workspace kept between
+/// calls (what a filter does; for runtime sizes nothing is allocated after the first call):
+///
+/// ```
+/// use estim_core::{LinearMeasurement, MomentPropagator, Moments, Observation, Outputs, Unscented};
+/// use estim_core::nalgebra::{DMatrix, DVector, Dyn};
+///
+/// let sensor = LinearMeasurement {
+///     observation: DMatrix::from_row_slice(1, 2, &[1.0, 1.0]),
+///     noise: DMatrix::identity(1, 1),
+/// };
+/// let (mean, covariance) = (DVector::from_vec(vec![1.0, 2.0]), DMatrix::identity(2, 2));
+/// let ukf = Unscented::default();
+/// let mut moments = Moments::zeros(Dyn(2), Dyn(1));
+/// let mut workspace = Default::default();
+/// for _ in 0..3 {
+///     let out = Outputs::moments(&mut moments);
+///     ukf.propagate_into(&mean, &covariance, &Observation::new(&sensor), out, &mut workspace)?;
+/// }
+/// // h(x) = x₀ + x₁ is linear: E[h] = 3, var h = 2, cov(x, h) = (1, 1).
+/// assert!((moments.mean[0] - 3.0).abs() < 1e-9 && (moments.covariance[(0, 0)] - 2.0).abs() < 1e-9);
+/// # Ok::<(), estim_core::Error>(())
+/// ```
 #[derive(Debug)]
 pub struct Outputs<'a, T: Real, N: Dim, M: Dim>
 where
