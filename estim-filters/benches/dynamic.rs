@@ -82,13 +82,14 @@
 //! if any differs by more than [`TOLERANCE`] = 1e-8 (for the UKF too, whose mean amplifies
 //! round-off by 1/α²: derivation there). The gaps are printed to stderr.
 
+mod common;
+
 use std::f64::consts::PI;
 use std::hint::black_box;
 use std::time::Duration;
 
-use criterion::{
-    BenchmarkGroup, Criterion, SamplingMode, criterion_group, criterion_main, measurement::WallTime,
-};
+use common::{Steps, counted_spec};
+use criterion::{Criterion, SamplingMode, criterion_group, criterion_main};
 use estim_core::kernel::{self, is_static};
 use estim_core::nalgebra::allocator::Allocator;
 use estim_core::nalgebra::{
@@ -571,8 +572,12 @@ where
 }
 
 /// Registers the estim variant of `kind` as `name` in `group`.
-fn bench_estim<N: Dim, M: Dim>(group: &mut Steps<'_>, name: &str, kind: Kind, m: &Models<N, M>)
-where
+fn bench_estim<N: Dim, M: Dim>(
+    group: &mut Steps<'_, STEPS>,
+    name: &str,
+    kind: Kind,
+    m: &Models<N, M>,
+) where
     DefaultAllocator: Alloc<N, M> + Alloc<N, U0>,
 {
     let u = OVector::<f64, U0>::zeros();
@@ -1303,99 +1308,25 @@ fn check(kind: Kind, pr: &Problem, models: &Models<Dyn, Dyn>, fm: &FaerModels) {
 // Benchmarks
 // ---------------------------------------------------------------------------------------------
 
-/// `DYNAMIC_BENCH_STEPS=<group>/<name>=<count>`, if set.
-fn counted_spec() -> Option<(String, usize)> {
-    std::env::var("DYNAMIC_BENCH_STEPS").ok().map(|spec| {
-        let (id, count) = spec
-            .rsplit_once('=')
-            .expect("DYNAMIC_BENCH_STEPS=<group>/<name>=<count>, e.g. ukf/n=200/faer=100");
-        (id.to_owned(), count.parse().expect("a step count"))
-    })
-}
+/// The counted-mode variable of this bench (see [`common`]).
+const COUNTED_VAR: &str = "DYNAMIC_BENCH_STEPS";
 
-/// A benchmark group of filter steps (see the module docs for what one iteration is).
-///
-/// With `DYNAMIC_BENCH_STEPS=<group>/<name>=<count>` in the environment, nothing is timed: the
-/// named variant runs `count` steps in [`run_counted`] and everything else is skipped, for
-/// profilers (`perf stat`, `perf record`, `valgrind --tool=callgrind
-/// --toggle-collect='*run_counted*'`).
-struct Steps<'a> {
-    group: BenchmarkGroup<'a, WallTime>,
-    name: String,
-    counted: Option<(String, usize)>,
-}
-
-impl<'a> Steps<'a> {
-    fn new(c: &'a mut Criterion, name: String, n: usize) -> Self {
-        let mut group = c.benchmark_group(&name);
-        // Few, long samples: the large sizes take milliseconds per step.
-        group.sample_size(10);
-        group.warm_up_time(Duration::from_millis(500));
-        group.measurement_time(Duration::from_secs(2));
-        if n >= 100 {
-            group.sampling_mode(SamplingMode::Flat);
-        }
-        Self {
-            group,
-            name,
-            counted: counted_spec(),
-        }
+/// A group of this bench's steps ([`Steps`], reset every [`STEPS`] steps), with few, long
+/// samples: the large sizes take milliseconds per step.
+fn steps(c: &mut Criterion, name: String, n: usize) -> Steps<'_, STEPS> {
+    let mut group = c.benchmark_group(&name);
+    group.sample_size(10);
+    group.warm_up_time(Duration::from_millis(500));
+    group.measurement_time(Duration::from_secs(2));
+    if n >= 100 {
+        group.sampling_mode(SamplingMode::Flat);
     }
-
-    /// Times `step(state, i)` on a state kept across iterations, i cycling over the
-    /// measurements and the state reset to `prior` whenever i wraps.
-    fn bench<S: Clone, R>(
-        &mut self,
-        name: &str,
-        prior: &S,
-        mut step: impl FnMut(&mut S, usize) -> R,
-    ) {
-        if let Some((id, count)) = &self.counted {
-            if *id == format!("{}/{name}", self.name) {
-                run_counted(*count, prior, &mut step);
-            }
-            return;
-        }
-        self.group.bench_function(name, |b| {
-            let mut state = prior.clone();
-            let mut i = 0;
-            b.iter(|| {
-                if i == STEPS {
-                    state.clone_from(prior);
-                    i = 0;
-                }
-                let r = step(&mut state, i);
-                black_box(&mut state);
-                i += 1;
-                r
-            })
-        });
-    }
-
-    fn finish(self) {
-        self.group.finish();
-    }
-}
-
-/// The loop of [`Steps::bench`] run `count` times outside criterion.
-#[inline(never)]
-fn run_counted<S: Clone, R>(count: usize, prior: &S, step: &mut impl FnMut(&mut S, usize) -> R) {
-    let mut state = prior.clone();
-    let mut i = 0;
-    for _ in 0..count {
-        if i == STEPS {
-            state.clone_from(prior);
-            i = 0;
-        }
-        black_box(step(&mut state, i));
-        black_box(&mut state);
-        i += 1;
-    }
+    Steps::new(group, name, COUNTED_VAR)
 }
 
 fn dynamic(c: &mut Criterion) {
     // In counted mode, set up and check only the named (filter, n).
-    let counted = counted_spec();
+    let counted = counted_spec(COUNTED_VAR);
     let wanted = |kind: Kind, n: usize| match &counted {
         Some((id, _)) => id.starts_with(&format!("{}/n={n}/", kind.name())),
         None => true,
@@ -1420,7 +1351,7 @@ fn dynamic(c: &mut Criterion) {
                 continue;
             }
             check(kind, &problem, &models, &fm);
-            let mut group = Steps::new(c, format!("{}/n={n}", kind.name()), n);
+            let mut group = steps(c, format!("{}/n={n}", kind.name()), n);
             bench_estim(&mut group, "estim", kind, &models);
             with_static_models!(&problem, |s| bench_estim(
                 &mut group,

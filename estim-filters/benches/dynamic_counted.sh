@@ -4,8 +4,8 @@
 # the median µs per step of each way and the medians of the per-repetition ratios
 # dmatrix/estim and estim/faer (the machines are shared and drift between runs, so the ratio
 # of neighbouring runs is the figure to quote), each with a 95% bootstrap interval for that
-# median (10 000 resamples of the repetitions, fixed seed). The numbers in BENCHMARKS.md
-# ("After the update rework" and later). Needs perf (Debian's linux-perf).
+# median (10 000 resamples of the repetitions, fixed seed): the table "Runtime-size steps" in
+# BENCHMARKS.md. Needs perf (Debian's linux-perf).
 #   BIN=$(ls -t target/release/deps/dynamic-* | grep -v '\.d$' | head -1)   # after --no-run
 #   estim-filters/benches/dynamic_counted.sh "$BIN" 5
 BIN=$1; REPS=${2:-5}

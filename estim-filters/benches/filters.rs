@@ -52,17 +52,18 @@
 //! and some pieces of the framework's step (its finiteness checks, its covariance factor), to
 //! show where the framework's extra time goes. For profilers, set
 //! `FILTERS_BENCH_STEPS=<group>/<name>=<count>` to run one variant for `count` steps outside
-//! criterion (see [`Steps`]).
+//! criterion (see [`common`]).
 //!
 //! Run with `cargo bench -p estim-filters --bench filters`.
+
+mod common;
 
 use std::f64::consts::PI;
 use std::hint::black_box;
 use std::time::Duration;
 
-use criterion::{
-    BenchmarkGroup, Criterion, criterion_group, criterion_main, measurement::WallTime,
-};
+use common::Steps;
+use criterion::{Criterion, criterion_group, criterion_main};
 use estim_core::derivative::{check_measurement_model, check_process_model};
 use estim_core::nalgebra::{U1, U2, U3, U4, U6};
 use estim_core::{
@@ -722,82 +723,10 @@ fn lockstep<const N: usize, const M: usize, F: Estimator<f64, nalgebra::Const<N>
 // Benchmarks
 // ---------------------------------------------------------------------------------------------
 
-/// A benchmark group of filter steps (see the module docs for what one iteration is).
-///
-/// With `FILTERS_BENCH_STEPS=<group>/<name>=<count>` in the environment, nothing is timed:
-/// the named variant runs `count` steps in [`run_counted`] and everything else is skipped, for
-/// profilers (`perf record`, `valgrind --tool=callgrind --toggle-collect='*run_counted*'`).
-struct Steps<'a> {
-    group: BenchmarkGroup<'a, WallTime>,
-    name: &'static str,
-    counted: Option<(String, usize)>,
-}
-
-impl<'a> Steps<'a> {
-    fn new(c: &'a mut Criterion, name: &'static str) -> Self {
-        let counted = std::env::var("FILTERS_BENCH_STEPS").ok().map(|spec| {
-            let (id, count) = spec
-                .rsplit_once('=')
-                .expect("FILTERS_BENCH_STEPS=<group>/<name>=<count>");
-            (id.to_owned(), count.parse().expect("a step count"))
-        });
-        Self {
-            group: c.benchmark_group(name),
-            name,
-            counted,
-        }
-    }
-
-    /// Times `step(state, i)` on a state kept across iterations, i cycling over the trajectory
-    /// and the state reset to `prior` whenever i wraps.
-    fn bench<S: Clone, R>(
-        &mut self,
-        name: &str,
-        prior: &S,
-        mut step: impl FnMut(&mut S, usize) -> R,
-    ) {
-        if let Some((id, count)) = &self.counted {
-            if *id == format!("{}/{name}", self.name) {
-                run_counted(*count, prior, &mut step);
-            }
-            return;
-        }
-        self.group.bench_function(name, |b| {
-            let mut state = prior.clone();
-            let mut i = 0;
-            b.iter(|| {
-                if i == STEPS {
-                    state.clone_from(prior);
-                    i = 0;
-                }
-                let r = step(&mut state, i);
-                // The estimate is the product: make the compiler keep every step's result.
-                black_box(&mut state);
-                i += 1;
-                r
-            })
-        });
-    }
-
-    fn finish(self) {
-        self.group.finish();
-    }
-}
-
-/// The loop of [`Steps::bench`] run `count` times outside criterion.
-#[inline(never)]
-fn run_counted<S: Clone, R>(count: usize, prior: &S, step: &mut impl FnMut(&mut S, usize) -> R) {
-    let mut state = prior.clone();
-    let mut i = 0;
-    for _ in 0..count {
-        if i == STEPS {
-            state.clone_from(prior);
-            i = 0;
-        }
-        black_box(step(&mut state, i));
-        black_box(&mut state);
-        i += 1;
-    }
+/// A group of this bench's steps ([`Steps`], reset every [`STEPS`] steps); counted mode from
+/// `FILTERS_BENCH_STEPS=<group>/<name>=<count>`.
+fn steps<'a>(c: &'a mut Criterion, name: &'static str) -> Steps<'a, STEPS> {
+    Steps::new(c.benchmark_group(name), name, "FILTERS_BENCH_STEPS")
 }
 
 fn linear_3x2(c: &mut Criterion) {
@@ -844,7 +773,7 @@ fn linear_3x2(c: &mut Criterion) {
     eprintln!("lockstep 3x2 UKF: largest relative gap {gap:.1e}");
     assert!(gap < 1e-6, "hand-written UKF differs from Ukf by {gap:e}");
 
-    let mut group = Steps::new(c, "step_3x2_linear");
+    let mut group = steps(c, "step_3x2_linear");
     let (p, m) = (&process, &measurement);
     let (us, zs) = (&inputs, &measurements);
     group.bench("KalmanFilter", &KalmanFilter::new(prior.clone()), |f, i| {
@@ -883,7 +812,7 @@ fn linear_3x2(c: &mut Criterion) {
 
     // Where the time goes: each half-step alone (same loop; without the other half the
     // covariance only grows or only shrinks between resets).
-    let mut group = Steps::new(c, "breakdown_3x2");
+    let mut group = steps(c, "breakdown_3x2");
     group.bench(
         "KalmanFilter_predict",
         &KalmanFilter::new(prior.clone()),
@@ -964,7 +893,7 @@ fn nonlinear_6x4(c: &mut Criterion) {
     eprintln!("lockstep 6x4 UKF: largest relative gap {gap:.1e}");
     assert!(gap < 1e-6, "hand-written UKF differs from Ukf by {gap:e}");
 
-    let mut group = Steps::new(c, "step_6x4_nonlinear");
+    let mut group = steps(c, "step_6x4_nonlinear");
     let zs = &measurements;
     group.bench("Ekf", &Ekf::new(prior.clone()), |f, i| {
         f.predict(black_box(vehicle), &(), DT).unwrap();
@@ -1005,7 +934,7 @@ fn nonlinear_6x4(c: &mut Criterion) {
     group.finish();
 
     // Where the time goes: each half-step alone, then pieces of the framework's step.
-    let mut group = Steps::new(c, "breakdown_6x4");
+    let mut group = steps(c, "breakdown_6x4");
     group.bench("Ekf_predict", &Ekf::new(prior.clone()), |f, _| {
         f.predict(black_box(vehicle), &(), DT).unwrap()
     });
