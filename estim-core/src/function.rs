@@ -19,6 +19,8 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 
 use crate::alloc::Alloc;
+use crate::error::{Quantity, Result, Stage};
+use crate::linalg::ensure_shape;
 use crate::scalar::Real;
 
 /// y = g(x) from an `N`-dimensional to an `M`-dimensional space.
@@ -69,6 +71,9 @@ where
     /// more cheaply: for g(x) = A x, A μ 1ᵀ ± A L is one matrix product A L for all 2n points
     /// ([`LinearProcess`](crate::LinearProcess) does this). The unscented propagator calls it
     /// for runtime-sized states.
+    ///
+    /// Errors: a value whose length is not the number of rows of `plus`
+    /// ([`DimensionMismatch`](crate::Error::DimensionMismatch), quantity `FunctionValue`).
     #[inline(always)]
     fn eval_sigma_points_into(
         &self,
@@ -77,10 +82,10 @@ where
         plus: &mut OMatrix<T, M, N>,
         minus: &mut OMatrix<T, M, N>,
         scratch: &mut SigmaScratch<T, N, M>,
-    ) {
+    ) -> Result<()> {
         sigma_points_one_by_one(mean, offsets, plus, minus, scratch, |x, y| {
             self.eval_into(x, y)
-        });
+        })
     }
 }
 
@@ -101,8 +106,9 @@ where
 /// let (mut plus, mut minus) = (Matrix1x2::zeros(), Matrix1x2::zeros());
 /// let mut scratch = SigmaScratch::new(Const::<2>, Const::<1>);
 /// let offsets = Matrix2::identity();
-/// Sum.eval_sigma_points_into(&Vector2::new(1.0, 2.0), &offsets, &mut plus, &mut minus, &mut scratch);
+/// Sum.eval_sigma_points_into(&Vector2::new(1.0, 2.0), &offsets, &mut plus, &mut minus, &mut scratch)?;
 /// assert_eq!((plus, minus), (Matrix1x2::new(4.0, 4.0), Matrix1x2::new(2.0, 2.0)));
+/// # Ok::<(), estim_core::Error>(())
 /// ```
 #[derive(Clone, Debug)]
 pub struct SigmaScratch<T: Real, N: Dim, M: Dim>
@@ -128,7 +134,7 @@ where
 
 /// The 2n sigma points μ ± Lⱼ mapped one at a time by `eval_into` into the columns of `plus`
 /// and `minus`: the default of every `*_sigma_points_into` method. A value of the wrong length
-/// leaves its column as it was (the caller's shape check on the values reports it).
+/// is a dimension error (quantity `FunctionValue`, stage `Propagation`).
 #[inline(always)]
 pub(crate) fn sigma_points_one_by_one<T: Real, N: Dim, M: Dim>(
     mean: &OVector<T, N>,
@@ -137,7 +143,8 @@ pub(crate) fn sigma_points_one_by_one<T: Real, N: Dim, M: Dim>(
     minus: &mut OMatrix<T, M, N>,
     scratch: &mut SigmaScratch<T, N, M>,
     mut eval_into: impl FnMut(&OVector<T, N>, &mut OVector<T, M>),
-) where
+) -> Result<()>
+where
     DefaultAllocator: Alloc<N, M>,
 {
     let n = mean.nrows();
@@ -153,11 +160,12 @@ pub(crate) fn sigma_points_one_by_one<T: Real, N: Dim, M: Dim>(
                 *xi = mi + sign * li;
             }
             eval_into(&scratch.point, &mut scratch.value);
-            if scratch.value.nrows() == m {
-                values.as_mut_slice()[j * m..(j + 1) * m].copy_from_slice(scratch.value.as_slice());
-            }
+            let stage = Stage::Propagation;
+            ensure_shape(&scratch.value, m, 1, stage, Quantity::FunctionValue)?;
+            values.as_mut_slice()[j * m..(j + 1) * m].copy_from_slice(scratch.value.as_slice());
         }
     }
+    Ok(())
 }
 
 /// A [`VectorFunction`] with an analytic Jacobian.

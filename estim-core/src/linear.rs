@@ -13,6 +13,7 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
+use crate::error::Result;
 use crate::function::{SigmaScratch, sigma_points_one_by_one};
 use crate::kernel::{self, Accum, is_static};
 use crate::model::{
@@ -95,7 +96,7 @@ where
         plus: &mut OMatrix<T, N, N>,
         minus: &mut OMatrix<T, N, N>,
         scratch: &mut SigmaScratch<T, N, N>,
-    ) {
+    ) -> Result<()> {
         let (f, b) = (&self.transition, &self.input);
         let n = mean.nrows();
         let fits = f.shape() == (n, n)
@@ -115,6 +116,7 @@ where
             kernel::mul_into_column(minus, 0, Accum::Add, T::one(), b, u);
         }
         centre_plus_minus(n, plus.as_mut_slice(), minus.as_mut_slice());
+        Ok(())
     }
 }
 
@@ -256,7 +258,7 @@ where
         plus: &mut OMatrix<T, M, N>,
         minus: &mut OMatrix<T, M, N>,
         scratch: &mut SigmaScratch<T, N, M>,
-    ) {
+    ) -> Result<()> {
         let h = &self.observation;
         let (m, n) = (h.nrows(), mean.nrows());
         let fits = h.ncols() == n
@@ -274,6 +276,7 @@ where
             kernel::mul_into_column(minus, 0, Accum::Replace, T::one(), h, mean);
         }
         centre_plus_minus(m, plus.as_mut_slice(), minus.as_mut_slice());
+        Ok(())
     }
 }
 

@@ -29,6 +29,7 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
+use crate::error::Result;
 use crate::function::{
     AffineFunction, Differentiable, SigmaScratch, TwiceDifferentiable, VectorFunction,
     sigma_points_one_by_one, store_hessian,
@@ -81,10 +82,10 @@ where
         plus: &mut OMatrix<T, N, N>,
         minus: &mut OMatrix<T, N, N>,
         scratch: &mut SigmaScratch<T, N, N>,
-    ) {
+    ) -> Result<()> {
         sigma_points_one_by_one(mean, offsets, plus, minus, scratch, |x, y| {
             self.transition_into(x, u, dt, y)
-        });
+        })
     }
 }
 
@@ -203,10 +204,10 @@ where
         plus: &mut OMatrix<T, M, N>,
         minus: &mut OMatrix<T, M, N>,
         scratch: &mut SigmaScratch<T, N, M>,
-    ) {
+    ) -> Result<()> {
         sigma_points_one_by_one(mean, offsets, plus, minus, scratch, |x, y| {
             self.measure_into(x, y)
-        });
+        })
     }
 }
 
@@ -295,7 +296,7 @@ where
         plus: &mut OMatrix<T, N, N>,
         minus: &mut OMatrix<T, N, N>,
         scratch: &mut SigmaScratch<T, N, N>,
-    ) {
+    ) -> Result<()> {
         self.model
             .transition_sigma_points_into(mean, offsets, self.input, self.dt, plus, minus, scratch)
     }
@@ -401,7 +402,7 @@ where
         plus: &mut OMatrix<T, M, N>,
         minus: &mut OMatrix<T, M, N>,
         scratch: &mut SigmaScratch<T, N, M>,
-    ) {
+    ) -> Result<()> {
         self.model
             .measure_sigma_points_into(mean, offsets, plus, minus, scratch)
     }

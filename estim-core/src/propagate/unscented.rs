@@ -202,7 +202,7 @@ where
             let sigma = workspace
                 .sigma
                 .get_or_insert_with(|| SigmaScratch::new(n_dim, m_dim));
-            g.eval_sigma_points_into(mean, l, plus, minus, sigma);
+            g.eval_sigma_points_into(mean, l, plus, minus, sigma)?;
             for deviations in [&mut *plus, &mut *minus] {
                 ensure_shape(deviations, m, n, stage, Quantity::FunctionValue)?;
                 for j in 0..n {

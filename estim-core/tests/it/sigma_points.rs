@@ -50,7 +50,7 @@ where
         plus: &mut OMatrix<f64, M, N>,
         minus: &mut OMatrix<f64, M, N>,
         scratch: &mut SigmaScratch<f64, N, M>,
-    ) {
+    ) -> estim_core::error::Result<()> {
         if !self.together {
             return OneByOne(self).eval_sigma_points_into(mean, offsets, plus, minus, scratch);
         }
@@ -60,6 +60,7 @@ where
                 out.set_column(j, &self.eval(&point));
             }
         }
+        Ok(())
     }
 }
 
@@ -183,7 +184,9 @@ fn linear_models_map_sigma_points_as_they_map_points() {
 
     let (mut plus, mut minus) = (DMatrix::zeros(n, n), DMatrix::zeros(n, n));
     let mut scratch = SigmaScratch::new(Dyn(n), Dyn(n));
-    process.transition_sigma_points_into(&mu, &l, &u, 0.1, &mut plus, &mut minus, &mut scratch);
+    let batch =
+        process.transition_sigma_points_into(&mu, &l, &u, 0.1, &mut plus, &mut minus, &mut scratch);
+    assert!(batch.is_ok());
     let (process_ref, u_ref, point_ref) = (&process, &u, &point);
     let single = move |sign: f64| {
         move |j: usize| {
@@ -198,7 +201,10 @@ fn linear_models_map_sigma_points_as_they_map_points() {
     // Through the adapter the unscented transform uses: the same values.
     let map = Transition::new(&process, &u, 0.1);
     let (mut plus2, mut minus2) = (DMatrix::zeros(n, n), DMatrix::zeros(n, n));
-    map.eval_sigma_points_into(&mu, &l, &mut plus2, &mut minus2, &mut scratch);
+    assert!(
+        map.eval_sigma_points_into(&mu, &l, &mut plus2, &mut minus2, &mut scratch)
+            .is_ok()
+    );
     assert_eq!((&plus2, &minus2), (&plus, &minus));
     // No inputs.
     let no_input = LinearProcess {
@@ -207,27 +213,43 @@ fn linear_models_map_sigma_points_as_they_map_points() {
         noise: DMatrix::identity(n, n),
     };
     let none = DVector::zeros(0);
-    no_input.transition_sigma_points_into(&mu, &l, &none, 0.1, &mut plus, &mut minus, &mut scratch);
+    let batch = no_input.transition_sigma_points_into(
+        &mu,
+        &l,
+        &none,
+        0.1,
+        &mut plus,
+        &mut minus,
+        &mut scratch,
+    );
+    assert!(batch.is_ok());
     let f_bound = bound(magnitude(&f, DMatrix::zeros(n, n)), n);
     assert_columns_within(&plus, |j| &f * point(j, 1.0), &f_bound);
     assert_columns_within(&minus, |j| &f * point(j, -1.0), &f_bound);
 
     let (mut plus, mut minus) = (DMatrix::zeros(m, n), DMatrix::zeros(m, n));
     let mut scratch = SigmaScratch::new(Dyn(n), Dyn(m));
-    sensor.measure_sigma_points_into(&mu, &l, &mut plus, &mut minus, &mut scratch);
+    assert!(
+        sensor
+            .measure_sigma_points_into(&mu, &l, &mut plus, &mut minus, &mut scratch)
+            .is_ok()
+    );
     let h_bound = bound(magnitude(&h, DMatrix::zeros(m, n)), n);
     assert_columns_within(&plus, |j| &h * point(j, 1.0), &h_bound);
     assert_columns_within(&minus, |j| &h * point(j, -1.0), &h_bound);
     let observation = Observation::new(&sensor);
     let (mut plus2, mut minus2) = (DMatrix::zeros(m, n), DMatrix::zeros(m, n));
-    observation.eval_sigma_points_into(&mu, &l, &mut plus2, &mut minus2, &mut scratch);
+    assert!(
+        observation
+            .eval_sigma_points_into(&mu, &l, &mut plus2, &mut minus2, &mut scratch)
+            .is_ok()
+    );
     assert_eq!((&plus2, &minus2), (&plus, &minus));
 
-    // Shapes that do not fit: left to the per-point route, which cannot write an m-vector
-    // into a column of m + 1 (the propagator then reports the shape).
+    // Shapes that do not fit: left to the per-point route, which reports them.
     let mut wrong = DMatrix::zeros(m + 1, n);
-    sensor.measure_sigma_points_into(&mu, &l, &mut wrong, &mut minus, &mut scratch);
-    assert_eq!(wrong, DMatrix::zeros(m + 1, n));
+    let e = sensor.measure_sigma_points_into(&mu, &l, &mut wrong, &mut minus, &mut scratch);
+    assert!(matches!(e, Err(Error::DimensionMismatch { .. })));
 }
 
 /// Claims to have mapped the points but leaves its outputs a row short.
@@ -245,9 +267,10 @@ impl VectorFunction<f64, Dyn, Dyn> for ShortBatch {
         plus: &mut DMatrix<f64>,
         minus: &mut DMatrix<f64>,
         _: &mut SigmaScratch<f64, Dyn, Dyn>,
-    ) {
+    ) -> estim_core::error::Result<()> {
         *plus = DMatrix::zeros(1, offsets.ncols());
         *minus = DMatrix::zeros(1, offsets.ncols());
+        Ok(())
     }
 }
 
