@@ -5,6 +5,11 @@
 //! `cargo test -p estim-core --test it papoulis::`.
 
 mod common;
+// The counting `#[global_allocator]` (per-thread counts) for the allocation tests, shared with
+// estim-filters' binary. It implements the unsafe `GlobalAlloc` trait: the workspace denies
+// `unsafe_code`, and this module is the one place in the tests that needs it.
+#[allow(unsafe_code)]
+mod counting;
 
 mod angles;
 mod derivative;

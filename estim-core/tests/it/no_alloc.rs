@@ -6,15 +6,9 @@
 //! The test functions (`common::TrigSum`, `common::Quadratic`) keep their coefficients in a
 //! `Vec`, allocated once before measuring; evaluating them only reads it.
 
-// A #[global_allocator] has to implement the unsafe trait `GlobalAlloc`; that impl (which only
-// forwards to `System` and bumps a counter) is the only unsafe code here.
-#![allow(unsafe_code)]
-
 use crate::common;
-
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-use std::hint::black_box;
+// The counting global allocator (shared with estim-filters' allocation tests).
+use crate::counting::allocations;
 
 use common::*;
 use estim_core::nalgebra::{Matrix4x6, Matrix6, U4, U5, U6, Vector4, Vector5, Vector6};
@@ -22,55 +16,6 @@ use estim_core::{
     Error, Gaussian, Linearized, MomentPropagator, Sampled, SecondOrder, SecondOrderGaussian,
     Unscented, derivative,
 };
-
-thread_local! {
-    // Const-initialised and without a destructor: reading it never allocates and it is never
-    // torn down, so the allocator can use it at any time.
-    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
-}
-
-struct Counting;
-
-fn count() {
-    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        // SAFETY: forwarded unchanged; the caller upholds `GlobalAlloc::alloc`'s contract.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        count();
-        // SAFETY: as above.
-        unsafe { System.alloc_zeroed(layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        // SAFETY: as above; `ptr` came from this allocator, i.e. from `System`.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: as above.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
-/// Runs `f` and returns its result with the number of heap allocations (including
-/// reallocations) it made on this thread.
-fn allocations<R>(f: impl FnOnce() -> R) -> (R, usize) {
-    let before = ALLOCATIONS.with(Cell::get);
-    let result = black_box(f());
-    let after = ALLOCATIONS.with(Cell::get);
-    (result, after - before)
-}
 
 #[test]
 fn the_counter_sees_heap_allocations() {

@@ -6,9 +6,11 @@
 
 mod common;
 mod consistency_common;
-// The counting `#[global_allocator]` implements the unsafe `GlobalAlloc` trait; the workspace
-// denies `unsafe_code` and this module is the one place in the tests that needs it.
+// The counting `#[global_allocator]` (per-thread counts) for the allocation tests, written
+// once in estim-core's test support. It implements the unsafe `GlobalAlloc` trait: the
+// workspace denies `unsafe_code`, and this module is the one place in the tests that needs it.
 #[allow(unsafe_code)]
+#[path = "../../../estim-core/tests/it/counting.rs"]
 mod counting;
 
 mod atomicity;

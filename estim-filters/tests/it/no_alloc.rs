@@ -1,9 +1,5 @@
 //! Static sizes allocate nothing per step: predict and update of every filter on 6-state,
 //! 4-measurement static models are run under a counting global allocator.
-// The counting `#[global_allocator]` (tests/counting) must implement the unsafe `GlobalAlloc`
-// trait; the workspace denies `unsafe_code`, and the allocation tests are the one place that
-// needs it. The implementation only forwards to `System` and bumps a thread-local counter.
-#![allow(unsafe_code)]
 
 use std::hint::black_box;
 

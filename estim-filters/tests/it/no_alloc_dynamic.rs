@@ -4,8 +4,6 @@
 //! the workspace right after construction; from then on no step allocates, the first one
 //! included. Without them, the first prediction and the first update with each measurement
 //! length size it instead (a positive control below shows the counter sees that).
-// See tests/counting: the counting allocator implements the unsafe `GlobalAlloc` trait.
-#![allow(unsafe_code)]
 
 use crate::common;
 use crate::counting;
