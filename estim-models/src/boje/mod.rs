@@ -199,9 +199,5 @@ pub use rate::{RateConfig, RateResult, ScalarRateProcess, ScalarRateSquared, rat
 
 pub use crate::Headline;
 
-/// An angle wrapped to (−π, π].
-pub fn wrap_angle(a: f64) -> f64 {
-    use std::f64::consts::PI;
-    let w = (a + PI).rem_euclid(2.0 * PI) - PI;
-    if w <= -PI { w + 2.0 * PI } else { w }
-}
+/// An angle wrapped to (−π, π] (estim-core's helper, re-exported here for the model's users).
+pub use estim_core::wrap_angle;
