@@ -1,6 +1,7 @@
-//! Monte Carlo checks (seeded): the χ² statistic's distribution and false-alarm rate, the
-//! estimate covariance against P (for Gaussian and for uniform noise), detection of a biased
-//! axis against the predicted power, a general spatial axis set, and the saturation run.
+//! Monte Carlo checks (seeded) of the model: the estimate covariance against P for uniform
+//! noise, and a general spatial axis set. The χ² statistic's distribution and false-alarm rate,
+//! the detection of a biased axis and the saturation run are the `lv2_fusion` example's, tested
+//! with it (`tests/it/lv2_fusion_example.rs` of the estim package).
 //!
 //! Tolerances are k standard errors of the Monte Carlo estimate, with k = 5 (a seeded run
 //! either passes or fails deterministically; 5σ keeps a correct implementation far from the
@@ -9,7 +10,6 @@
 use core::f64::consts::SQRT_2;
 
 use estim_core::nalgebra::{Matrix2, SMatrix, SVector, Vector2, Vector3};
-use estim_models::lv2::experiments::{self, Lv2Config};
 use estim_models::lv2::simulate::SensorArray;
 use estim_models::lv2::stats::chi2_quantile_upper;
 use estim_models::lv2::xyq::{self, Eq6Coefficients, XyqReading, XyqSigmas};
@@ -17,115 +17,14 @@ use estim_models::lv2::{AxisStatus, SpatialAxes};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
+/// The `lv2_fusion` example's channel noise (its `Lv2Config`): σx = 0.010, σy = 0.012,
+/// σq = 0.008 m/s².
 fn sigmas() -> XyqSigmas {
-    Lv2Config::quick().sigmas
-}
-
-/// χ² of fault-free readings: mean 1 (dof), variance 2, false-alarm rate α; the errors of
-/// (x̂, ŷ) have mean 0 and covariance P (the closed form, including the negative x̂–ŷ term).
-#[test]
-fn chi2_mean_false_alarm_rate_and_covariance() {
-    let cfg = Lv2Config::quick();
-    let mc = experiments::monte_carlo(&cfg.sigmas, &cfg.monte_carlo, cfg.false_alarm).unwrap();
-    let n = mc.runs as f64;
-    assert_eq!(mc.dof, 1);
-    // χ²₁: mean 1, sd of the sample mean √(2/n).
-    assert!(
-        (mc.chi2_mean - 1.0).abs() < 5.0 * (2.0 / n).sqrt(),
-        "mean {}",
-        mc.chi2_mean
-    );
-    // Sample variance: sd ≈ √((μ₄ − σ⁴)/n) with μ₄ = 60, σ⁴ = 4 for χ²₁.
-    assert!(
-        (mc.chi2_variance - 2.0).abs() < 5.0 * (56.0 / n).sqrt(),
-        "var {}",
-        mc.chi2_variance
-    );
-    // False alarms: binomial, sd √(α(1 − α)/n).
-    let a = mc.false_alarm;
-    assert!(
-        (mc.false_alarm_rate - a).abs() < 5.0 * (a * (1.0 - a) / n).sqrt(),
-        "{}",
-        mc.false_alarm_rate
-    );
-    assert!((mc.threshold - 10.827566170662733).abs() < 1e-10);
-    // Covariance: sd of a sample (co)variance ≈ √((PᵢᵢPⱼⱼ + Pᵢⱼ²)/n) for Gaussian errors.
-    let p = mc.predicted_covariance;
-    for i in 0..2 {
-        assert!(mc.mean_error[i].abs() < 5.0 * (p[(i, i)] / n).sqrt());
-        for j in 0..2 {
-            let se = ((p[(i, i)] * p[(j, j)] + p[(i, j)].powi(2)) / n).sqrt();
-            assert!(
-                (mc.empirical_covariance[(i, j)] - p[(i, j)]).abs() < 5.0 * se,
-                "P[{i},{j}] {} vs {}",
-                mc.empirical_covariance[(i, j)],
-                p[(i, j)]
-            );
-        }
+    XyqSigmas {
+        x: 0.010,
+        y: 0.012,
+        q: 0.008,
     }
-    // The redundant axis helps: both variances below the single-axis σ², and the x̂–ŷ
-    // covariance is negative (−σx²σy²/s₁).
-    assert!(
-        p[(0, 0)] < mc.covariance_without_q[(0, 0)] && p[(1, 1)] < mc.covariance_without_q[(1, 1)]
-    );
-    assert!(mc.empirical_covariance[(0, 1)] < -0.5 * p[(0, 1)].abs());
-    // The empirical CDF follows χ²₁ (Kolmogorov: sd of an ECDF value ≤ 0.5/√n).
-    for c in &mc.cdf {
-        assert!(
-            (c.empirical - c.theory).abs() < 5.0 * 0.5 / n.sqrt(),
-            "{c:?}"
-        );
-        assert!(
-            (c.empirical_biased - c.theory_biased).abs() < 5.0 * 0.5 / n.sqrt(),
-            "{c:?}"
-        );
-    }
-}
-
-/// A bias on any one axis is detected at the rate the noncentral χ²₁ predicts; a bias on x or
-/// y shifts the parity by b/√s₁, on q by −√2 b/√s₁, so all three look the same to the test
-/// (detection, not isolation). The estimate's bias matches (bx − σx² p/s₁, by − σy² p/s₁).
-#[test]
-fn bias_detection_matches_predicted_power() {
-    let cfg = Lv2Config::quick();
-    let mc = experiments::monte_carlo(&cfg.sigmas, &cfg.monte_carlo, cfg.false_alarm).unwrap();
-    let n = mc.runs as f64;
-    let s1 = cfg.sigmas.s1();
-    assert_eq!(mc.faults.len(), 3);
-    for f in &mc.faults {
-        let pr = f.predicted_rate;
-        assert!(
-            (f.detection_rate - pr).abs() < 5.0 * (pr * (1.0 - pr) / n).sqrt(),
-            "{}: {} vs {pr}",
-            f.axis,
-            f.detection_rate
-        );
-        let want_shift = match f.axis {
-            'q' => -SQRT_2 * f.bias / s1.sqrt(),
-            _ => f.bias / s1.sqrt(),
-        };
-        assert!((f.parity_shift - want_shift).abs() < 1e-12);
-        let p = mc.predicted_covariance;
-        for i in 0..2 {
-            assert!(
-                (f.mean_error[i] - f.predicted_mean_error[i]).abs() < 5.0 * (p[(i, i)] / n).sqrt(),
-                "{} bias leak {i}: {} vs {}",
-                f.axis,
-                f.mean_error[i],
-                f.predicted_mean_error[i]
-            );
-        }
-    }
-    // The stated scenario: a 0.08 m/s² bias (≈ 4.1 σ of the parity) is detected ≈ 80 % of the
-    // time on x or y at α = 1e-3, and more often on q.
-    let rate = |c: char| {
-        mc.faults
-            .iter()
-            .find(|f| f.axis == c)
-            .unwrap()
-            .detection_rate
-    };
-    assert!(rate('x') > 0.7 && rate('y') > 0.7 && rate('q') > 0.95);
 }
 
 /// Eq 3 is the BLUE for any noise with these variances (Gauss–Markov): with uniform noise of
@@ -237,79 +136,4 @@ fn general_spatial_set_chi2_and_covariance() {
             );
         }
     }
-}
-
-/// The saturation run: dropping saturated axes keeps the error at the estimator's own claimed
-/// level, while using the clipped readings does not; with q, far fewer samples are lost than
-/// with x and y alone.
-#[test]
-fn saturation_screening_beats_clipped_readings() {
-    let cfg = Lv2Config::quick();
-    let r = experiments::saturation_run(&cfg.sigmas, &cfg.saturation, cfg.false_alarm).unwrap();
-    assert_eq!(r.samples, 2000);
-    // Each axis is at its rail when cos(phase − axis angle) ≥ 2.0/2.1 (±17.8° around each of
-    // its two peaks): 2·35.6/360 ≈ 19.8 % of samples, minus drop-outs. Allow ±3 % absolute
-    // (sampling of a deterministic 0.5 Hz signal at 100 Hz, plus noise at the edges).
-    for (i, &k) in r.saturated.iter().enumerate() {
-        let frac = k as f64 / r.samples as f64;
-        assert!((frac - 0.198).abs() < 0.03, "axis {i}: {frac}");
-    }
-    // Missing: 1 % per axis, binomial sd √(0.01·0.99/2000) ≈ 0.22 %.
-    for &k in &r.missing {
-        assert!(
-            (k as f64 / r.samples as f64 - 0.01).abs() < 5.0 * (0.01 * 0.99 / 2000.0f64).sqrt()
-        );
-    }
-    // Screened: its RMS error agrees with its own √P within 10 % (the RMS over ≈ 2000 samples
-    // has a relative sd ≈ 1/√(2·2000) ≈ 1.6 %, so 10 % is > 5 sd).
-    let s = r.screened;
-    for i in 0..2 {
-        assert!(
-            (s.rms_error[i] / s.predicted_rms[i] - 1.0).abs() < 0.1,
-            "{s:?}"
-        );
-    }
-    // No estimate needs two axes lost at once: one saturated (at most one at a time here)
-    // and another dropped, or two drop-outs. Expected count n (f (1 − (1 − d)²) + (1 − f) 3d²),
-    // f the saturated fraction, d = 1 %: ≈ 24; Poisson sd √24 ≈ 5.
-    let n = r.samples as f64;
-    let f = r.saturated.iter().sum::<usize>() as f64 / n;
-    let d = cfg.saturation.dropout;
-    let expected = n * (f * (1.0 - (1.0 - d).powi(2)) + (1.0 - f) * 3.0 * d * d);
-    assert!(
-        (s.no_estimate as f64 - expected).abs() < 5.0 * expected.sqrt(),
-        "{} vs {expected}",
-        s.no_estimate
-    );
-    assert_eq!(s.estimated + s.no_estimate, r.samples);
-    // False alarms on the 3-axis samples: ≈ α n ≈ 1; allow a handful.
-    assert!(s.flagged <= 6, "{}", s.flagged);
-    // Naive: uses clipped readings, the error is several times larger than claimed.
-    let nv = r.naive;
-    assert!(r.clipped_samples > 800);
-    assert!(
-        nv.rms_error[0] > 2.0 * s.rms_error[0] && nv.rms_error[1] > 2.0 * s.rms_error[1],
-        "{nv:?}"
-    );
-    assert!(nv.rms_error[0] > 2.0 * nv.predicted_rms[0]);
-    // x, y alone would have no estimate whenever x or y saturates (≈ 40 %).
-    assert!(r.xy_only_no_estimate as f64 > 0.35 * r.samples as f64);
-    assert!(r.xy_only_no_estimate > 20 * s.no_estimate.max(1));
-}
-
-/// The whole quick configuration runs and produces headlines for every claim.
-#[test]
-fn quick_run_and_headlines() {
-    let cfg = Lv2Config::quick();
-    let t = std::time::Instant::now();
-    let res = experiments::run(&cfg).unwrap();
-    let hl = experiments::headlines(&res);
-    assert_eq!(hl.len(), 8);
-    assert!(
-        hl.iter()
-            .all(|h| !h.quantity.is_empty() && !h.paper.is_empty() && !h.estim.is_empty())
-    );
-    // Budget: the lead's `papers` example runs every paper's quick config in < 60 s (release).
-    assert!(t.elapsed().as_secs_f64() < 10.0);
-    let _ = Vector3::<f64>::zeros();
 }
