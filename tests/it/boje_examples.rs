@@ -13,7 +13,7 @@ use estim_models::boje::moments::{exact_trig_moments, paper_trig_moments};
 use estim_models::boje::rate::{steady_state_eq18, steady_state_eq19_printed};
 use estim_models::boje::{CircleConfig, FilterKind, ProcessKind};
 
-// ---- boje_moments, boje_lambda (from estim-models/tests/boje_moments.rs)
+// ---- boje_moments, boje_lambda (from estim-models' `boje_moments` tests)
 
 /// Round-off allowance for closed form vs propagator: both evaluate the same sums of a few
 /// products in different orders, so they differ by a few ulps of the largest term; 1e-12 of the
@@ -123,7 +123,7 @@ fn lambda_example_closed_form_vs_generic_vs_sampled() {
     }
 }
 
-// ---- boje_rate (from estim-models/tests/boje_rate.rs)
+// ---- boje_rate (from estim-models' `boje_rate` tests)
 
 /// Erratum E6/E7: the printed eq 19 (1/(cΔt)² inside the root) differs from eq 18 — at the
 /// paper's numbers it gives 1.735e-5 (rad/s)² = 0.2387 °/s (the paper's "0.24 °/s") against the
@@ -168,7 +168,7 @@ fn scalar_ekf_monte_carlo_matches_eq18() {
     assert!((r.noise_to_full_scale_ratio - 10.0).abs() < 0.5);
 }
 
-// ---- boje_circle (from estim-models/tests/boje_filter.rs)
+// ---- boje_circle (from estim-models' `boje_filter` tests)
 
 /// Quick circle Monte Carlo (4 runs, full 20 s, correct ICs, the paper's EKF):
 /// - position and heading RMS error inside 2 √P: the filter is consistent there (40-run ratio

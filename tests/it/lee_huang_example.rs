@@ -239,7 +239,7 @@ fn quick_experiment_runs_and_headlines_are_complete() {
     }
 }
 
-// ---- the OTE on section IV pseudo-measurements (from estim-models/tests/lee_huang_ote.rs)
+// ---- the OTE on section IV pseudo-measurements (from estim-models' `lee_huang_ote` tests)
 
 fn inv(m: &Matrix2<f64>) -> Matrix2<f64> {
     m.try_inverse().expect("invertible in these tests")

@@ -154,7 +154,7 @@ fn closed_form_truth_fails_the_mean_check() {
     }
 }
 
-// ---- from estim-models/tests/lu_models.rs (it runs the example's Monte Carlo too)
+// ---- from estim-models' `lu_models` tests (it runs the example's Monte Carlo too)
 
 /// Invalid scenarios and settings are typed errors from every entry point, not panics.
 #[test]

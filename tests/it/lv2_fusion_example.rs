@@ -12,7 +12,7 @@ use core::f64::consts::SQRT_2;
 use crate::lv2_fusion::{self as experiments, Lv2Config, fusion_example};
 use estim_core::nalgebra::{Vector2, Vector3};
 
-// ---- the worked example (from estim-models/tests/lv2_fusion.rs)
+// ---- the worked example (from estim-models' `lv2_fusion` tests)
 
 /// The worked example, with the values recomputed here by hand from the parity form.
 #[test]
@@ -50,7 +50,7 @@ fn worked_example_numbers() {
     assert!(ex.consistent && ex.p_value > 0.4);
 }
 
-// ---- Monte Carlo (from estim-models/tests/lv2_monte_carlo.rs)
+// ---- Monte Carlo (from estim-models' `lv2_monte_carlo` tests)
 
 /// χ² of fault-free readings: mean 1 (dof), variance 2, false-alarm rate α; the errors of
 /// (x̂, ŷ) have mean 0 and covariance P (the closed form, including the negative x̂–ŷ term).

@@ -22,7 +22,7 @@ use estim_models::lv2::xyq::{
 use estim_models::lv2::{AxisStatus, XyqModel};
 use proptest::prelude::*;
 
-mod lv2_support;
+use crate::lv2_support;
 
 /// WLS from scratch (QR of the whitened system, see `lv2_support`).
 fn naive_wls(h: &DMatrix<f64>, sigmas: &[f64], z: &[f64]) -> (DVector<f64>, DMatrix<f64>, f64) {
