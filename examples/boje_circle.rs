@@ -8,10 +8,12 @@
 //!
 //! `cargo run --release --example boje_circle [-- --json] [-- --quick]`
 
+#[path = "reproductions/boje_circle.rs"]
+mod boje_circle;
 mod common;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let output = common::boje_circle::run(common::quick_requested())?;
+    let output = boje_circle::run(common::quick_requested())?;
     if common::json_requested() {
         println!("{}", output.json);
     }

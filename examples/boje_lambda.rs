@@ -4,10 +4,12 @@
 //!
 //! `cargo run --release --example boje_lambda [-- --json] [-- --quick]`
 
+#[path = "reproductions/boje_lambda.rs"]
+mod boje_lambda;
 mod common;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let output = common::boje_lambda::run(common::quick_requested())?;
+    let output = boje_lambda::run(common::quick_requested())?;
     if common::json_requested() {
         println!("{}", output.json);
     }

@@ -5,10 +5,12 @@
 //!
 //! `cargo run --release --example boje_moments [-- --json] [-- --quick]`
 
+#[path = "reproductions/boje_moments.rs"]
+mod boje_moments;
 mod common;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let output = common::boje_moments::run(common::quick_requested())?;
+    let output = boje_moments::run(common::quick_requested())?;
     if common::json_requested() {
         println!("{}", output.json);
     }

@@ -5,10 +5,12 @@
 //!
 //! `cargo run --release --example boje_rate [-- --json] [-- --quick]`
 
+#[path = "reproductions/boje_rate.rs"]
+mod boje_rate;
 mod common;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let output = common::boje_rate::run(common::quick_requested())?;
+    let output = boje_rate::run(common::quick_requested())?;
     if common::json_requested() {
         println!("{}", output.json);
     }

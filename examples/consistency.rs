@@ -5,9 +5,15 @@
 //! `cargo run --release --example consistency [-- --json] [-- --quick]`
 
 mod common;
+#[path = "reproductions/consistency.rs"]
+mod consistency;
+#[path = "reproductions/lee_huang.rs"]
+mod lee_huang;
+#[path = "reproductions/lu_calibration.rs"]
+mod lu_calibration;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let output = common::consistency::run(common::quick_requested())?;
+    let output = consistency::run(common::quick_requested())?;
     if common::json_requested() {
         println!("{}", output.json);
     }

@@ -10,9 +10,11 @@
 //! `cargo run --release --example lee_huang [-- --json] [-- --quick]`
 
 mod common;
+#[path = "reproductions/lee_huang.rs"]
+mod lee_huang;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let output = common::lee_huang::run(common::quick_requested())?;
+    let output = lee_huang::run(common::quick_requested())?;
     if common::json_requested() {
         println!("{}", output.json);
     }

@@ -17,8 +17,10 @@
 //! `cargo run --release --example lu_calibration [-- --json] [-- --quick] [-- --sequential] [-- --bench]`
 
 mod common;
+#[path = "reproductions/lu_calibration.rs"]
+mod lu_calibration;
 
-use estim::models::lu::{Execution, MonteCarloConfig, run_monte_carlo};
+use lu_calibration::{Execution, MonteCarloConfig, run_monte_carlo};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let execution = if std::env::args().any(|a| a == "--sequential") {
@@ -43,7 +45,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         return Ok(());
     }
-    let output = common::lu_calibration::run_with(common::quick_requested(), execution)?;
+    let output = lu_calibration::run_with(common::quick_requested(), execution)?;
     if common::json_requested() {
         println!("{}", output.json);
     }

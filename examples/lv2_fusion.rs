@@ -12,9 +12,11 @@
 //! and with a biased x axis).
 
 mod common;
+#[path = "reproductions/lv2_fusion.rs"]
+mod lv2_fusion;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let output = common::lv2_fusion::run(common::quick_requested())?;
+    let output = lv2_fusion::run(common::quick_requested())?;
     if common::json_requested() {
         println!("{}", output.json);
     }

@@ -11,8 +11,26 @@
 //!
 //! `--quick` runs the smaller configurations (fewer Monte Carlo runs); `--json` prints one JSON
 //! object, keyed by example name, as the last stdout line.
+//!
+//! Each paper example `X` is `examples/X.rs` (flags and `main`) and its reproduction (the
+//! experiment, tables, figures, headlines and JSON) is `examples/reproductions/X.rs`; this file
+//! includes the same reproduction modules by `#[path]`, so each is written once.
 
+#[path = "reproductions/boje_circle.rs"]
+mod boje_circle;
+#[path = "reproductions/boje_lambda.rs"]
+mod boje_lambda;
+#[path = "reproductions/boje_moments.rs"]
+mod boje_moments;
+#[path = "reproductions/boje_rate.rs"]
+mod boje_rate;
 mod common;
+#[path = "reproductions/lee_huang.rs"]
+mod lee_huang;
+#[path = "reproductions/lu_calibration.rs"]
+mod lu_calibration;
+#[path = "reproductions/lv2_fusion.rs"]
+mod lv2_fusion;
 
 use std::fmt::Write as _;
 use std::time::{Instant, SystemTime};
@@ -36,29 +54,29 @@ const PAPERS: &[Paper] = &[
         citation: "E. Boje, Approximations for state estimation in a plane using two two-axis accelerometers.",
         module: "estim_models::boje",
         examples: &[
-            ("boje_moments", common::boje_moments::run),
-            ("boje_lambda", common::boje_lambda::run),
-            ("boje_rate", common::boje_rate::run),
-            ("boje_circle", common::boje_circle::run),
+            ("boje_moments", boje_moments::run),
+            ("boje_lambda", boje_lambda::run),
+            ("boje_rate", boje_rate::run),
+            ("boje_circle", boje_circle::run),
         ],
     },
     Paper {
         title: "Lee & Huang: all-accelerometer INS with an own-ship trajectory estimator",
         citation: "S.-C. Lee, Y.-C. Huang, Innovative estimation method with measurement likelihood for all-accelerometer type INS, IEEE T-AES 38(1), 2002.",
         module: "estim_models::lee_huang",
-        examples: &[("lee_huang", common::lee_huang::run)],
+        examples: &[("lee_huang", lee_huang::run)],
     },
     Paper {
         title: "LV2: best estimates for X and Y given X, Y and Q",
         citation: "LV2 IMU note, Best estimates for X and Y given X, Y and Q, v1.00, 2004.",
         module: "estim_models::lv2",
-        examples: &[("lv2_fusion", common::lv2_fusion::run)],
+        examples: &[("lv2_fusion", lv2_fusion::run)],
     },
     Paper {
         title: "Lu: calibration of an accelerometer using GPS measurements",
         citation: "J. Lu, Calibration of an accelerometer using GPS measurements (course report).",
         module: "estim_models::lu",
-        examples: &[("lu_calibration", common::lu_calibration::run)],
+        examples: &[("lu_calibration", lu_calibration::run)],
     },
 ];
 

@@ -60,16 +60,6 @@ struct Radar {
     sigma_bearing: f64,
 }
 
-fn wrap(a: f64) -> f64 {
-    let w =
-        (a + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI;
-    if w == -std::f64::consts::PI {
-        std::f64::consts::PI
-    } else {
-        w
-    }
-}
-
 impl MeasurementModel<f64, U4, U2> for Radar {
     fn measure(&self, x: &Vector4<f64>) -> Vector2<f64> {
         Vector2::new(x[0].hypot(x[1]), x[1].atan2(x[0]))
@@ -81,7 +71,10 @@ impl MeasurementModel<f64, U4, U2> for Radar {
         ))
     }
     fn residual(&self, a: &Vector2<f64>, b: &Vector2<f64>) -> Vector2<f64> {
-        Vector2::new(a[0] - b[0], wrap(a[1] - b[1]))
+        // The bearing (component 1) is an angle: wrap its difference into (−π, π].
+        let mut r = a - b;
+        estim::core::wrap_components(&mut r, &[1]);
+        r
     }
 }
 impl MeasurementJacobian<f64, U4, U2> for Radar {

@@ -25,6 +25,7 @@
 #![deny(missing_docs)]
 
 pub mod alloc;
+pub mod angle;
 pub mod derivative;
 pub mod error;
 pub mod function;
@@ -37,6 +38,7 @@ pub mod propagate;
 pub mod scalar;
 
 pub use alloc::Alloc;
+pub use angle::{wrap_angle, wrap_components};
 pub use error::{Error, Parameter, Quantity, Stage};
 pub use function::{
     AffineFunction, Differentiable, SigmaScratch, TwiceDifferentiable, VectorFunction,

@@ -1,7 +1,7 @@
 //! # estim-models
 //!
 //! Four papers on accelerometer-based navigation, each a model plugin for the estim filters,
-//! with its simulator and the experiments its example reproduces:
+//! with its simulator:
 //!
 //! - [`boje`]: planar motion from two two-axis accelerometers (second-order moments, the λ
 //!   covariance, the 6-state EKF with correlated noise, rate accuracy, the circle example).
@@ -14,11 +14,13 @@
 //! closed form taken from a paper is tested against an independent route. Where a paper is
 //! wrong, the module's *Errata* section says what it prints, what estim uses and which test
 //! shows it.
+//!
+//! The papers' experiments (runs, headline tables, figures) are not in this crate: each is an
+//! example of the `estim` package, `examples/<name>.rs`, whose body is
+//! `examples/reproductions/<name>.rs`; `cargo run --release --example papers` runs them all.
 #![deny(missing_docs)]
 
 pub mod boje;
-mod headline;
-pub use headline::Headline;
 pub mod lee_huang;
 pub mod lu;
 pub mod lv2;

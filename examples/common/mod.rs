@@ -1,19 +1,42 @@
-//! Helpers shared by the examples: the `--json` flag, the figure folder, and line plots.
+//! Helpers shared by the examples: the `--json` and `--quick` flags, the figure folder, line
+//! plots, and what an example's run returns ([`Output`], [`Headline`]).
+//!
+//! Layout: example `X` is `examples/X.rs` (its flags and `main`), and its body, the paper's
+//! reproduction (experiment, tables, figures, JSON), is `examples/reproductions/X.rs`, which
+//! `X.rs` names with `#[path]`; `papers.rs` includes every paper's body the same way, and the
+//! `estim` package's tests (`tests/it`) include them to check the reproductions. Each
+//! reproduction reaches these helpers as `crate::common`.
 #![allow(dead_code)] // each example uses a subset
 
+use core::fmt;
 use std::path::PathBuf;
 
-use estim::models::Headline;
+/// A headline number: the paper's claim next to what estim computes, and why they differ.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Headline {
+    /// What is compared.
+    pub quantity: String,
+    /// The paper's value or sentence.
+    pub paper: String,
+    /// estim's value(s).
+    pub estim: String,
+    /// Why they differ, or what the comparison rests on (empty when they simply agree).
+    pub note: String,
+}
 
-pub mod boje_circle;
-pub mod boje_lambda;
-pub mod boje_moments;
-pub mod boje_rate;
-pub mod consistency;
-pub mod large_state;
-pub mod lee_huang;
-pub mod lu_calibration;
-pub mod lv2_fusion;
+impl fmt::Display for Headline {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}: paper {}, estim {}",
+            self.quantity, self.paper, self.estim
+        )?;
+        if !self.note.is_empty() {
+            write!(f, " ({})", self.note)?;
+        }
+        Ok(())
+    }
+}
 
 /// What an example's run returns: its `--json` object and its headline comparisons.
 pub struct Output {

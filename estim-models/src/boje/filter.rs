@@ -26,12 +26,11 @@ use estim_core::nalgebra::{
 };
 use estim_core::{
     LinearMeasurementModel, MeasurementHessian, MeasurementJacobian, MeasurementModel,
-    ProcessHessian, ProcessJacobian, ProcessModel,
+    ProcessHessian, ProcessJacobian, ProcessModel, wrap_components,
 };
 use estim_filters::{Estimator, PredictCorrelated, Update};
 
 use super::geometry::{ChannelVariances, InversionInput, inertial_moments, invert, rate_squared};
-use super::wrap_angle;
 
 /// Index of ẋ in the state.
 pub const VX: usize = 0;
@@ -401,7 +400,9 @@ impl MeasurementModel<f64, U6, U3> for PositionHeadingMeasurement {
     }
 
     fn residual(&self, a: &Vector3<f64>, b: &Vector3<f64>) -> Vector3<f64> {
-        Vector3::new(a[0] - b[0], a[1] - b[1], wrap_angle(a[2] - b[2]))
+        let mut r = a - b;
+        wrap_components(&mut r, &[2]); // z = (x, y, θ): the heading
+        r
     }
 }
 

@@ -13,15 +13,16 @@
 //!
 //! | module | paper | what |
 //! |---|---|---|
-//! | [`moments`] | §2.2, eq 7–11 | the worked examples cos θ, sin θ, x cos θ, x sin θ: generic [`SecondOrder`](estim_core::SecondOrder) vs exact vs sampled ([`moments_experiment`]) |
+//! | [`moments`] | §2.2, eq 7–11 | the worked examples cos θ, sin θ, x cos θ, x sin θ: [`TrigProducts`] for the generic [`SecondOrder`](estim_core::SecondOrder), exact and printed closed forms |
 //! | [`geometry`] | eq 1–5, 12, 13 | [`AccelerometerInversion`] (eq 5 with Jacobian and Hessians), [`inertial_mean`] (eq 12), [`lambda()`] (eq 13 corrected) |
-//! | [`lambda_example`] | eq 12–13 | the λ example ([`lambda_experiment`]) |
 //! | [`filter`] | eq 14–16 | [`PlanarProcess`], [`NonlinearPlanarProcess`], [`RateSquaredMeasurement`], [`PositionHeadingMeasurement`], [`filter_step`] |
-//! | [`rate`] | §3, eq 17–19 | closed forms, Riccati iteration, scalar EKF Monte Carlo ([`rate_experiment`]) |
-//! | [`circle`] | §4, Table 1 | simulator ([`simulate_circle`]), Monte Carlo ([`circle_experiment`], [`circle_variants`]) |
+//! | [`rate`] | §3, eq 17–19 | the scalar rate sub-model, closed forms, Riccati iteration |
+//! | [`circle`] | §4, Table 1 | the scenario ([`CircleConfig`]) and its simulator ([`simulate_circle`]) |
 //!
-//! Every experiment takes a config with a `paper()`/`example()` and a `quick()` constructor and
-//! returns a result struct with public fields and `headlines()` ([`Headline`]: paper vs estim).
+//! The paper's experiments (the moments and λ examples, the rate Monte Carlo, the circle Monte
+//! Carlo, their headline tables and figures) are the examples `boje_moments`, `boje_lambda`,
+//! `boje_rate` and `boje_circle`: `examples/<name>.rs`, whose body is
+//! `examples/reproductions/<name>.rs`.
 //!
 //! ## State and measurements
 //!
@@ -176,14 +177,11 @@
 pub mod circle;
 pub mod filter;
 pub mod geometry;
-pub mod lambda_example;
 pub mod moments;
 pub mod rate;
 
 pub use circle::{
-    CircleConfig, CircleData, CircleResult, FilterKind, FilterTrace, InitialConditions,
-    MonteCarloSummary, ProcessKind, StateStats, circle_experiment, circle_monte_carlo,
-    circle_variants, run_circle_filter, simulate_circle, variant_headlines,
+    CircleConfig, CircleData, FilterKind, InitialConditions, ProcessKind, simulate_circle,
 };
 pub use filter::{
     AccelerometerProcess, NonlinearPlanarProcess, PlanarFilter, PlanarInput, PlanarProcess,
@@ -193,15 +191,8 @@ pub use geometry::{
     AccelerometerInversion, ChannelVariances, InertialMoments, InversionInput, inertial_mean,
     inertial_moments, lambda, lambda_as_printed,
 };
-pub use lambda_example::{LambdaConfig, LambdaResult, lambda_experiment};
-pub use moments::{MomentsConfig, MomentsResult, TrigMoments, TrigProducts, moments_experiment};
-pub use rate::{RateConfig, RateResult, ScalarRateProcess, ScalarRateSquared, rate_experiment};
+pub use moments::{TrigMoments, TrigProducts};
+pub use rate::{ScalarRateProcess, ScalarRateSquared};
 
-pub use crate::Headline;
-
-/// An angle wrapped to (−π, π].
-pub fn wrap_angle(a: f64) -> f64 {
-    use std::f64::consts::PI;
-    let w = (a + PI).rem_euclid(2.0 * PI) - PI;
-    if w <= -PI { w + 2.0 * PI } else { w }
-}
+/// An angle wrapped to (−π, π] (estim-core's helper, re-exported here for the model's users).
+pub use estim_core::wrap_angle;

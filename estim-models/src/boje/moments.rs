@@ -1,19 +1,15 @@
 //! Section 2.2: Papoulis' second-order moments of functions of a random vector, on Boje's worked
 //! examples (eq 8, 10, 11): cos θ, sin θ, x cos θ, x sin θ for independent x and θ.
 //!
-//! [`moments_experiment`] computes each quantity three ways: the generic [`SecondOrder`]
-//! propagator on [`TrigProducts`], the exact Gaussian expectation ([`exact_trig_moments`]), and
-//! the seeded [`Sampled`] propagator; it also evaluates the paper's printed closed forms
-//! ([`paper_trig_moments`]), which the tests compare with the generic propagator.
+//! [`TrigProducts`] is the function with its analytic derivatives, so the generic propagators
+//! run on it; [`exact_trig_moments`] gives the exact Gaussian expectations and
+//! [`paper_trig_moments`] the paper's printed closed forms, which the tests compare with the
+//! generic [`SecondOrder`](estim_core::SecondOrder) propagator. The `boje_moments` example
+//! (`examples/reproductions/boje_moments.rs`) computes each quantity three ways (generic
+//! second order, exact, seeded [`Sampled`](estim_core::Sampled)).
 
-use estim_core::error::Result;
 use estim_core::nalgebra::{Matrix2, Matrix4x2, U2, U4, Vector2, Vector4};
-use estim_core::{
-    Differentiable, MomentPropagator, Moments, Sampled, SecondOrder, SecondOrderGaussian,
-    TwiceDifferentiable, VectorFunction,
-};
-
-use super::Headline;
+use estim_core::{Differentiable, Moments, TwiceDifferentiable, VectorFunction};
 
 /// g(x, θ) = (cos θ, sin θ, x cos θ, x sin θ), argument order (x, θ).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -57,7 +53,8 @@ impl TwiceDifferentiable<f64, U2, U4> for TrigProducts {
     }
 }
 
-/// The seven quantities of the example, in the order of [`MomentsConfig::NAMES`].
+/// The seven quantities of the worked examples: E{cos θ}, E{sin θ}, var(cos θ), var(sin θ),
+/// E{x cos θ}, var(x cos θ), var(x sin θ).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TrigMoments {
     /// E{cos θ}.
@@ -77,7 +74,7 @@ pub struct TrigMoments {
 }
 
 impl TrigMoments {
-    /// The values in the order of [`MomentsConfig::NAMES`].
+    /// The values in field order (e_cos, e_sin, var_cos, var_sin, e_x_cos, var_x_cos, var_x_sin).
     pub fn to_array(&self) -> [f64; 7] {
         [
             self.e_cos,
@@ -90,7 +87,8 @@ impl TrigMoments {
         ]
     }
 
-    fn from_moments(m: &Moments<f64, U2, U4>) -> Self {
+    /// The seven quantities read off the moments of [`TrigProducts`].
+    pub fn from_moments(m: &Moments<f64, U2, U4>) -> Self {
         let c = &m.covariance;
         Self {
             e_cos: m.mean[0],
@@ -142,149 +140,5 @@ pub fn paper_trig_moments(x_mean: f64, x_std: f64, theta_mean: f64, theta_std: f
         e_x_cos: x_mean * c * (1.0 - v / 2.0),
         var_x_cos: v * x_mean * x_mean * s * s + vx * c * c,
         var_x_sin: v * x_mean * x_mean * c * c + vx * s * s,
-    }
-}
-
-/// Settings of the moments example.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MomentsConfig {
-    /// θ̄, rad.
-    pub theta_mean: f64,
-    /// σ_θ, rad.
-    pub theta_std: f64,
-    /// x̄.
-    pub x_mean: f64,
-    /// σ_x.
-    pub x_std: f64,
-    /// Monte Carlo samples for the sampled reference.
-    pub samples: usize,
-    /// Seed of the sampled reference.
-    pub seed: u64,
-}
-
-impl MomentsConfig {
-    /// The names of the seven quantities (the example's JSON keys).
-    pub const NAMES: [&'static str; 7] = [
-        "e_cos",
-        "e_sin",
-        "var_cos",
-        "var_sin",
-        "e_x_cos",
-        "var_x_cos",
-        "var_x_sin",
-    ];
-
-    /// The example's values: θ̄ = 0.7, σ_θ = 0.1, x̄ = 2, σ_x = 0.3, 10⁶ samples.
-    pub fn paper() -> Self {
-        Self {
-            theta_mean: 0.7,
-            theta_std: 0.1,
-            x_mean: 2.0,
-            x_std: 0.3,
-            samples: 1_000_000,
-            seed: 2026,
-        }
-    }
-
-    /// As [`paper`](Self::paper) with 2·10⁵ samples.
-    pub fn quick() -> Self {
-        Self {
-            samples: 200_000,
-            ..Self::paper()
-        }
-    }
-}
-
-/// What [`moments_experiment`] returns.
-#[derive(Clone, Debug, PartialEq)]
-pub struct MomentsResult {
-    /// The settings used.
-    pub config: MomentsConfig,
-    /// Generic [`SecondOrder`] propagator on [`TrigProducts`] (Papoulis, Boje eq 7 and 9).
-    pub second_order: TrigMoments,
-    /// Generic [`SecondOrderGaussian`] propagator (adds ½ tr(Hₖ C Hₗ C) to the covariance).
-    pub second_order_gaussian: TrigMoments,
-    /// Exact Gaussian expectations.
-    pub exact: TrigMoments,
-    /// Seeded Monte Carlo ([`Sampled`]).
-    pub sampled: TrigMoments,
-    /// Standard error of each sampled value: √(var/N) for means; for variances the Gaussian
-    /// approximation var·√(2/(N−1)) (a guide: the outputs are not Gaussian).
-    pub sampled_std_error: TrigMoments,
-    /// The paper's printed closed forms (eq 8, 10, 11).
-    pub paper: TrigMoments,
-}
-
-/// Runs the moments example.
-///
-/// Errors: invalid covariance (negative variance) or sample count < 2.
-pub fn moments_experiment(config: &MomentsConfig) -> Result<MomentsResult> {
-    let mean = Vector2::new(config.x_mean, config.theta_mean);
-    let cov = Matrix2::new(
-        config.x_std * config.x_std,
-        0.0,
-        0.0,
-        config.theta_std * config.theta_std,
-    );
-    let g = TrigProducts;
-    let second = SecondOrder.propagate(&mean, &cov, &g)?;
-    let gaussian = SecondOrderGaussian.propagate(&mean, &cov, &g)?;
-    let sampled = Sampled::new(config.samples, config.seed)?.propagate(&mean, &cov, &g)?;
-    let sampled = TrigMoments::from_moments(&sampled);
-    let n = config.samples as f64;
-    let se_var = |v: f64| v * (2.0 / (n - 1.0)).sqrt();
-    let sampled_std_error = TrigMoments {
-        e_cos: (sampled.var_cos / n).sqrt(),
-        e_sin: (sampled.var_sin / n).sqrt(),
-        var_cos: se_var(sampled.var_cos),
-        var_sin: se_var(sampled.var_sin),
-        e_x_cos: (sampled.var_x_cos / n).sqrt(),
-        var_x_cos: se_var(sampled.var_x_cos),
-        var_x_sin: se_var(sampled.var_x_sin),
-    };
-    Ok(MomentsResult {
-        config: *config,
-        second_order: TrigMoments::from_moments(&second),
-        second_order_gaussian: TrigMoments::from_moments(&gaussian),
-        exact: exact_trig_moments(
-            config.x_mean,
-            config.x_std,
-            config.theta_mean,
-            config.theta_std,
-        ),
-        sampled,
-        sampled_std_error,
-        paper: paper_trig_moments(
-            config.x_mean,
-            config.x_std,
-            config.theta_mean,
-            config.theta_std,
-        ),
-    })
-}
-
-impl MomentsResult {
-    /// Paper vs estim for each quantity: the paper's closed form against the exact Gaussian
-    /// value (the second-order approximation's error).
-    pub fn headlines(&self) -> Vec<Headline> {
-        let paper = self.paper.to_array();
-        let second = self.second_order.to_array();
-        let exact = self.exact.to_array();
-        MomentsConfig::NAMES
-            .iter()
-            .enumerate()
-            .map(|(i, name)| Headline {
-                quantity: format!("{name} (eq 8/10/11)"),
-                paper: format!("{:.6e} (closed form)", paper[i]),
-                estim: format!(
-                    "{:.6e} (generic SecondOrder); exact {:.6e}",
-                    second[i], exact[i]
-                ),
-                note: format!(
-                    "second-order error vs exact Gaussian: {:.1e} relative",
-                    (second[i] - exact[i]) / exact[i]
-                ),
-            })
-            .collect()
     }
 }

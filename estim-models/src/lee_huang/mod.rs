@@ -18,7 +18,10 @@
 //!   Jacobian and Hessians.
 //! - [`ote`]: the own-ship trajectory estimator (eq 40–48) on the framework's
 //!   [`FadingMemoryRls`](estim_filters::FadingMemoryRls), and its steady state.
-//! - [`simulation`]: seeded truth and sensor data; [`experiments`]: section IV and its variants.
+//! - [`simulation`]: seeded truth and sensor data.
+//!
+//! Section IV and its variants (the runs, the headline table, the figures) are the `lee_huang`
+//! example: `examples/lee_huang.rs`, whose body is `examples/reproductions/lee_huang.rs`.
 //!
 //! ## State, input and measurement
 //!
@@ -145,18 +148,12 @@
 //! - All of them fail *error ⟂ estimate* by construction: the truth is one fixed trajectory
 //!   (x̂ = x − e with x fixed), which that check does not allow for.
 
-pub mod experiments;
 pub mod likelihood;
 pub mod model;
 pub mod ote;
 pub mod sensors;
 pub mod simulation;
 
-pub use experiments::{
-    CkfJacobian, ErrorHistory, Headline, LeeHuangConfig, LeeHuangResult, SectionIvConfig,
-    SectionIvResult, VariantSummary, headlines, labels, position_growth_exponent, run,
-    run_section_iv,
-};
 pub use likelihood::{LikelihoodForm, VelocityLikelihood, velocity_likelihood_as_printed};
 pub use model::{
     AttitudeMeasurement, CkfInput, CkfProcess, Discretization, InsProcess, Plane, STANDARD_GRAVITY,

@@ -279,12 +279,8 @@ impl estim_core::ProcessHessian<f64, estim_core::nalgebra::U6> for CkfProcess {
     }
 }
 
-/// Wraps an angle into (−π, π].
-pub fn wrap_angle(a: f64) -> f64 {
-    use core::f64::consts::PI;
-    let w = (a + PI).rem_euclid(2.0 * PI) - PI;
-    if w <= -PI { w + 2.0 * PI } else { w }
-}
+/// Wraps an angle into (−π, π] (estim-core's helper, re-exported here for the model's users).
+pub use estim_core::wrap_angle;
 
 /// The attitude measurement E = H D + ε, H = e₄ᵀ (eq 21; "gravity sensing"), ε ~ N(0, R_v).
 /// The innovation is wrapped into (−π, π].

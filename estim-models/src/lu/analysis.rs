@@ -174,3 +174,7 @@ pub fn covariance_analysis(
     }
     Ok(out)
 }
+
+/// The paper's printed residual check (1/N) Σ r(20) r(30)ᵀ (§3.2), which white residuals do
+/// not produce (erratum E11).
+pub const PAPER_RESIDUAL_CORRELATION: [[f64; 2]; 2] = [[0.0486, -0.0023], [0.0002, 0.0002]];

@@ -18,8 +18,11 @@
 //!   covariance recursion written out ([`covariance_history`]).
 //! - [`analysis`]: the exact moments the Monte Carlo estimates (covariance analysis of the
 //!   truth/filter pair, also for the mismatched filters).
-//! - [`experiments`]: the Monte Carlo validation on the framework's runner
-//!   ([`estim_filters::monte_carlo::MonteCarlo`]), the printed variants, headlines.
+//!
+//! The Monte Carlo validation on the framework's runner
+//! ([`estim_filters::monte_carlo::MonteCarlo`]), the printed variants, the headline table and
+//! the figures are the `lu_calibration` example: `examples/lu_calibration.rs`, whose body is
+//! `examples/reproductions/lu_calibration.rs`.
 //!
 //! ## State and measurement
 //!
@@ -115,8 +118,8 @@
 //!
 //! ## Consistency (estim's toolkit)
 //!
-//! `cargo run --release --example consistency` runs this module's Monte Carlo
-//! ([`run_monte_carlo`], consistent configuration, master seed 271) on estim's runner: 5000
+//! `cargo run --release --example consistency` runs the `lu_calibration` example's Monte Carlo
+//! (`run_monte_carlo`, consistent configuration, master seed 271) on estim's runner: 5000
 //! runs (500 with `--quick`), 151 slots (t = 0 and every GPS update), NIS of every update,
 //! residual pair 20 s × 30 s; each check at 99 % (Simes). **All six checks pass**: mean error
 //! p = 0.93, ensemble/filter variance ratio p = 0.99, average NEES p = 0.48 (2.93–3.02 against
@@ -126,16 +129,12 @@
 //! error dynamics the filter models, so nothing is left unmodelled.
 
 pub mod analysis;
-pub mod experiments;
 pub mod filter;
 pub mod model;
 pub mod simulation;
 
-pub use crate::Headline;
-pub use analysis::{CovarianceAnalysis, covariance_analysis, quadrature_drive};
-pub use experiments::{
-    Execution, LuConfig, LuResult, MonteCarloConfig, MonteCarloResult, MonteCarloSummary,
-    PAPER_RESIDUAL_CORRELATION, headlines, labels, run, run_monte_carlo, verdict_line,
+pub use analysis::{
+    CovarianceAnalysis, PAPER_RESIDUAL_CORRELATION, covariance_analysis, quadrature_drive,
 };
 pub use filter::{
     CovarianceHistory, FilterSettings, LuFilter, Realization, covariance_history, run_realization,

@@ -123,11 +123,12 @@
 //!   model and its fusions.
 //! - [`simulate`]: seeded sensor simulation (noise, bias, clipping, drop-outs).
 //! - [`stats`]: erfc, normal and χ² distribution functions for the test thresholds.
-//! - [`experiments`]: the `lv2_fusion` example's computations ([`experiments::run`],
-//!   [`experiments::headlines`]).
+//!
+//! The note's worked example, the χ² Monte Carlo, the saturation run, the headline table and
+//! the figures are the `lv2_fusion` example: `examples/lv2_fusion.rs`, whose body is
+//! `examples/reproductions/lv2_fusion.rs`.
 
 mod error;
-pub mod experiments;
 mod model;
 pub mod simulate;
 pub mod stats;
@@ -138,5 +139,3 @@ pub use model::{
     AxisStatus, DynAxes, FilterFusion, Fusion, PlanarAxes, RedundantAxes, SpatialAxes, XyqModel,
     screen,
 };
-
-pub use crate::Headline;

@@ -1,7 +1,7 @@
 //! Seeded sensor simulation: truth, noisy (biased, clipped, dropped) axis readings.
 //!
-//! The note gives no noise levels, sample rate or scenario; the experiments choose their own
-//! and say so ([`super::experiments`]).
+//! The note gives no noise levels, sample rate or scenario; the `lv2_fusion` example chooses
+//! its own and says so (`examples/reproductions/lv2_fusion.rs`).
 
 use core::f64::consts::{PI, SQRT_2};
 

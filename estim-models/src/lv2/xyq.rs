@@ -3,7 +3,7 @@
 //! Every function here has an independent counterpart in the general model
 //! ([`RedundantAxes::xyq`](super::RedundantAxes::xyq) fused by weighted least squares, or by
 //! the Kalman filter in [`RedundantAxes::fuse_with_filter`](super::RedundantAxes::fuse_with_filter));
-//! the tests in `estim-models/tests/lv2_fusion.rs` show they agree to round-off.
+//! the tests in `estim-models/tests/it/lv2_fusion.rs` show they agree to round-off.
 
 use core::f64::consts::SQRT_2;
 

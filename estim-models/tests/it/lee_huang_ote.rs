@@ -1,13 +1,12 @@
 //! The OTE (eq 44–48) on the framework's FadingMemoryRls: steady state, least-squares
-//! equivalence, and its coupling to the CKF.
+//! equivalence, and its coupling to the CKF. Its equivalence with batch least squares on the
+//! section IV pseudo-measurements uses the `lee_huang` example's configuration and is tested
+//! with it, in the estim package's tests (`tests/it/lee_huang_example.rs`).
 
 use estim_core::{Gaussian, LinearMeasurement};
-use estim_filters::{Estimator, FadingMemoryRls, KalmanFilter, Predict, Update};
-use estim_models::lee_huang::{
-    AttitudeMeasurement, CkfInput, Discretization, FourAccelerometers, InsProcess, OteSettings,
-    OwnShipTrajectoryEstimator, Plane, SectionIvConfig, SensorConfig, ote_steady_state, simulate,
-};
-use nalgebra::{Matrix2, Matrix3, Matrix6, U2, Vector1, Vector2, Vector6};
+use estim_filters::{Estimator, FadingMemoryRls, KalmanFilter, Update};
+use estim_models::lee_huang::{OteSettings, OwnShipTrajectoryEstimator, ote_steady_state};
+use nalgebra::{Matrix2, Matrix6, U2, Vector2, Vector6};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -97,94 +96,6 @@ fn unit_forgetting_gain_diminishes_like_one_over_k() {
             (step.gain[(0, 0)] - expected).abs() < 1e-12 * expected.max(1.0),
             "k = {k}"
         );
-    }
-}
-
-/// The pseudo-measurements Z_p = g(D̂) of a section IV CKF+OTE run (first seed, 5 s).
-fn section_iv_pseudo_measurements() -> Vec<Vector2<f64>> {
-    let config = SectionIvConfig::paper();
-    let steps = 500;
-    let sim = simulate(
-        &config.scenario,
-        &SensorConfig {
-            dt: config.dt,
-            steps,
-            accelerometers: FourAccelerometers::default(),
-            input_bias: config.input_bias,
-            input_noise_std: config.input_noise_std,
-            attitude_std: config.attitude_std,
-        },
-        config.first_seed,
-    );
-    let var = config
-        .input_noise_std
-        .component_mul(&config.input_noise_std);
-    let process = InsProcess {
-        input_noise: Matrix3::from_diagonal(&var),
-        discretization: Discretization::ZeroOrderHold,
-        plane: Plane::Horizontal,
-    }
-    .ckf();
-    let measurement = AttitudeMeasurement {
-        variance: config.attitude_std.powi(2),
-    };
-    let mut ckf = KalmanFilter::new(
-        Gaussian::new(config.scenario.initial_state, config.initial_covariance).unwrap(),
-    );
-    let mut ote = OwnShipTrajectoryEstimator::new(&config.ote).unwrap();
-    let mut z = Vec::new();
-    for k in 1..=steps {
-        let input = CkfInput {
-            signals: sim.samples[k - 1].inputs,
-            attitude: ckf.state()[4],
-        };
-        ckf.predict(&process, &input, config.dt).unwrap();
-        ckf.update(&measurement, &Vector1::new(sim.samples[k].attitude))
-            .unwrap();
-        z.push(ote.correct(&mut ckf).unwrap().pseudo_measurement);
-    }
-    z
-}
-
-/// The framework RLS, fed the section IV pseudo-measurements without the CKF reset, equals the
-/// batch (exponentially) weighted least-squares solution with the prior as regulariser,
-///
-/// r̂_k = argmin γᵏ |r − r₀|²_{P₀⁻¹} + Σⱼ γᵏ⁻ʲ |Z_j − r|²_{S⁻¹}
-///     = (γᵏ P₀⁻¹ + Σ γᵏ⁻ʲ S⁻¹)⁻¹ (γᵏ P₀⁻¹ r₀ + Σ γᵏ⁻ʲ S⁻¹ Z_j),
-///
-/// at every k, for γ = 1 (ordinary RLS = batch least squares) and γ = 0.95. Tolerance 1e-9
-/// relative: 500 sequential Joseph updates against one solve.
-#[test]
-fn rls_with_unit_forgetting_equals_batch_least_squares_on_pseudo_measurements() {
-    let z = section_iv_pseudo_measurements();
-    let s = Matrix2::new(0.01, 0.002, 0.002, 0.02);
-    let p0 = Matrix2::identity();
-    let r0 = Vector2::new(2.0, 2.0);
-    let measurement = LinearMeasurement::<f64, U2, U2> {
-        observation: Matrix2::identity(),
-        noise: s,
-    };
-    for gamma in [1.0, 0.95] {
-        let mut rls = FadingMemoryRls::new(Gaussian::new(r0, p0).unwrap(), gamma).unwrap();
-        let s_inv = inv(&s);
-        for k in 1..=z.len() {
-            rls.update(&measurement, &z[k - 1]).unwrap();
-            let w0 = gamma.powi(k as i32);
-            let mut info = inv(&p0) * w0;
-            let mut vec = inv(&p0) * r0 * w0;
-            for (j, zj) in z[..k].iter().enumerate() {
-                let w = gamma.powi((k - 1 - j) as i32);
-                info += s_inv * w;
-                vec += s_inv * zj * w;
-            }
-            let batch = inv(&info) * vec;
-            let err = (rls.state() - batch).amax();
-            assert!(
-                err < 1e-9 * (1.0 + batch.amax()),
-                "gamma {gamma}, k {k}: {err}"
-            );
-            assert!((rls.covariance() - inv(&info)).amax() < 1e-9 * inv(&info).amax());
-        }
     }
 }
 

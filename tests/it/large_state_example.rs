@@ -1,10 +1,7 @@
 //! The `large_state` example in its quick form (10 steps): the 200-state Kalman filter and
 //! UKF are consistent and agree to round-off.
 
-#[path = "../examples/common/mod.rs"]
-mod common;
-
-use common::large_state::{
+use crate::large_state::{
     MEASUREMENT_SIGMA, NODES, QUICK_STEPS, cov_diff_bound, run, state_diff_bound,
 };
 use estim::filters::consistency::ChiSquareBand;
@@ -20,8 +17,7 @@ fn get(v: &serde_json::Value, path: &[&str]) -> f64 {
 
 #[test]
 fn large_state_quick_run_is_consistent_and_kf_matches_ukf() {
-    let out = run(true).unwrap();
-    let j = &out.json;
+    let j = &run(true).unwrap();
     assert_eq!(get(j, &["steps"]) as usize, QUICK_STEPS);
     assert_eq!(get(j, &["nodes"]) as usize, NODES);
 

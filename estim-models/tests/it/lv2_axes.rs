@@ -18,7 +18,7 @@ use estim_models::lv2::{
 };
 use proptest::prelude::*;
 
-mod lv2_support;
+use crate::lv2_support;
 
 /// The independent QR-based WLS on the rows `used`.
 fn naive_wls<N: Dim, M: Dim>(

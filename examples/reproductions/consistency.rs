@@ -19,15 +19,17 @@
 //! whatever the filter. The summary line therefore also states the verdict without it.
 //!
 //! `cargo run --release --example consistency [-- --json] [-- --quick]`
+#![allow(dead_code)] // also compiled into `papers` and the tests, each using a subset
 
 use std::time::Instant;
 
-use super::Output;
+use crate::common::{Headline, Output};
+use crate::lee_huang::SectionIvConfig;
+use crate::lu_calibration::{MonteCarloConfig, run_monte_carlo};
 use estim::core::Error;
 use estim::filters::consistency::{Check, Outcome, Verdict};
 use estim::filters::monte_carlo::{EnsembleStats, MonteCarlo, Recorder};
 use estim::filters::{Ekf, Estimator, KalmanFilter, Predict, PredictCorrelated, Update};
-use estim::models::Headline;
 use estim::models::boje::filter::HEADING;
 use estim::models::boje::geometry::rate_squared;
 use estim::models::boje::{
@@ -37,9 +39,8 @@ use estim::models::boje::{
 };
 use estim::models::lee_huang::{
     AttitudeMeasurement, CkfInput, FourAccelerometers, InsProcess, OwnShipTrajectoryEstimator,
-    SectionIvConfig, SensorConfig, simulate,
+    SensorConfig, simulate,
 };
-use estim::models::lu::{MonteCarloConfig, run_monte_carlo};
 use estim::nalgebra::{Matrix3, U1, U3, U6, Vector1, Vector3, Vector6};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};

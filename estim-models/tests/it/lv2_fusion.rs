@@ -3,6 +3,8 @@
 //! normal equations; `lv2_support`), and the framework's Kalman filter (exact prior from two
 //! axes, update with the third), plus the library's own WLS; and the covariances by the
 //! framework's generic moment propagators applied to eq 6 and eq 7 as functions of the readings.
+//! The worked example is tested with the `lv2_fusion` example (`tests/it/lv2_fusion_example.rs`
+//! of the estim package).
 
 use core::f64::consts::SQRT_2;
 
@@ -13,7 +15,6 @@ use estim_core::nalgebra::{
 use estim_core::propagate::{Linearized, MomentPropagator, Moments, Unscented};
 use estim_core::{Differentiable, Gaussian, VectorFunction};
 use estim_filters::{Estimator, FadingMemoryRls, KalmanFilter, Update};
-use estim_models::lv2::experiments::{Lv2Config, fusion_example};
 use estim_models::lv2::xyq::{
     self, Eq6Coefficients, XyqAxes, XyqReading, XyqSigmas, combine_independent, eq5_x_hat,
     eq5_y_hat, parity_chi2, parity_residual, x_hat_2, y_hat_2,
@@ -21,7 +22,7 @@ use estim_models::lv2::xyq::{
 use estim_models::lv2::{AxisStatus, XyqModel};
 use proptest::prelude::*;
 
-mod lv2_support;
+use crate::lv2_support;
 
 /// WLS from scratch (QR of the whitened system, see `lv2_support`).
 fn naive_wls(h: &DMatrix<f64>, sigmas: &[f64], z: &[f64]) -> (DVector<f64>, DMatrix<f64>, f64) {
@@ -185,42 +186,6 @@ proptest! {
         prop_assert!((var_star - p11).abs() <= 1e-12 * p11);
         prop_assert!((combine_independent(0.0, s.x * s.x, 0.0, s.var_x2()).1 - p11).abs() <= 1e-12 * p11);
     }
-}
-
-/// The worked example, with the values recomputed here by hand from the parity form.
-#[test]
-fn worked_example_numbers() {
-    let cfg = Lv2Config::quick();
-    let ex = fusion_example(&cfg.reading, &cfg.sigmas, cfg.false_alarm).unwrap();
-    let (vx, vy, vq): (f64, f64, f64) = (1e-4, 1.44e-4, 6.4e-5);
-    let s1 = vx + vy + 2.0 * vq; // 3.72e-4
-    let r = 1.0 + 0.5 - SQRT_2 * 1.07; // −0.0132085
-    let x_hat = 1.0 - vx / s1 * r;
-    let y_hat = 0.5 - vy / s1 * r;
-    let close = |a: f64, b: f64| (a - b).abs() <= 1e-14 * b.abs().max(1e-3);
-    assert!(
-        close(ex.fused.estimate[0], x_hat),
-        "{} vs {x_hat}",
-        ex.fused.estimate[0]
-    );
-    assert!(close(ex.fused.estimate[1], y_hat));
-    assert!(close(ex.fused.chi2, r * r / s1));
-    assert!(close(ex.fused.covariance[(0, 1)], -vx * vy / s1));
-    assert!(close(ex.without_x.estimate[0], SQRT_2 * 1.07 - 0.5));
-    assert!(close(ex.without_y.estimate[1], SQRT_2 * 1.07 - 1.0));
-    assert_eq!(ex.without_q.estimate, Vector2::new(1.0, 0.5));
-    // The same numbers rounded (checked in Python outside the repo): x̂ = 1.0035507,
-    // ŷ = 0.5051130, χ² = 0.46899.
-    assert!((x_hat - 1.0035507).abs() < 1e-7 && (y_hat - 0.5051130).abs() < 1e-7);
-    assert!((r * r / s1 - 0.46899).abs() < 1e-5);
-    // Every route agrees to round-off. Estimates ≈ 1: a few ε. Covariance entries ≈ 1e-4:
-    // relative 1e-14. χ²: r = x̃ + ỹ − √2 q̃ cancels 1.5 against 1.513, so r carries a relative
-    // error ≈ 2ε·1.5/0.013 ≈ 5e-14 and χ² twice that.
-    let d = ex.route_difference;
-    assert!(d.estimate < 1e-14, "{d:?}");
-    assert!(d.covariance < 1e-18, "{d:?}");
-    assert!(d.chi2 < 1e-13 * ex.fused.chi2.max(1.0), "{d:?}");
-    assert!(ex.consistent && ex.p_value > 0.4);
 }
 
 /// The Kalman filter from the exact two-axis prior, the fading-memory RLS with γ = 1 from

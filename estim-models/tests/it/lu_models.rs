@@ -1,6 +1,8 @@
 //! Lu: derivative checks of the error-state process and the GPS measurement, the error
 //! dynamics of the simulated truth (errata E4, E5, E13), the GPS schedule (E1) and the
-//! simulator's noise statistics.
+//! simulator's noise statistics. (The invalid-configuration test, which also runs the
+//! `lu_calibration` example's Monte Carlo, is in the estim package's
+//! `tests/it/lu_calibration_example.rs`.)
 
 use estim_core::derivative::{check_measurement_model, check_process_model};
 use estim_core::{MeasurementModel, ProcessModel};
@@ -233,49 +235,4 @@ fn stored_simulation_matches_the_step_by_step_simulator() {
     let phi = transition_matrix(0.005, BiasCoupling::Derived);
     let expected = Matrix3::new(1.0, 0.005, -1.25e-5, 0.0, 1.0, -0.005, 0.0, 0.0, 1.0);
     assert!((phi - expected).abs().max() < 1e-18);
-}
-
-/// Invalid scenarios and settings are typed errors from every entry point, not panics.
-#[test]
-fn invalid_configurations_are_errors() {
-    use estim_models::lu::{
-        FilterSettings, LuFilter, MonteCarloConfig, covariance_analysis, covariance_history,
-        run_monte_carlo,
-    };
-    let good = Scenario::paper();
-    let settings = FilterSettings::consistent(&good);
-    let mut cases = Vec::new();
-    let mut s = good;
-    s.gps_every = 0;
-    cases.push(s);
-    let mut s = good;
-    s.dt = 0.0;
-    cases.push(s);
-    let mut s = good;
-    s.gps_velocity_variance = 0.0;
-    cases.push(s);
-    let mut s = good;
-    s.bias_variance = -1.0;
-    cases.push(s);
-    let mut s = good;
-    s.amplitude = f64::NAN;
-    cases.push(s);
-    for s in cases {
-        assert!(s.validate().is_err());
-        assert!(LuFilter::new(&s, &settings).is_err());
-        assert!(covariance_history(&s, &settings, 100).is_err());
-        assert!(covariance_analysis(&s, &settings).is_err());
-        let mc = MonteCarloConfig {
-            scenario: s,
-            ..MonteCarloConfig::full().with_runs(2)
-        };
-        assert!(run_monte_carlo(&mc).is_err());
-    }
-    let mut bad = settings;
-    bad.accel_noise_variance = -1.0;
-    assert!(LuFilter::new(&good, &bad).is_err());
-    let mut bad = settings;
-    bad.initial_covariance[(0, 0)] = -1.0;
-    assert!(LuFilter::new(&good, &bad).is_err());
-    assert!(covariance_analysis(&good, &bad).is_err());
 }

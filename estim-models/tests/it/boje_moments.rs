@@ -1,14 +1,13 @@
 //! Boje eq 4–13 and 8–11: every closed form against an independent route — the generic moment
 //! propagators on the underlying function (eq 5, or the trig products), the exact Gaussian
-//! expectation, and Monte Carlo.
+//! expectation, and Monte Carlo. The moments and λ examples are tested with the examples, in
+//! the estim package's tests (`tests/it/boje_examples.rs`).
 
 use estim_core::nalgebra::{Matrix4, Vector4};
 use estim_core::{Linearized, MomentPropagator, Sampled, SecondOrder};
 use estim_models::boje::geometry::{invert, sensor_matrix};
-use estim_models::boje::moments::{exact_trig_moments, paper_trig_moments};
 use estim_models::boje::{
-    ChannelVariances, InversionInput, LambdaConfig, MomentsConfig, inertial_mean, lambda,
-    lambda_as_printed, lambda_experiment, moments_experiment,
+    ChannelVariances, InversionInput, inertial_mean, lambda, lambda_as_printed,
 };
 use proptest::prelude::*;
 
@@ -145,102 +144,4 @@ fn equal_channels_cross_terms_vanish() {
     }
     assert!((l[(2, 2)] - 1e-4 / (2.0 * 0.25)).abs() < 1e-18);
     assert_eq!(l[(2, 2)], l[(3, 3)]);
-}
-
-/// Eq 8, 10, 11 (closed forms as printed) = the generic SecondOrder propagator on
-/// (cos θ, sin θ, x cos θ, x sin θ), over a grid of means and spreads.
-#[test]
-fn eq8_10_11_closed_forms_equal_generic_second_order() {
-    for &(xm, sx, tm, st) in &[
-        (2.0, 0.3, 0.7, 0.1),
-        (-1.0, 1.0, 2.5, 0.4),
-        (0.0, 0.1, -3.0, 0.01),
-    ] {
-        let c = MomentsConfig {
-            x_mean: xm,
-            x_std: sx,
-            theta_mean: tm,
-            theta_std: st,
-            samples: 2,
-            seed: 0,
-        };
-        let r = moments_experiment(&c).unwrap();
-        let (a, b) = (
-            paper_trig_moments(xm, sx, tm, st).to_array(),
-            r.second_order.to_array(),
-        );
-        for i in 0..7 {
-            assert!(
-                (a[i] - b[i]).abs() <= 1e-14 * (1.0 + a[i].abs()),
-                "{i}: {} vs {}",
-                a[i],
-                b[i]
-            );
-        }
-    }
-}
-
-/// The moments example: the exact expectations are right (sampled within 5 standard errors:
-/// a false failure has probability < 10⁻⁵ per entry), and the second-order values are within
-/// the expected truncation error of them: relative O(σ_θ⁴) for the means
-/// (e^{−σ²/2} − (1 − σ²/2) = σ⁴/8 + …, 1.25e-5 relative at σ_θ = 0.1) and O(σ_θ²) for the
-/// variances (the dropped fourth-moment terms, ≈ σ²_θ/2 relative = 0.5 %).
-#[test]
-fn moments_example_second_order_vs_exact_vs_sampled() {
-    let r = moments_experiment(&MomentsConfig::quick()).unwrap();
-    let (ex, sa, se, so) = (
-        r.exact.to_array(),
-        r.sampled.to_array(),
-        r.sampled_std_error.to_array(),
-        r.second_order.to_array(),
-    );
-    for i in 0..7 {
-        assert!(
-            (sa[i] - ex[i]).abs() <= 5.0 * se[i],
-            "{}: sampled {} exact {} se {}",
-            MomentsConfig::NAMES[i],
-            sa[i],
-            ex[i],
-            se[i]
-        );
-    }
-    for i in [0, 1, 4] {
-        assert!(((so[i] - ex[i]) / ex[i]).abs() < 2e-5);
-    }
-    for i in [2, 3, 5, 6] {
-        assert!(
-            ((so[i] - ex[i]) / ex[i]).abs() < 0.02,
-            "{}: {} vs {}",
-            MomentsConfig::NAMES[i],
-            so[i],
-            ex[i]
-        );
-    }
-    let e = exact_trig_moments(2.0, 0.3, 0.7, 0.1);
-    assert_eq!(e, r.exact);
-}
-
-/// The λ example: closed forms = generic propagators (round-off), and both within Monte Carlo
-/// error of the sampled moments. The sampled covariance differs from J C Jᵀ also by the
-/// fourth-order θ terms (relative ≈ σ²_θ = 2.5e-3) and by sampling error (≈ √(2/N) = 4.5e-3 at
-/// N = 10⁵); 3 % of the largest entry covers both.
-#[test]
-fn lambda_example_closed_form_vs_generic_vs_sampled() {
-    let r = lambda_experiment(&LambdaConfig::quick()).unwrap();
-    let scale = max_abs(&r.lambda);
-    assert!((r.lambda - r.generic_lambda).abs().max() <= ROUNDOFF * scale);
-    assert!((r.mean - r.generic_mean).abs().max() <= ROUNDOFF * (1.0 + r.mean.abs().max()));
-    assert!(
-        (r.lambda - r.sampled_lambda).abs().max() <= 0.03 * scale,
-        "{} {}",
-        r.lambda,
-        r.sampled_lambda
-    );
-    for k in 0..4 {
-        let se = (r.sampled_lambda[(k, k)] / 1e5).sqrt();
-        assert!(
-            (r.mean[k] - r.sampled_mean[k]).abs() <= 5.0 * se + 1e-6,
-            "k={k}"
-        );
-    }
 }

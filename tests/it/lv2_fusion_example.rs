@@ -1,6 +1,7 @@
-//! Monte Carlo checks (seeded): the χ² statistic's distribution and false-alarm rate, the
-//! estimate covariance against P (for Gaussian and for uniform noise), detection of a biased
-//! axis against the predicted power, a general spatial axis set, and the saturation run.
+//! The `lv2_fusion` example's reproduction (`examples/reproductions/lv2_fusion.rs`): the worked
+//! example (moved from estim-models' `lv2_fusion` tests) and the seeded Monte Carlo checks of
+//! the χ² statistic, the bias detection and the saturation run (moved from `lv2_monte_carlo`).
+//! Assertions unchanged.
 //!
 //! Tolerances are k standard errors of the Monte Carlo estimate, with k = 5 (a seeded run
 //! either passes or fails deterministically; 5σ keeps a correct implementation far from the
@@ -8,18 +9,48 @@
 
 use core::f64::consts::SQRT_2;
 
-use estim_core::nalgebra::{Matrix2, SMatrix, SVector, Vector2, Vector3};
-use estim_models::lv2::experiments::{self, Lv2Config};
-use estim_models::lv2::simulate::SensorArray;
-use estim_models::lv2::stats::chi2_quantile_upper;
-use estim_models::lv2::xyq::{self, Eq6Coefficients, XyqReading, XyqSigmas};
-use estim_models::lv2::{AxisStatus, SpatialAxes};
-use rand::rngs::StdRng;
-use rand::{Rng, SeedableRng};
+use crate::lv2_fusion::{self as experiments, Lv2Config, fusion_example};
+use estim_core::nalgebra::{Vector2, Vector3};
 
-fn sigmas() -> XyqSigmas {
-    Lv2Config::quick().sigmas
+// ---- the worked example (from estim-models' `lv2_fusion` tests)
+
+/// The worked example, with the values recomputed here by hand from the parity form.
+#[test]
+fn worked_example_numbers() {
+    let cfg = Lv2Config::quick();
+    let ex = fusion_example(&cfg.reading, &cfg.sigmas, cfg.false_alarm).unwrap();
+    let (vx, vy, vq): (f64, f64, f64) = (1e-4, 1.44e-4, 6.4e-5);
+    let s1 = vx + vy + 2.0 * vq; // 3.72e-4
+    let r = 1.0 + 0.5 - SQRT_2 * 1.07; // −0.0132085
+    let x_hat = 1.0 - vx / s1 * r;
+    let y_hat = 0.5 - vy / s1 * r;
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-14 * b.abs().max(1e-3);
+    assert!(
+        close(ex.fused.estimate[0], x_hat),
+        "{} vs {x_hat}",
+        ex.fused.estimate[0]
+    );
+    assert!(close(ex.fused.estimate[1], y_hat));
+    assert!(close(ex.fused.chi2, r * r / s1));
+    assert!(close(ex.fused.covariance[(0, 1)], -vx * vy / s1));
+    assert!(close(ex.without_x.estimate[0], SQRT_2 * 1.07 - 0.5));
+    assert!(close(ex.without_y.estimate[1], SQRT_2 * 1.07 - 1.0));
+    assert_eq!(ex.without_q.estimate, Vector2::new(1.0, 0.5));
+    // The same numbers rounded (checked in Python outside the repo): x̂ = 1.0035507,
+    // ŷ = 0.5051130, χ² = 0.46899.
+    assert!((x_hat - 1.0035507).abs() < 1e-7 && (y_hat - 0.5051130).abs() < 1e-7);
+    assert!((r * r / s1 - 0.46899).abs() < 1e-5);
+    // Every route agrees to round-off. Estimates ≈ 1: a few ε. Covariance entries ≈ 1e-4:
+    // relative 1e-14. χ²: r = x̃ + ỹ − √2 q̃ cancels 1.5 against 1.513, so r carries a relative
+    // error ≈ 2ε·1.5/0.013 ≈ 5e-14 and χ² twice that.
+    let d = ex.route_difference;
+    assert!(d.estimate < 1e-14, "{d:?}");
+    assert!(d.covariance < 1e-18, "{d:?}");
+    assert!(d.chi2 < 1e-13 * ex.fused.chi2.max(1.0), "{d:?}");
+    assert!(ex.consistent && ex.p_value > 0.4);
 }
+
+// ---- Monte Carlo (from estim-models' `lv2_monte_carlo` tests)
 
 /// χ² of fault-free readings: mean 1 (dof), variance 2, false-alarm rate α; the errors of
 /// (x̂, ŷ) have mean 0 and covariance P (the closed form, including the negative x̂–ŷ term).
@@ -128,117 +159,6 @@ fn bias_detection_matches_predicted_power() {
     assert!(rate('x') > 0.7 && rate('y') > 0.7 && rate('q') > 0.95);
 }
 
-/// Eq 3 is the BLUE for any noise with these variances (Gauss–Markov): with uniform noise of
-/// the same σ's the error covariance is still P. (The χ² false-alarm rate is not: it assumes
-/// Gaussian noise; uniform noise has no tail beyond √3σ, so the rate is lower.)
-#[test]
-fn covariance_holds_for_uniform_noise() {
-    let s = sigmas();
-    let c = Eq6Coefficients::new(&s);
-    let p = xyq::covariance(&s);
-    let mut rng = StdRng::seed_from_u64(7);
-    let n = 200_000;
-    let truth = Vector2::new(0.3, -0.2);
-    let (mut se, mut see) = (Vector2::zeros(), Matrix2::zeros());
-    let mut alarms = 0;
-    let thr = chi2_quantile_upper(1e-3, 1);
-    let u = |rng: &mut StdRng, sd: f64| (rng.random::<f64>() * 2.0 - 1.0) * 3f64.sqrt() * sd;
-    for _ in 0..n {
-        let r = XyqReading {
-            x: truth[0] + u(&mut rng, s.x),
-            y: truth[1] + u(&mut rng, s.y),
-            q: (truth[0] + truth[1]) / SQRT_2 + u(&mut rng, s.q),
-        };
-        let e = Vector2::new(c.x_hat(&r), c.y_hat(&r)) - truth;
-        se += e;
-        see += e * e.transpose();
-        alarms += usize::from(xyq::parity_chi2(&r, &s) > thr);
-    }
-    let nf = n as f64;
-    let cov = (see - se * se.transpose() / nf) / (nf - 1.0);
-    // For non-Gaussian errors the sd of a sample variance involves the 4th moment; the errors
-    // here are sums of three uniforms (kurtosis between 1.8 and 3), so the Gaussian se is an
-    // upper bound: √((PᵢᵢPⱼⱼ + Pᵢⱼ²)/n).
-    for i in 0..2 {
-        for j in 0..2 {
-            let se = ((p[(i, i)] * p[(j, j)] + p[(i, j)].powi(2)) / nf).sqrt();
-            assert!(
-                (cov[(i, j)] - p[(i, j)]).abs() < 5.0 * se,
-                "[{i},{j}] {} vs {}",
-                cov[(i, j)],
-                p[(i, j)]
-            );
-        }
-    }
-    // The parity of uniform noise is bounded by √3 Σ|coefficients·σ|; in s₁ units this is
-    // √3 (σx + σy + √2 σq)/√s₁ ≈ 3.0 < √10.83 = 3.29: no false alarm can occur at all.
-    let bound = 3f64.sqrt() * (s.x + s.y + SQRT_2 * s.q) / s.s1().sqrt();
-    assert!(bound * bound < thr);
-    assert_eq!(alarms, 0);
-}
-
-/// A general spatial set (6 axes on a skewed cone, runtime-independent static sizes),
-/// simulated with `SensorArray`: the WLS χ² has mean dof = 3, the false-alarm rate at α is α,
-/// and the error covariance is the WLS P.
-#[test]
-fn general_spatial_set_chi2_and_covariance() {
-    let dirs: Vec<Vector3<f64>> = (0..6)
-        .map(|k| {
-            let az = k as f64 * core::f64::consts::PI / 3.0;
-            let el: f64 = if k % 2 == 0 { 0.6 } else { -0.3 };
-            Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin())
-        })
-        .collect();
-    let h = SMatrix::<f64, 6, 3>::from_fn(|r, c| dirs[r][c]);
-    let sig = SVector::<f64, 6>::new(0.01, 0.02, 0.015, 0.01, 0.03, 0.012);
-    let axes = SpatialAxes::<6>::new(h, sig).unwrap();
-    let array = SensorArray::new(axes.clone());
-    let truth = Vector3::new(0.1, -9.81, 0.4);
-    let mut rng = StdRng::seed_from_u64(42);
-    let n = 40_000;
-    let (mut s_chi2, mut alarms) = (0.0, 0);
-    let (mut se, mut see) = (Vector3::zeros(), estim_core::nalgebra::Matrix3::zeros());
-    let thr = chi2_quantile_upper(0.01, 3);
-    let mut p = estim_core::nalgebra::Matrix3::zeros();
-    for _ in 0..n {
-        let s = array.sample(&truth, &mut rng);
-        let f = axes
-            .fuse_screened(&s.reading, &[AxisStatus::Used; 6])
-            .unwrap();
-        assert_eq!(f.dof, 3);
-        s_chi2 += f.chi2;
-        alarms += usize::from(!f.is_consistent(0.01));
-        let e = f.estimate - truth;
-        se += e;
-        see += e * e.transpose();
-        p = f.covariance;
-    }
-    let nf = n as f64;
-    assert!(
-        (s_chi2 / nf - 3.0).abs() < 5.0 * (6.0 / nf).sqrt(),
-        "mean χ² {}",
-        s_chi2 / nf
-    );
-    let rate = alarms as f64 / nf;
-    assert!(
-        (rate - 0.01).abs() < 5.0 * (0.01 * 0.99 / nf).sqrt(),
-        "rate {rate}"
-    );
-    let _ = thr;
-    let cov = (see - se * se.transpose() / nf) / (nf - 1.0);
-    for i in 0..3 {
-        for j in 0..3 {
-            let sd = ((p[(i, i)] * p[(j, j)] + p[(i, j)].powi(2)) / nf).sqrt();
-            assert!(
-                (cov[(i, j)] - p[(i, j)]).abs() < 5.0 * sd,
-                "[{i},{j}] {} vs {}",
-                cov[(i, j)],
-                p[(i, j)]
-            );
-        }
-    }
-}
-
 /// The saturation run: dropping saturated axes keeps the error at the estimator's own claimed
 /// level, while using the clipped readings does not; with q, far fewer samples are lost than
 /// with x and y alone.
@@ -302,7 +222,7 @@ fn saturation_screening_beats_clipped_readings() {
 fn quick_run_and_headlines() {
     let cfg = Lv2Config::quick();
     let t = std::time::Instant::now();
-    let res = experiments::run(&cfg).unwrap();
+    let res = experiments::run_experiment(&cfg).unwrap();
     let hl = experiments::headlines(&res);
     assert_eq!(hl.len(), 8);
     assert!(

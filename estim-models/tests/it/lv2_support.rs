@@ -1,5 +1,4 @@
 //! The independent weighted least squares the lv2 tests compare against.
-#![allow(dead_code)] // each test file uses a subset
 
 use estim_core::nalgebra::{DMatrix, DVector};
 

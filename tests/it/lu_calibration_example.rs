@@ -1,3 +1,6 @@
+//! The `lu_calibration` example's reproduction (`examples/reproductions/lu_calibration.rs`,
+//! moved from estim-models' `lu_monte_carlo` tests with it; assertions unchanged).
+//!
 //! Lu §3.2 in a fast form (200 realizations instead of 5000) on the framework's Monte Carlo
 //! runner: the consistent filter passes every check; each printed variant of the paper is
 //! flagged by the verdict (errata E2, E3, E4, E5); the ensemble statistics agree with the exact
@@ -8,10 +11,9 @@
 //! dependence of neighbouring slots. The seed below is fixed, so the tests are deterministic;
 //! every test of this file was also run with master seeds 1–40 (all passed).
 
+use crate::lu_calibration::{MonteCarloConfig, MonteCarloResult, run_monte_carlo};
 use estim_filters::consistency::Check;
-use estim_models::lu::{
-    FilterSettings, MonteCarloConfig, MonteCarloResult, Scenario, run_monte_carlo,
-};
+use estim_models::lu::{FilterSettings, Scenario};
 
 const RUNS: usize = 200;
 const SEED: u64 = 271;
@@ -150,4 +152,48 @@ fn closed_form_truth_fails_the_mean_check() {
             assert!(d.abs() < 4.5 * sd, "slot {k} [{i}]: {d} vs σ/√N {sd}");
         }
     }
+}
+
+// ---- from estim-models' `lu_models` tests (it runs the example's Monte Carlo too)
+
+/// Invalid scenarios and settings are typed errors from every entry point, not panics.
+#[test]
+fn invalid_configurations_are_errors() {
+    use estim_models::lu::{LuFilter, covariance_analysis, covariance_history};
+    let good = Scenario::paper();
+    let settings = FilterSettings::consistent(&good);
+    let mut cases = Vec::new();
+    let mut s = good;
+    s.gps_every = 0;
+    cases.push(s);
+    let mut s = good;
+    s.dt = 0.0;
+    cases.push(s);
+    let mut s = good;
+    s.gps_velocity_variance = 0.0;
+    cases.push(s);
+    let mut s = good;
+    s.bias_variance = -1.0;
+    cases.push(s);
+    let mut s = good;
+    s.amplitude = f64::NAN;
+    cases.push(s);
+    for s in cases {
+        assert!(s.validate().is_err());
+        assert!(LuFilter::new(&s, &settings).is_err());
+        assert!(covariance_history(&s, &settings, 100).is_err());
+        assert!(covariance_analysis(&s, &settings).is_err());
+        let mc = MonteCarloConfig {
+            scenario: s,
+            ..MonteCarloConfig::full().with_runs(2)
+        };
+        assert!(run_monte_carlo(&mc).is_err());
+    }
+    let mut bad = settings;
+    bad.accel_noise_variance = -1.0;
+    assert!(LuFilter::new(&good, &bad).is_err());
+    let mut bad = settings;
+    bad.initial_covariance[(0, 0)] = -1.0;
+    assert!(LuFilter::new(&good, &bad).is_err());
+    assert!(covariance_analysis(&good, &bad).is_err());
 }

@@ -1,10 +1,7 @@
 //! The `consistency` example's Monte Carlos in small form: what the toolkit finds about the
 //! papers' filters, asserted where the margin is large.
 
-#[path = "../examples/common/mod.rs"]
-mod common;
-
-use common::consistency::{BojeProcess, LeeHuangCase, boje, lee_huang, lee_huang_case, lu};
+use crate::consistency::{BojeProcess, LeeHuangCase, boje, lee_huang, lee_huang_case, lu};
 use estim::filters::consistency::Check;
 
 /// Lu's consistent configuration passes every check. 500 runs is the module's own quick form

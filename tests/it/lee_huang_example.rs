@@ -1,14 +1,23 @@
-//! Section IV in a fast form: assertions on what the honest run shows.
+//! The `lee_huang` example's reproduction (`examples/reproductions/lee_huang.rs`): section IV
+//! in a fast form, assertions on what the honest run shows (moved from estim-models'
+//! `lee_huang_section_iv` tests), and the OTE's least-squares equivalence on the section IV
+//! pseudo-measurements (moved from `lee_huang_ote`). Assertions unchanged.
 //!
 //! Statistics are RMS over 20 seeds (a 20 s run with two filters costs ≈ 0.1 s). Each tolerance
 //! says where it sits against the values observed over 10 disjoint 20-seed sets (seeds 2002 to
 //! 2201; 5-seed tests: 10 disjoint 5-seed sets), so a change of seeds does not flip it.
 
-use estim_models::lee_huang::{
-    CkfJacobian, LeeHuangConfig, LikelihoodForm, Plane, SectionIvConfig, SectionIvResult,
-    headlines, position_growth_exponent, run, run_section_iv,
+use crate::lee_huang::{
+    CkfJacobian, LeeHuangConfig, SectionIvConfig, SectionIvResult, headlines,
+    position_growth_exponent, run_experiment as run, run_section_iv,
 };
-use nalgebra::{Vector2, Vector3};
+use estim_core::{Gaussian, LinearMeasurement};
+use estim_filters::{Estimator, FadingMemoryRls, KalmanFilter, Predict, Update};
+use estim_models::lee_huang::{
+    AttitudeMeasurement, CkfInput, Discretization, FourAccelerometers, InsProcess, LikelihoodForm,
+    OwnShipTrajectoryEstimator, Plane, SensorConfig, simulate,
+};
+use nalgebra::{Matrix2, Matrix3, U2, Vector1, Vector2, Vector3};
 
 fn axes() -> (Vector2<f64>, Vector2<f64>) {
     let (s, c) = 30f64.to_radians().sin_cos();
@@ -227,5 +236,99 @@ fn quick_experiment_runs_and_headlines_are_complete() {
     }
     for v in &r.variants {
         assert!(v.ckf_final_position_rms.is_finite() && v.ckf_ote_final_position_rms.is_finite());
+    }
+}
+
+// ---- the OTE on section IV pseudo-measurements (from estim-models' `lee_huang_ote` tests)
+
+fn inv(m: &Matrix2<f64>) -> Matrix2<f64> {
+    m.try_inverse().expect("invertible in these tests")
+}
+
+/// The pseudo-measurements Z_p = g(D̂) of a section IV CKF+OTE run (first seed, 5 s).
+fn section_iv_pseudo_measurements() -> Vec<Vector2<f64>> {
+    let config = SectionIvConfig::paper();
+    let steps = 500;
+    let sim = simulate(
+        &config.scenario,
+        &SensorConfig {
+            dt: config.dt,
+            steps,
+            accelerometers: FourAccelerometers::default(),
+            input_bias: config.input_bias,
+            input_noise_std: config.input_noise_std,
+            attitude_std: config.attitude_std,
+        },
+        config.first_seed,
+    );
+    let var = config
+        .input_noise_std
+        .component_mul(&config.input_noise_std);
+    let process = InsProcess {
+        input_noise: Matrix3::from_diagonal(&var),
+        discretization: Discretization::ZeroOrderHold,
+        plane: Plane::Horizontal,
+    }
+    .ckf();
+    let measurement = AttitudeMeasurement {
+        variance: config.attitude_std.powi(2),
+    };
+    let mut ckf = KalmanFilter::new(
+        Gaussian::new(config.scenario.initial_state, config.initial_covariance).unwrap(),
+    );
+    let mut ote = OwnShipTrajectoryEstimator::new(&config.ote).unwrap();
+    let mut z = Vec::new();
+    for k in 1..=steps {
+        let input = CkfInput {
+            signals: sim.samples[k - 1].inputs,
+            attitude: ckf.state()[4],
+        };
+        ckf.predict(&process, &input, config.dt).unwrap();
+        ckf.update(&measurement, &Vector1::new(sim.samples[k].attitude))
+            .unwrap();
+        z.push(ote.correct(&mut ckf).unwrap().pseudo_measurement);
+    }
+    z
+}
+
+/// The framework RLS, fed the section IV pseudo-measurements without the CKF reset, equals the
+/// batch (exponentially) weighted least-squares solution with the prior as regulariser,
+///
+/// r̂_k = argmin γᵏ |r − r₀|²_{P₀⁻¹} + Σⱼ γᵏ⁻ʲ |Z_j − r|²_{S⁻¹}
+///     = (γᵏ P₀⁻¹ + Σ γᵏ⁻ʲ S⁻¹)⁻¹ (γᵏ P₀⁻¹ r₀ + Σ γᵏ⁻ʲ S⁻¹ Z_j),
+///
+/// at every k, for γ = 1 (ordinary RLS = batch least squares) and γ = 0.95. Tolerance 1e-9
+/// relative: 500 sequential Joseph updates against one solve.
+#[test]
+fn rls_with_unit_forgetting_equals_batch_least_squares_on_pseudo_measurements() {
+    let z = section_iv_pseudo_measurements();
+    let s = Matrix2::new(0.01, 0.002, 0.002, 0.02);
+    let p0 = Matrix2::identity();
+    let r0 = Vector2::new(2.0, 2.0);
+    let measurement = LinearMeasurement::<f64, U2, U2> {
+        observation: Matrix2::identity(),
+        noise: s,
+    };
+    for gamma in [1.0, 0.95] {
+        let mut rls = FadingMemoryRls::new(Gaussian::new(r0, p0).unwrap(), gamma).unwrap();
+        let s_inv = inv(&s);
+        for k in 1..=z.len() {
+            rls.update(&measurement, &z[k - 1]).unwrap();
+            let w0 = gamma.powi(k as i32);
+            let mut info = inv(&p0) * w0;
+            let mut vec = inv(&p0) * r0 * w0;
+            for (j, zj) in z[..k].iter().enumerate() {
+                let w = gamma.powi((k - 1 - j) as i32);
+                info += s_inv * w;
+                vec += s_inv * zj * w;
+            }
+            let batch = inv(&info) * vec;
+            let err = (rls.state() - batch).amax();
+            assert!(
+                err < 1e-9 * (1.0 + batch.amax()),
+                "gamma {gamma}, k {k}: {err}"
+            );
+            assert!((rls.covariance() - inv(&info)).amax() < 1e-9 * inv(&info).amax());
+        }
     }
 }
