@@ -14,8 +14,7 @@
 //!   Gaussian second order, unscented and sampled.
 //! - [`linear`]: linear-Gaussian models with constant matrices.
 //! - [`derivative`]: checks analytic Jacobians and Hessians against finite differences.
-//! - [`kernel`]: the dense products, Cholesky factorisation and triangular solves behind every
-//!   step: nalgebra for static sizes, faer (into preallocated buffers) for runtime sizes.
+//! - [`psd_factor`]: the square root of a positive semi-definite covariance.
 //! - [`Error`]: the one error type.
 //!
 //! Sizes are generic: the same code serves `SVector<f64, 6>` (stack only, no heap allocation)
@@ -30,7 +29,9 @@ pub mod derivative;
 pub mod error;
 pub mod function;
 pub mod gaussian;
+#[doc(hidden)]
 pub mod kernel;
+#[doc(hidden)]
 pub mod linalg;
 pub mod linear;
 pub mod model;
@@ -44,6 +45,7 @@ pub use function::{
     AffineFunction, Differentiable, SigmaScratch, TwiceDifferentiable, VectorFunction,
 };
 pub use gaussian::Gaussian;
+pub use linalg::psd_factor;
 pub use linear::{LinearMeasurement, LinearProcess};
 pub use model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,

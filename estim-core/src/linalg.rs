@@ -1,11 +1,12 @@
-//! Small numerical kernels shared by the estim crates: finiteness and shape checks, a
-//! semi-definite Cholesky factor, symmetrisation.
+//! Internal, not public API (hidden from the docs; the estim crates use it): finiteness and
+//! shape checks, the positive semi-definite factor of a covariance ([`psd_factor`], public as
+//! `estim_core::psd_factor`), symmetrisation.
 //!
 //! All of them work in place or on the stack for static sizes: none allocates unless the
 //! matrix type itself lives on the heap (`Dyn`).
 
 use nalgebra::{
-    DefaultAllocator, Dim, IsContiguous, Matrix, OMatrix, OVector, RawStorage, U1,
+    DefaultAllocator, Dim, IsContiguous, Matrix, OMatrix, OVector, RawStorage, StorageMut, U1,
     allocator::Allocator,
 };
 
@@ -120,7 +121,8 @@ fn tolerance_for<T: Real>(n: usize, max_diag: T) -> T {
     real::<T>(16.0 * n as f64) * T::default_epsilon() * max_diag
 }
 
-/// A square root S with S Sᵀ = C of a symmetric positive **semi**-definite C.
+/// A square root S with S Sᵀ = C of a symmetric positive **semi**-definite C (its lower
+/// triangle is read).
 ///
 /// First a Cholesky factorisation that accepts zero pivots: a pivot within [`psd_tolerance`] of
 /// zero gives a zero column (that direction has no variance). This is the ordinary lower
@@ -131,23 +133,56 @@ fn tolerance_for<T: Real>(n: usize, max_diag: T) -> T {
 /// cleanly at the rank: S = Pᵀ L, no longer triangular. Only if that also finds a clearly
 /// negative direction is C rejected. Either way the unscented and sampled propagators get a
 /// valid square root, and states that are known exactly (zero variance) are allowed.
+///
+/// This is the one factorisation of a covariance in the library (`lower_factor_in_place`);
+/// the runtime-size fast path of [`psd_factor_into`] and the update's innovation covariance use
+/// faer's Cholesky factor, which agrees with it up to round-off on positive definite matrices.
+///
+/// ```
+/// use estim_core::{psd_factor, Stage};
+/// use estim_core::nalgebra::Matrix2;
+///
+/// // A covariance of rank one: x₂ = 2 x₁ exactly.
+/// let c = Matrix2::new(1.0, 2.0, 2.0, 4.0);
+/// let s = psd_factor(&c, Stage::Propagation)?;
+/// assert!((s * s.transpose() - c).abs().max() < 1e-12);
+/// assert_eq!(s[(1, 1)], 0.0); // the second direction adds no variance
+/// # Ok::<(), estim_core::Error>(())
+/// ```
 pub fn psd_factor<T: Real, D: Dim>(c: &OMatrix<T, D, D>, stage: Stage) -> Result<OMatrix<T, D, D>>
 where
     DefaultAllocator: Allocator<D> + Allocator<D, D>,
 {
-    unpivoted_psd_factor(c)
-        .or_else(|()| pivoted_psd_factor(c))
-        .map_err(|()| Error::NotPositiveSemiDefinite {
-            stage,
-            quantity: Quantity::Covariance,
-        })
+    let bounds = zero_pivot_bounds(c);
+    let mut l = c.clone_owned();
+    if lower_factor_in_place(&mut l, bounds, None).is_ok() {
+        l.fill_upper_triangle(T::zero(), 1);
+        return Ok(l);
+    }
+    let error = Error::NotPositiveSemiDefinite {
+        stage,
+        quantity: Quantity::Covariance,
+    };
+    // `perm[i]` is the row of C that row i of L came from.
+    let mut perm = OVector::<usize, D>::from_fn_generic(c.shape_generic().0, U1, |i, _| i);
+    l.copy_from(c);
+    let rank =
+        lower_factor_in_place(&mut l, bounds, Some(perm.as_mut_slice())).map_err(|()| error)?;
+    // Row i of L is row perm[i] of S; columns ≥ rank and the upper triangle are zero.
+    let mut root = c.clone_owned();
+    root.fill(T::zero());
+    for (i, &row) in perm.iter().enumerate() {
+        for k in 0..rank.min(i + 1) {
+            root[(row, k)] = l[(i, k)];
+        }
+    }
+    Ok(root)
 }
 
-/// [`psd_factor`] into `out`. For runtime sizes it first tries the Cholesky factorisation in
-/// place ([`cholesky_in_place`]: faer's, or our own column kernel below n = 96;
-/// allocation-free with a sized `scratch`), which succeeds for every positive definite C
-/// and gives the same lower factor up to round-off; only a semi-definite C falls back to
-/// [`psd_factor`] (which allocates). Static sizes use [`psd_factor`] directly.
+/// [`psd_factor`] into `out`. For runtime sizes it first tries faer's Cholesky factor in place
+/// ([`cholesky_in_place`], allocation-free with a sized `scratch`), which succeeds for every
+/// positive definite C and gives the same lower factor up to round-off; only a semi-definite
+/// C falls back to [`psd_factor`] (which allocates). Static sizes use [`psd_factor`] directly.
 pub fn psd_factor_into<T: Real, D: Dim>(
     c: &OMatrix<T, D, D>,
     out: &mut OMatrix<T, D, D>,
@@ -179,93 +214,70 @@ where
     (tol, (tol * max_diag).sqrt() + tol)
 }
 
-/// Lower Cholesky factor accepting zero pivots; `Err(())` on a pivot below −tolerance.
-fn unpivoted_psd_factor<T: Real, D: Dim>(
-    c: &OMatrix<T, D, D>,
-) -> core::result::Result<OMatrix<T, D, D>, ()>
+/// The factorisation behind [`psd_factor`] and [`inverse_quadratic_form`]: P A Pᵀ = L Lᵀ in
+/// place by the outer-product (right-looking) Cholesky algorithm, L in the lower triangle of
+/// `a` (only the lower triangle is read; the strict upper triangle is left unspecified).
+///
+/// Without `perm`, P = I and pivot j is a_jj after the first j steps. With `perm`, pivot j is
+/// the largest remaining diagonal entry (diagonal pivoting, as LAPACK's `dpstrf`; the swaps
+/// recorded in `perm`, which must start as the identity). A pivot within `tol` of zero
+/// (`bounds = (tol, off_tol)`) is a direction without variance: its column of L is zero and
+/// its remaining covariances must be within `off_tol` (|cᵢⱼ|² ≤ cᵢᵢ cⱼⱼ); with pivoting every
+/// later pivot is then as small, so the factorisation stops there. Returns the rank (the
+/// number of nonzero pivots), or `Err(())` at a pivot below −`tol`, a non-finite pivot, or a
+/// covariance of a zero-variance direction beyond `off_tol` (a NaN included); then `a` is
+/// unspecified.
+pub(crate) fn lower_factor_in_place<T, D, S>(
+    a: &mut Matrix<T, D, D, S>,
+    (tol, off_tol): (T, T),
+    mut perm: Option<&mut [usize]>,
+) -> core::result::Result<usize, ()>
 where
-    DefaultAllocator: Allocator<D, D>,
+    T: Real,
+    D: Dim,
+    S: StorageMut<T, D, D>,
 {
-    let n = c.nrows();
-    let (tol, off_tol) = zero_pivot_bounds(c);
-    let mut l = c.clone_owned();
-    l.fill(T::zero());
+    let n = a.nrows();
+    let mut rank = 0;
     for j in 0..n {
-        let mut d = c[(j, j)];
-        for k in 0..j {
-            d -= l[(j, k)] * l[(j, k)];
+        if let Some(perm) = perm.as_deref_mut() {
+            let mut p = j;
+            for i in j..n {
+                let d = a[(i, i)];
+                if !d.is_finite() || d < -tol {
+                    return Err(());
+                }
+                if d > a[(p, p)] {
+                    p = i;
+                }
+            }
+            if a[(p, p)] <= tol {
+                // The rest has (numerically) zero variance: every remaining covariance must
+                // vanish. Negated so that a NaN covariance fails too.
+                let vanish = (j..n).all(|k| (k..n).all(|i| a[(i, k)].abs() <= off_tol));
+                return if vanish { Ok(rank) } else { Err(()) };
+            }
+            if p != j {
+                symmetric_swap(a, j, p);
+                perm.swap(j, p);
+            }
         }
+        let d = a[(j, j)];
         if d < -tol || !d.is_finite() {
             return Err(());
         }
-        let zero_pivot = d <= tol;
-        let ljj = d.sqrt();
-        if !zero_pivot {
-            l[(j, j)] = ljj;
-        }
-        for i in (j + 1)..n {
-            let mut s = c[(i, j)];
-            for k in 0..j {
-                s -= l[(i, k)] * l[(j, k)];
-            }
-            if zero_pivot {
-                // The column stays zero: consistent only if these covariances vanish too.
-                if s.abs() > off_tol || !s.is_finite() {
+        if d <= tol {
+            // A zero column: consistent only if these covariances vanish too.
+            for i in j..n {
+                if !(i == j || a[(i, j)].abs() <= off_tol) {
                     return Err(());
                 }
-            } else {
-                l[(i, j)] = s / ljj;
+                a[(i, j)] = T::zero();
             }
+            continue;
         }
-    }
-    Ok(l)
-}
-
-/// S = Pᵀ L from the diagonally pivoted factorisation P C Pᵀ = L Lᵀ; `Err(())` if C has a
-/// direction with variance below −tolerance or is not finite.
-fn pivoted_psd_factor<T: Real, D: Dim>(
-    c: &OMatrix<T, D, D>,
-) -> core::result::Result<OMatrix<T, D, D>, ()>
-where
-    DefaultAllocator: Allocator<D> + Allocator<D, D>,
-{
-    let n = c.nrows();
-    let (tol, off_tol) = zero_pivot_bounds(c);
-    // `a` holds L in columns < j and the symmetric Schur complement in rows/columns ≥ j;
-    // `perm[i]` is the row of C that row i of `a` came from.
-    let mut a = c.clone_owned();
-    let mut perm = OVector::<usize, D>::from_fn_generic(c.shape_generic().0, U1, |i, _| i);
-    let mut rank = n;
-    for j in 0..n {
-        let mut p = j;
-        for i in j..n {
-            let d = a[(i, i)];
-            if !d.is_finite() || d < -tol {
-                return Err(());
-            }
-            if d > a[(p, p)] {
-                p = i;
-            }
-        }
-        if a[(p, p)] <= tol {
-            // The rest has (numerically) zero variance: every remaining covariance must vanish.
-            // Negated so that a NaN covariance fails too.
-            for k in j..n {
-                for i in k..n {
-                    if !(a[(i, k)].abs() <= off_tol) {
-                        return Err(());
-                    }
-                }
-            }
-            rank = j;
-            break;
-        }
-        if p != j {
-            a.swap_rows(j, p);
-            a.swap_columns(j, p);
-            perm.swap_rows(j, p);
-        }
-        let ljj = a[(j, j)].sqrt();
+        rank += 1;
+        let ljj = d.sqrt();
         a[(j, j)] = ljj;
         for i in (j + 1)..n {
             a[(i, j)] /= ljj;
@@ -274,19 +286,54 @@ where
             for i in k..n {
                 let v = a[(i, k)] - a[(i, j)] * a[(k, j)];
                 a[(i, k)] = v;
-                a[(k, i)] = v;
             }
         }
     }
-    // Row i of L is row perm[i] of S; columns ≥ rank and the upper triangle are zero.
-    let mut root = c.clone_owned();
-    root.fill(T::zero());
-    for i in 0..n {
-        for k in 0..rank.min(i + 1) {
-            root[(perm[i], k)] = a[(i, k)];
-        }
+    Ok(rank)
+}
+
+/// Swaps rows and columns j < p of the symmetric matrix whose lower triangle is `a`'s, within
+/// that lower triangle (rows/columns before j hold finished columns of L and swap as rows).
+fn symmetric_swap<T: Real, D: Dim, S: StorageMut<T, D, D>>(
+    a: &mut Matrix<T, D, D, S>,
+    j: usize,
+    p: usize,
+) {
+    let n = a.nrows();
+    for k in 0..j {
+        a.swap((j, k), (p, k));
     }
-    Ok(root)
+    a.swap((j, j), (p, p));
+    for i in (j + 1)..p {
+        a.swap((i, j), (p, i));
+    }
+    for i in (p + 1)..n {
+        a.swap((i, j), (i, p));
+    }
+}
+
+/// vᵀ C⁻¹ v = |L⁻¹ v|² for a symmetric positive definite C (its lower triangle is read), by
+/// the factorisation of [`psd_factor`] with a zero tolerance: `None` if C is not positive
+/// definite (a pivot ≤ 0 or not finite). `c` is overwritten by L and `v` by L⁻¹ v. Allocates
+/// nothing (views over caller buffers work).
+pub fn inverse_quadratic_form<T, D, S, SV>(
+    c: &mut Matrix<T, D, D, S>,
+    v: &mut Matrix<T, D, U1, SV>,
+) -> Option<T>
+where
+    T: Real,
+    D: Dim,
+    S: StorageMut<T, D, D>,
+    SV: StorageMut<T, D, U1>,
+{
+    let n = c.nrows();
+    assert_eq!(v.nrows(), n, "inverse_quadratic_form: shapes differ");
+    let rank = lower_factor_in_place(c, (T::zero(), T::zero()), None).ok()?;
+    if rank < n {
+        return None;
+    }
+    c.solve_lower_triangular_unchecked_mut(v);
+    Some(v.norm_squared())
 }
 
 /// Replaces `m` by (m + mᵀ)/2, in place.
@@ -306,9 +353,6 @@ where
     }
 }
 
-/// Side of the square tiles [`symmetric_map`] works in: 8 `f64` are one 64-byte cache line.
-const TILE: usize = 8;
-
 /// One symmetric pass over n × n column-major matrices: for every i ≥ j,
 ///
 /// ```text
@@ -317,18 +361,8 @@ const TILE: usize = 8;
 ///
 /// with the old values of `dst` read before any is written; true if every written value is
 /// finite. One pass where a symmetrisation, an addition and a finiteness scan would otherwise
-/// each sweep the matrix (a separate scan measured 2× slower in the n = 50 KF step); e.g.
-/// `f = |d, [a], dt, [at]| ((d + a) + (dt + at)) / 2` is `dst += a` then
-/// `dst ← (dst + dstᵀ)/2`.
-///
-/// The pairs are visited in 8 × 8 tiles and a tile's mirror image: both are loaded into local
-/// arrays (each tile column is one contiguous run of the column-major storage), combined there,
-/// and stored back, so the strided half of every pair costs no more than the contiguous half.
-/// (Measured with `perf record` on the n = 50 KF step of `benches/dynamic.rs`: an element-wise
-/// pair loop with a finiteness flag per element was ~40 % of the step; see BENCHMARKS.md.)
-/// From n = 16 the tile loop is compiled for AVX2 where the CPU has it (pulp's runtime
-/// dispatch; AVX-512 measured slower), with the same arithmetic in the same order, so the same
-/// results.
+/// each sweep the matrix; e.g. `f = |d, [a], dt, [at]| ((d + a) + (dt + at)) / 2` is
+/// `dst += a` then `dst ← (dst + dstᵀ)/2`.
 #[inline(always)]
 #[track_caller]
 pub fn symmetric_map<T: Real, const K: usize>(
@@ -342,180 +376,9 @@ pub fn symmetric_map<T: Real, const K: usize>(
         sources.iter().all(|s| s.len() == n * n),
         "symmetric_map: a source is not n × n"
     );
-    // Dispatched from two tiles on (doc above): KF step at n = 24 14 % faster, at n = 50
-    // 12 %, at n = 200 6 %; no difference at n = 12 (dynamic bench, A/B runs).
-    if n < 2 * TILE {
-        return symmetric_tiles(n, dst, &sources, &f);
-    }
-    let tiles = SymmetricTiles { n, dst, sources, f };
-    // AVX2 at most: compiled for AVX-512 the tile loop measured slower (KF step at n = 50
-    // +4 %, its share of the step 17 → 23 %).
-    #[cfg(target_arch = "x86_64")]
-    if let Some(simd) = pulp::x86::V3::try_new() {
-        return pulp::Simd::vectorize(simd, tiles);
-    }
-    pulp::Arch::new().dispatch(tiles)
-}
-
-/// The operands of [`symmetric_tiles`], as the `pulp` operation compiled per instruction set.
-struct SymmetricTiles<'a, T, const K: usize, F> {
-    n: usize,
-    dst: &'a mut [T],
-    sources: [&'a [T]; K],
-    f: F,
-}
-
-impl<T: Real, const K: usize, F: Fn(T, [T; K], T, [T; K]) -> T> pulp::WithSimd
-    for SymmetricTiles<'_, T, K, F>
-{
-    type Output = bool;
-
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _: S) -> bool {
-        symmetric_tiles(self.n, self.dst, &self.sources, &self.f)
-    }
-}
-
-/// [`symmetric_map`]'s tile loop.
-#[inline(always)]
-fn symmetric_tiles<T: Real, const K: usize>(
-    n: usize,
-    dst: &mut [T],
-    sources: &[&[T]; K],
-    f: &impl Fn(T, [T; K], T, [T; K]) -> T,
-) -> bool {
     let mut finite = true;
-    for jb in (0..n).step_by(TILE) {
-        let jw = TILE.min(n - jb);
-        finite &= if jw == TILE {
-            diagonal_tile::<T, K, TILE>(n, jb, dst, sources, f)
-        } else {
-            tile_pair_partial(n, jb, jb, jw, jw, dst, sources, f)
-        };
-        // The tiles below it and their mirror images to its right.
-        for ib in (jb + jw..n).step_by(TILE) {
-            let iw = TILE.min(n - ib);
-            finite &= if iw == TILE && jw == TILE {
-                tile_pair::<T, K, TILE, TILE>(n, ib, jb, dst, sources, f)
-            } else {
-                tile_pair_partial(n, ib, jb, iw, jw, dst, sources, f)
-            };
-        }
-    }
-    finite
-}
-
-/// The W × W diagonal tile at (jb, jb), through local arrays like [`tile_pair`].
-#[inline(always)]
-fn diagonal_tile<T: Real, const K: usize, const W: usize>(
-    n: usize,
-    jb: usize,
-    dst: &mut [T],
-    sources: &[&[T]; K],
-    f: &impl Fn(T, [T; K], T, [T; K]) -> T,
-) -> bool {
-    // d[c][r] = M[jb + r, jb + c].
-    let mut d = [[T::zero(); W]; W];
-    let mut s = [[[T::zero(); W]; W]; K];
-    for c in 0..W {
-        let at = (jb + c) * n + jb;
-        d[c].copy_from_slice(&dst[at..at + W]);
-        for k in 0..K {
-            s[k][c].copy_from_slice(&sources[k][at..at + W]);
-        }
-    }
-    for c in 0..W {
-        for r in c..W {
-            let (mut lower, mut upper) = ([T::zero(); K], [T::zero(); K]);
-            for k in 0..K {
-                lower[k] = s[k][c][r];
-                upper[k] = s[k][r][c];
-            }
-            let v = f(d[c][r], lower, d[r][c], upper);
-            d[c][r] = v;
-            d[r][c] = v;
-        }
-    }
-    let finite = slice_finite(d.as_flattened());
-    for c in 0..W {
-        let at = (jb + c) * n + jb;
-        dst[at..at + W].copy_from_slice(&d[c]);
-    }
-    finite
-}
-
-/// The off-diagonal tile rows ib..ib+IW × columns jb..jb+JW (ib ≥ jb + JW) and its mirror
-/// image, with compile-time tile sizes (the common case: the compiler unrolls and vectorises).
-#[inline(always)]
-fn tile_pair<T: Real, const K: usize, const IW: usize, const JW: usize>(
-    n: usize,
-    ib: usize,
-    jb: usize,
-    dst: &mut [T],
-    sources: &[&[T]; K],
-    f: &impl Fn(T, [T; K], T, [T; K]) -> T,
-) -> bool {
-    // lower[c][r] = M[ib + r, jb + c] (column runs); upper[r][c] = M[jb + c, ib + r] (the
-    // mirror image's column runs).
-    let mut d_lower = [[T::zero(); IW]; JW];
-    let mut d_upper = [[T::zero(); JW]; IW];
-    let mut s_lower = [[[T::zero(); IW]; JW]; K];
-    let mut s_upper = [[[T::zero(); JW]; IW]; K];
-    for c in 0..JW {
-        let at = (jb + c) * n + ib;
-        d_lower[c].copy_from_slice(&dst[at..at + IW]);
-        for k in 0..K {
-            s_lower[k][c].copy_from_slice(&sources[k][at..at + IW]);
-        }
-    }
-    for r in 0..IW {
-        let at = (ib + r) * n + jb;
-        d_upper[r].copy_from_slice(&dst[at..at + JW]);
-        for k in 0..K {
-            s_upper[k][r].copy_from_slice(&sources[k][at..at + JW]);
-        }
-    }
-    for c in 0..JW {
-        for r in 0..IW {
-            let (mut lower, mut upper) = ([T::zero(); K], [T::zero(); K]);
-            for k in 0..K {
-                lower[k] = s_lower[k][c][r];
-                upper[k] = s_upper[k][r][c];
-            }
-            let v = f(d_lower[c][r], lower, d_upper[r][c], upper);
-            d_lower[c][r] = v;
-            d_upper[r][c] = v;
-        }
-    }
-    let finite = slice_finite(d_lower.as_flattened());
-    for c in 0..JW {
-        let at = (jb + c) * n + ib;
-        dst[at..at + IW].copy_from_slice(&d_lower[c]);
-    }
-    for r in 0..IW {
-        let at = (ib + r) * n + jb;
-        dst[at..at + JW].copy_from_slice(&d_upper[r]);
-    }
-    finite
-}
-
-/// [`tile_pair`] (or, with `ib == jb`, [`diagonal_tile`]) for a tile cut short by the matrix
-/// edge (`iw` × `jw`), pair by pair.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn tile_pair_partial<T: Real, const K: usize>(
-    n: usize,
-    ib: usize,
-    jb: usize,
-    iw: usize,
-    jw: usize,
-    dst: &mut [T],
-    sources: &[&[T]; K],
-    f: &impl Fn(T, [T; K], T, [T; K]) -> T,
-) -> bool {
-    let mut finite = true;
-    for j in jb..jb + jw {
-        for i in ib.max(j)..ib + iw {
+    for j in 0..n {
+        for i in j..n {
             let (ij, ji) = (i + j * n, j + i * n);
             let v = f(
                 dst[ij],
@@ -692,8 +555,8 @@ mod tests {
         DMatrix::from_fn(n, n, |i, j| ((i * 31 + j * 17) as f64 * 0.37 + salt).sin())
     }
 
-    /// The tiled pass against the plain pair loop, bit for bit, on sizes around the tile
-    /// (partial tiles on both edges, a single partial tile, n = 0).
+    /// The pass against a plain pair loop, bit for bit, on sizes around 8 and 16 (where a
+    /// tiled version of it had partial tiles), n = 0 included.
     #[test]
     fn symmetric_map_matches_the_pair_loop() {
         for n in [0, 1, 3, 7, 8, 9, 15, 16, 17, 24, 50] {
@@ -720,6 +583,107 @@ mod tests {
             for (x, y) in tiled.iter().zip(expected.iter()) {
                 assert_eq!(x.to_bits(), y.to_bits(), "n = {n}");
             }
+        }
+    }
+
+    /// C = G Gᵀ/n + I: well conditioned (κ < 10), so factors agree to a few ε.
+    fn definite(n: usize) -> DMatrix<f64> {
+        let g = DMatrix::from_fn(n, n, |i, j| ((i * 13 + j * 7) as f64 * 0.37).sin());
+        &g * g.transpose() / n.max(1) as f64 + DMatrix::identity(n, n)
+    }
+
+    /// On a positive definite C, `psd_factor` (and `psd_factor_into`, faer's factor first) is
+    /// the Cholesky factor: lower triangular, equal to nalgebra's within 8 n ε max|L| (C is
+    /// well conditioned), f64 and f32, runtime and static sizes.
+    #[test]
+    fn psd_factor_is_the_cholesky_factor_of_a_definite_matrix() {
+        for n in [1, 2, 3, 5, 8, 13, 40] {
+            let c = definite(n);
+            let expected = c.clone().cholesky().unwrap().l();
+            let bound = |eps: f64| 8.0 * n as f64 * eps * expected.amax();
+            let s = psd_factor(&c, Stage::Propagation).unwrap();
+            assert!((&s - &expected).amax() <= bound(f64::EPSILON), "n = {n}");
+            let mut into = DMatrix::zeros(n, n);
+            let mut scratch = CholeskyScratch::default();
+            psd_factor_into(&c, &mut into, &mut scratch, Stage::Propagation).unwrap();
+            assert!(
+                (&into - &expected).amax() <= bound(f64::EPSILON),
+                "into n = {n}"
+            );
+            let s32 = psd_factor(&c.map(|v| v as f32), Stage::Propagation).unwrap();
+            let gap = (s32.map(f64::from) - &expected).amax();
+            assert!(gap <= bound(f32::EPSILON as f64), "f32 n = {n}: {gap:e}");
+        }
+        let c = nalgebra::Matrix4::from_iterator(definite(4).iter().copied());
+        let s = psd_factor(&c, Stage::Propagation).unwrap();
+        let expected = c.cholesky().unwrap().l();
+        assert!((s - expected).amax() <= 32.0 * f64::EPSILON * expected.amax());
+    }
+
+    /// The pivoted factorisation of C = B Bᵀ (B n × r of rank r) for every rank, with
+    /// diagonal entries spread so that the pivots are swapped around: it reports rank r and
+    /// S = Pᵀ L reproduces C within 16 n ε max(1, max Cᵢᵢ) (f64; f32 through `psd_factor`).
+    #[test]
+    fn pivoted_factor_reproduces_every_rank() {
+        for n in [1, 2, 3, 5, 9] {
+            for r in 0..=n {
+                // Orthogonal (cosine-transform) columns, rows scaled by 1 to n out of order.
+                let b = DMatrix::from_fn(n, r, |i, j| {
+                    let angle = core::f64::consts::PI * (i as f64 + 0.5) * j as f64 / n as f64;
+                    angle.cos() * (1.0 + (i * 7 % n) as f64)
+                });
+                let c = &b * b.transpose();
+                let tol = 16.0 * n as f64 * c.diagonal().amax().max(1.0);
+                let mut l = c.clone();
+                let mut perm: Vec<usize> = (0..n).collect();
+                let bounds = zero_pivot_bounds(&c);
+                let rank = lower_factor_in_place(&mut l, bounds, Some(&mut perm)).unwrap();
+                assert_eq!(rank, r, "n = {n}");
+                let mut s = DMatrix::zeros(n, n);
+                for (i, &row) in perm.iter().enumerate() {
+                    for k in 0..rank.min(i + 1) {
+                        s[(row, k)] = l[(i, k)];
+                    }
+                }
+                let gap = (&s * s.transpose() - &c).amax();
+                assert!(gap <= tol * f64::EPSILON, "n = {n} r = {r}: {gap:e}");
+                let c32 = c.map(|v| v as f32);
+                let s32 = psd_factor(&c32, Stage::Propagation).unwrap();
+                let gap = (&s32 * s32.transpose() - &c32).amax() as f64;
+                // Rounded to f32, C is no longer of rank r: the pivots left within the zero
+                // tolerance (16 n ε max Cᵢᵢ each) are dropped, so 4× the f64 bound.
+                let bound = 4.0 * tol * f32::EPSILON as f64;
+                assert!(gap <= bound, "f32 n = {n} r = {r}: {gap:e}");
+            }
+        }
+    }
+
+    /// vᵀ C⁻¹ v against nalgebra's Cholesky solve (f64, f32, static size); a semi-definite, an
+    /// indefinite and a NaN C give `None`.
+    #[test]
+    fn inverse_quadratic_form_matches_nalgebra() {
+        for n in [1, 2, 6, 17] {
+            let c = definite(n);
+            let v = nalgebra::DVector::from_fn(n, |i, _| (i as f64 * 0.9).cos());
+            let expected = v.dot(&c.clone().cholesky().unwrap().solve(&v));
+            let q = inverse_quadratic_form(&mut c.clone(), &mut v.clone()).unwrap();
+            assert!((q - expected).abs() <= 8.0 * n as f64 * f64::EPSILON * expected);
+            let (mut c32, mut v32) = (c.map(|x| x as f32), v.map(|x| x as f32));
+            let q32 = inverse_quadratic_form(&mut c32, &mut v32).unwrap() as f64;
+            assert!((q32 - expected).abs() <= 64.0 * n as f64 * f32::EPSILON as f64 * expected);
+        }
+        let mut c = nalgebra::Matrix2::new(4.0_f64, 2.0, 2.0, 3.0);
+        let mut v = nalgebra::Vector2::new(1.0, 2.0);
+        let q = inverse_quadratic_form(&mut c, &mut v).unwrap();
+        assert!((q - 11.0 / 8.0).abs() < 1e-15);
+        for rows in [
+            [1.0, 1.0, 1.0, 1.0],
+            [1.0, 2.0, 2.0, 1.0],
+            [f64::NAN, 0.0, 0.0, 1.0],
+        ] {
+            let mut c = nalgebra::Matrix2::from_row_slice(&rows);
+            let mut v = nalgebra::Vector2::new(1.0, 0.0);
+            assert_eq!(inverse_quadratic_form(&mut c, &mut v), None, "{rows:?}");
         }
     }
 

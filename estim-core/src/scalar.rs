@@ -2,10 +2,18 @@
 
 use nalgebra::RealField;
 
-/// A real scalar: `f32` or `f64` (anything that is a `nalgebra::RealField` and `Copy`).
-pub trait Real: RealField + Copy {}
+/// A real scalar: `f32` or `f64`.
+///
+/// Sealed to these two. On runtime sizes every kernel runs on faer (products, Cholesky factor,
+/// triangular solves) or on our matrix × vector kernel, and the sealed supertrait carries that
+/// code compiled once per scalar in this crate; a third type would need its own kernels or a
+/// slower generic fallback that every crate compiles again. Other number types a model may
+/// need (dual numbers for automatic derivatives, say) live inside the model's evaluation, not
+/// in a filter's state.
+pub trait Real: RealField + Copy + crate::kernel::Dense {}
 
-impl<T: RealField + Copy> Real for T {}
+impl Real for f32 {}
+impl Real for f64 {}
 
 /// Converts an `f64` constant into `T` (exact for `f64`, rounded for `f32`).
 #[inline]

@@ -33,7 +33,7 @@
 //! # Ok::<(), estim_filters::ValidationError>(())
 //! ```
 
-use estim_core::linalg::ensure_shape;
+use estim_core::linalg::{ensure_shape, inverse_quadratic_form};
 use estim_core::nalgebra::{self, DefaultAllocator, Dim, OMatrix, OVector, allocator::Allocator};
 use estim_core::{Error, Parameter, Quantity, Real, Stage};
 
@@ -135,40 +135,15 @@ pub(crate) mod dist {
     }
 }
 
-/// Factors the symmetric `n × n` matrix `a` (column-major; only the lower triangle is read)
-/// in place as L Lᵀ, overwrites `v` with L⁻¹ v and returns |L⁻¹ v|² = vᵀ A⁻¹ v.
-///
-/// `None` if `a` is not positive definite (a pivot ≤ 0 or not finite).
+/// vᵀ A⁻¹ v for the symmetric `n × n` matrix `a` (column-major; only the lower triangle is
+/// read), by the library's one covariance factorisation with a zero tolerance
+/// ([`inverse_quadratic_form`] on views of the buffers): `a` is overwritten by its Cholesky
+/// factor L and `v` by L⁻¹ v. `None` if `a` is not positive definite (a pivot ≤ 0 or not
+/// finite).
 pub(crate) fn cholesky_quadratic_form(a: &mut [f64], v: &mut [f64], n: usize) -> Option<f64> {
-    for j in 0..n {
-        let mut d = a[j + j * n];
-        for k in 0..j {
-            d -= a[j + k * n] * a[j + k * n];
-        }
-        if !(d > 0.0) || !d.is_finite() {
-            return None;
-        }
-        let ljj = d.sqrt();
-        a[j + j * n] = ljj;
-        for i in (j + 1)..n {
-            let mut s = a[i + j * n];
-            for k in 0..j {
-                s -= a[i + k * n] * a[j + k * n];
-            }
-            a[i + j * n] = s / ljj;
-        }
-    }
-    let mut total = 0.0;
-    for i in 0..n {
-        let mut s = v[i];
-        for k in 0..i {
-            s -= a[i + k * n] * v[k];
-        }
-        let y = s / a[i + i * n];
-        v[i] = y;
-        total += y * y;
-    }
-    Some(total)
+    let mut a = nalgebra::DMatrixViewMut::from_slice(&mut a[..n * n], n, n);
+    let mut v = nalgebra::DVectorViewMut::from_slice(&mut v[..n], n);
+    inverse_quadratic_form(&mut a, &mut v)
 }
 
 fn normalized_square<T: Real, N: Dim>(
