@@ -30,6 +30,7 @@
 
 use std::time::{Duration, Instant};
 
+use estim::filters::ValidationError;
 use estim::filters::consistency::{ChiSquareBand, nees};
 use estim::nalgebra::{DMatrix, DVector, Dyn};
 use estim::prelude::*;
@@ -332,7 +333,7 @@ fn gain_and_condition(rod: &Rod, p: &DMatrix<f64>) -> (f64, f64) {
 }
 
 /// Runs both filters over `steps` steps.
-pub fn experiment(steps: usize) -> Result<LargeStateResult, Error> {
+pub fn experiment(steps: usize) -> Result<LargeStateResult, ValidationError> {
     let rod = rod()?;
     let truth = simulate(&rod, steps, SEED);
     let mut kf = KalmanFilter::new(rod.prior.clone());

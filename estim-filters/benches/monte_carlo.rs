@@ -24,9 +24,9 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use estim_core::nalgebra::{
     Matrix2, Matrix2x3, Matrix3, Matrix3x1, U1, U2, U3, Vector1, Vector2, Vector3,
 };
-use estim_core::{Error, Gaussian, LinearMeasurement, LinearProcess};
+use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
 use estim_filters::monte_carlo::{MonteCarlo, Recorder, run_seed};
-use estim_filters::{Estimator, KalmanFilter, Predict, Update};
+use estim_filters::{Estimator, KalmanFilter, Predict, Update, ValidationError};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
@@ -87,8 +87,8 @@ fn simulate(
         &Vector3<f64>,
         &KalmanFilter<f64, U3>,
         &estim_filters::UpdateReport<f64, U2>,
-    ) -> Result<(), Error>,
-) -> Result<(), Error> {
+    ) -> Result<(), ValidationError>,
+) -> Result<(), ValidationError> {
     let mut rng = StdRng::seed_from_u64(seed);
     let n3 = |rng: &mut StdRng| Vector3::from_fn(|_, _| rng.sample(StandardNormal));
     let mut x = sys.prior.mean() + sys.lp * n3(&mut rng);
@@ -105,7 +105,7 @@ fn simulate(
     Ok(())
 }
 
-fn record(sys: &System, seed: u64, rec: &mut Recorder) -> Result<(), Error> {
+fn record(sys: &System, seed: u64, rec: &mut Recorder) -> Result<(), ValidationError> {
     simulate(sys, seed, |k, x, kf, report| {
         rec.record_innovation(k, report)?;
         rec.record_estimate(k, x, kf.state(), kf.covariance())

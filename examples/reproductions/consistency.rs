@@ -27,6 +27,7 @@ use crate::common::{Headline, Output};
 use crate::lee_huang::SectionIvConfig;
 use crate::lu_calibration::{MonteCarloConfig, run_monte_carlo};
 use estim::core::Error;
+use estim::filters::ValidationError;
 use estim::filters::consistency::{Check, Outcome, Verdict};
 use estim::filters::monte_carlo::{EnsembleStats, MonteCarlo, Recorder};
 use estim::filters::{Ekf, Estimator, KalmanFilter, Predict, PredictCorrelated, Update};
@@ -262,7 +263,7 @@ fn boje_realization<P>(
     process: &P,
     seed: u64,
     rec: &mut Recorder,
-) -> Result<(), Error>
+) -> Result<(), ValidationError>
 where
     P: AccelerometerProcess,
     Ekf<f64, U6>: PlanarFilter<P>,
@@ -366,7 +367,7 @@ fn lee_huang_loop<F>(
     mut ote: Option<OwnShipTrajectoryEstimator>,
     sim: &estim::models::lee_huang::Simulation,
     rec: &mut Recorder,
-) -> Result<(), Error>
+) -> Result<(), ValidationError>
 where
     F: Update<f64, U6, U1, AttitudeMeasurement>,
 {
@@ -427,7 +428,7 @@ pub fn lee_huang_case(runs: usize, case: LeeHuangCase) -> Result<Run, Box<dyn st
         .with_seed(SEED)
         .with_residual_pair(LEE_HUANG_RESIDUAL_SLOTS.0, LEE_HUANG_RESIDUAL_SLOTS.1)?;
     let start = Instant::now();
-    let stats = mc.run(|_, seed, rec| -> Result<(), Error> {
+    let stats = mc.run(|_, seed, rec| -> Result<(), ValidationError> {
         let sim = simulate(&config.scenario, &sensors, seed);
         let mut initial = config.scenario.initial_state;
         if unbiased {

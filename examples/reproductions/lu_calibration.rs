@@ -17,6 +17,7 @@ use std::time::Instant;
 
 use crate::common::{Headline, Output, Series, line_plot};
 use estim::core::Error;
+use estim::filters::ValidationError;
 use estim::filters::consistency::{Check, Verdict};
 use estim::filters::monte_carlo::{EnsembleStats, MonteCarlo, Recorder};
 use estim::models::lu::{
@@ -284,7 +285,7 @@ impl MonteCarloResult {
 /// simulator and the filter over the whole run, recording at t = 0 and at every GPS update the
 /// error state δx against the filter (error, P, estimate δx̂), the NIS, and the residuals at
 /// the two residual times.
-pub fn run_monte_carlo(config: &MonteCarloConfig) -> Result<MonteCarloResult, Error> {
+pub fn run_monte_carlo(config: &MonteCarloConfig) -> Result<MonteCarloResult, ValidationError> {
     let scenario = config.scenario;
     let settings = config.filter;
     // Fail early (not inside a run) on an invalid scenario or prior.
@@ -298,7 +299,7 @@ pub fn run_monte_carlo(config: &MonteCarloConfig) -> Result<MonteCarloResult, Er
     let mc = MonteCarlo::new(config.runs, slots)?
         .with_seed(config.seed)
         .with_residual_pair(a, b)?;
-    let realization = |_run: usize, seed: u64, rec: &mut Recorder| -> Result<(), Error> {
+    let realization = |_run: usize, seed: u64, rec: &mut Recorder| -> Result<(), ValidationError> {
         let mut sim = Simulator::new(&scenario, seed);
         let mut filter = LuFilter::new(&scenario, &settings)?;
         let truth = sim.truth().error_state(filter.mechanisation());
@@ -323,7 +324,7 @@ pub fn run_monte_carlo(config: &MonteCarloConfig) -> Result<MonteCarloResult, Er
         Execution::Default => mc.run(realization),
         Execution::Sequential => mc.run_sequential(realization),
     }
-    .map_err(Error::from)?;
+    .map_err(ValidationError::from)?;
     let wall_s = start.elapsed().as_secs_f64();
     let verdict = stats.verdict(config.confidence)?;
 
@@ -452,7 +453,7 @@ pub struct LuResult {
 
 /// Runs the experiment: the consistent Monte Carlo, the variants, the covariance history and
 /// the long-horizon gains, and one realization.
-pub fn run_experiment(config: &LuConfig) -> Result<LuResult, Error> {
+pub fn run_experiment(config: &LuConfig) -> Result<LuResult, ValidationError> {
     let monte_carlo = run_monte_carlo(&config.monte_carlo)?;
     let variants = config
         .variants
