@@ -16,7 +16,6 @@
 use std::time::Instant;
 
 use crate::common::{Headline, Output, Series, line_plot};
-use estim::core::Error;
 use estim::filters::ValidationError;
 use estim::filters::consistency::{Check, Verdict};
 use estim::filters::monte_carlo::{EnsembleStats, MonteCarlo, Recorder};
