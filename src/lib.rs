@@ -39,6 +39,7 @@
 //! # Ok::<(), estim::core::Error>(())
 //! ```
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub use estim_core as core;
 pub use estim_filters as filters;

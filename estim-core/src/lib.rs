@@ -22,6 +22,7 @@
 //! [workspace](PropagatorWorkspace) is sized, for models that implement the `_into` methods). The allocator bounds nalgebra needs are
 //! gathered in [`Alloc`].
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod alloc;
 pub mod angle;

@@ -47,6 +47,7 @@
 //! - `proptest_support` (feature `proptest-support`): strategies for SPD matrices, Gaussians
 //!   and stable linear systems, and derivative-check assertions for proptests.
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod consistency;
 mod correlated;

@@ -217,7 +217,7 @@ where
             // cancels P (a state measured almost exactly), P + X is a subtraction of nearby
             // numbers and exact, and the small posterior keeps its relative accuracy. Every
             // shortcut measured worse in Lee & Huang's noise-free run
-            // (estim-models/tests/lee_huang_section_iv.rs, bias_alone_gives_half_b_t_squared,
+            // (tests/it/lee_huang_example.rs, bias_alone_gives_half_b_t_squared,
             // worst position error 7.2e-10 m with this form): grouping as P + (X + Xᵀ), or the
             // cheaper P + A Kᵀ + K Aᵀ (A = ½ K S − Pₓᵤ), 3000× larger; taking the lower
             // triangle of each term instead of averaging both (which would let G be computed

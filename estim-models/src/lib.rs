@@ -19,6 +19,7 @@
 //! example of the `estim` package, `examples/<name>.rs`, whose body is
 //! `examples/reproductions/<name>.rs`; `cargo run --release --example papers` runs them all.
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod boje;
 pub mod lee_huang;

@@ -14,8 +14,7 @@ use estim_core::{Moments, Sampled, Unscented, VectorFunction};
 
 /// Wraps into (−π, π].
 fn wrap(a: f64) -> f64 {
-    let t = (a + PI).rem_euclid(2.0 * PI) - PI;
-    if t <= -PI { t + 2.0 * PI } else { t }
+    estim_core::wrap_angle(a)
 }
 
 /// y = (wrap(x₀ + 0.5 x₁ + k sin x₁), x₁): a heading (affine in x when k = 0) and a rate.

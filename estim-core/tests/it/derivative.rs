@@ -323,13 +323,7 @@ struct RangeBearing {
 }
 
 fn wrap(a: f64) -> f64 {
-    let t =
-        (a + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI;
-    if t == -std::f64::consts::PI {
-        std::f64::consts::PI
-    } else {
-        t
-    }
+    estim_core::wrap_angle(a)
 }
 
 impl MeasurementModel<f64, U4, U2> for RangeBearing {
