@@ -405,7 +405,7 @@ impl ChiSquareAverage {
 /// tr(S²) / (K (tr S)²) ≤ 1/K, so the bound is conservative; whiten them first
 /// (νₖ ↦ Lₖ⁻¹ νₖ with Sₖ = Lₖ Lₖᵀ) to make all components count equally.
 ///
-/// Errors: `lag` ≥ K ([`Setting::Lag`](crate::validation::Setting::Lag)), innovations of different lengths, non-finite
+/// Errors: `lag` ≥ K ([`Setting::Lag`]), innovations of different lengths, non-finite
 /// values, or an all-zero sequence (ρ undefined: [`Error::NonFinite`]).
 pub fn normalized_autocorrelation<T: Real, M: Dim>(
     innovations: &[OVector<T, M>],

@@ -476,7 +476,7 @@ impl Recorder {
     /// covariance, and (e, x̂) the orthogonality statistics.
     ///
     /// At most once per slot and run. Errors: slot out of range or recorded twice
-    /// ([`Setting::Slot`](crate::validation::Setting::Slot)), shapes, non-finite values, P not positive definite.
+    /// ([`Setting::Slot`]), shapes, non-finite values, P not positive definite.
     pub fn record_estimate<T: Real, N: Dim>(
         &mut self,
         slot: usize,

@@ -125,6 +125,9 @@ impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>> SizeFamily<N> for UpdateOfMeas
         DefaultAllocator: Alloc<Z, N>;
 }
 
+/// A cached update scratch and its slot in the cache.
+pub(crate) type CachedUpdate<'a, T, N, M, Pr> = (&'a mut UpdateScratch<T, N, M, Pr>, usize);
+
 /// What a filter keeps between steps for runtime sizes: the scratch of its prediction and one
 /// per measurement length, created on first use. Only fully dynamic scratch (n and m both
 /// `Dyn`) is kept; mixed static/dynamic shapes run the same code with a fresh scratch per step.
@@ -197,7 +200,7 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
         &mut self,
         n: N,
         m: M,
-    ) -> Option<(&mut UpdateScratch<T, N, M, Pr>, usize)>
+    ) -> Option<CachedUpdate<'_, T, N, M, Pr>>
     where
         DefaultAllocator: Alloc<N, M>,
     {
