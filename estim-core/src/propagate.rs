@@ -94,7 +94,7 @@ where
 /// };
 /// let (mean, covariance) = (DVector::from_vec(vec![1.0, 2.0]), DMatrix::identity(2, 2));
 /// let ukf = Unscented::default();
-/// let mut moments = Moments::zeros(Dyn(2), Dyn(1));
+/// let mut moments: Moments<f64, Dyn, Dyn> = Moments::zeros(Dyn(2), Dyn(1));
 /// let mut workspace = Default::default();
 /// for _ in 0..3 {
 ///     let out = Outputs::moments(&mut moments);
