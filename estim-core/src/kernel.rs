@@ -428,29 +428,6 @@ pub fn mul_tr<T, R, K, C>(
     }
 }
 
-/// dst (+)= α aᵀ b.
-#[inline(always)]
-#[track_caller]
-pub fn tr_mul<T, R, K, C>(
-    dst: &mut OMatrix<T, R, C>,
-    accum: Accum,
-    alpha: T,
-    a: &OMatrix<T, K, R>,
-    b: &OMatrix<T, K, C>,
-) where
-    T: Real,
-    R: Dim,
-    K: Dim,
-    C: Dim,
-    DefaultAllocator: Allocator<R, C> + Allocator<K, R> + Allocator<K, C>,
-{
-    if is_static::<R>() && is_static::<K>() && is_static::<C>() {
-        store(dst, accum, alpha, a.tr_mul(b));
-    } else {
-        faer_product(dst, accum, alpha, a, true, b, false, false);
-    }
-}
-
 /// The lower triangle (diagonal included) of dst (+)= α a b, for a product known to be
 /// symmetric (such as J (C Jᵀ)): on runtime sizes only that triangle is computed, about half
 /// the work. The strict upper triangle of `dst` is unspecified afterwards (static sizes compute
@@ -622,21 +599,6 @@ where
     }
 }
 
-/// Solves Lᵀ X = B in place (`b` ← L⁻ᵀ b) with L the lower triangle of `l`.
-#[inline(always)]
-pub fn solve_lower_transpose_in_place<T: Real, D: Dim, C: Dim>(
-    l: &OMatrix<T, D, D>,
-    b: &mut OMatrix<T, D, C>,
-) where
-    DefaultAllocator: Allocator<D, D> + Allocator<D, C>,
-{
-    if is_static::<D>() && is_static::<C>() {
-        l.tr_solve_lower_triangular_unchecked_mut(b);
-    } else {
-        T::solve_lower(view(l), view_mut(b), true);
-    }
-}
-
 /// Solves X Lᵀ = B in place (`b` ← B L⁻ᵀ) with L the lower triangle of `l`: the first half of
 /// a gain K = Pₓᵤ S⁻¹ = Pₓᵤ L⁻ᵀ L⁻¹, solved in K's own n × m storage (no transposed copy).
 /// Runtime sizes: faer's left solve on the transposed view, (B L⁻ᵀ)ᵀ = L⁻¹ Bᵀ.
@@ -727,11 +689,6 @@ mod tests {
         let mut dst = DMatrix::zeros(4, 5);
         mul_tr(&mut dst, Accum::Replace, 1.0, &a, &bt);
         assert!((dst - &a * &b).amax() < 1e-12);
-
-        let at = a.transpose();
-        let mut dst = DMatrix::zeros(4, 5);
-        tr_mul(&mut dst, Accum::Replace, -1.0, &at, &b);
-        assert!((dst + &a * &b).amax() < 1e-12);
     }
 
     /// `Matvec` on one instruction set, as `kernel::mul` runs it on the best one.
@@ -837,14 +794,13 @@ mod tests {
         assert!(cholesky_in_place(&mut l, &mut scratch));
         let mut x = b.clone();
         solve_lower_in_place(&l, &mut x);
-        solve_lower_transpose_in_place(&l, &mut x);
-        assert!((&s * &x - &b).amax() < 1e-10);
+        assert!((l.lower_triangle() * &x - &b).amax() < 1e-10);
+        assert!((l.lower_triangle() * l.lower_triangle().transpose() - &s).amax() < 1e-10);
 
         let mut ls = Matrix3::from_iterator(s.iter().copied());
         assert!(cholesky_in_place(&mut ls, &mut scratch));
         let mut xs = Matrix3x2::from_iterator(b.iter().copied());
         solve_lower_in_place(&ls, &mut xs);
-        solve_lower_transpose_in_place(&ls, &mut xs);
         for i in 0..3 {
             for j in 0..2 {
                 assert!((xs[(i, j)] - x[(i, j)]).abs() < 1e-12);
