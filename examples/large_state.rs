@@ -275,7 +275,7 @@ pub struct LargeStateResult {
 ///   |x̂| in the prediction, and the update's ẑ = H x̂ (also ≤ X) reaches the state through the
 ///   gain, ≤ ‖K‖∞ X. Per step ½ √(2/n) (ε/α²) (1 + ‖K‖∞) X.
 /// - Both filters' kernels (products of inner dimension n, the solve with S): ≤ 10 n ε κ(S)
-///   relative, as for the large-filter test of estim-filters (tests/dynamic.rs), times X.
+///   relative, as for the large-filter test of estim-filters (estim-filters/tests/it/dynamic.rs), times X.
 ///
 /// Errors of successive steps are added (no forgetting assumed), so the bound is `steps` times
 /// the per-step sum.

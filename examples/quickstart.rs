@@ -139,7 +139,7 @@ where
     H: MeasurementModel<f64, U4, estim::nalgebra::Const<M>>,
 {
     let mut rng = StdRng::seed_from_u64(seed);
-    let q = estim::core::linalg::psd_factor(
+    let q = estim::core::psd_factor(
         &process.process_noise(&x0, &(), dt),
         estim::core::Stage::Construction,
     )

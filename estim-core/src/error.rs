@@ -80,14 +80,6 @@ pub enum Parameter {
     GateThreshold,
     /// A finite-difference step (must be finite and > 0).
     StepSize,
-    /// A tolerance (must be finite and ≥ 0).
-    Tolerance,
-    /// A confidence level (must lie strictly between 0 and 1).
-    Confidence,
-    /// Degrees of freedom of a χ² distribution (at least 1).
-    DegreesOfFreedom,
-    /// Number of Monte Carlo runs or of averaged terms (at least 1).
-    RunCount,
 }
 
 /// Every error an estim algorithm returns.
@@ -205,10 +197,6 @@ impl fmt::Display for Parameter {
             Parameter::ForgettingFactor => "forgetting factor",
             Parameter::GateThreshold => "gate threshold",
             Parameter::StepSize => "step size",
-            Parameter::Tolerance => "tolerance",
-            Parameter::Confidence => "confidence",
-            Parameter::DegreesOfFreedom => "degrees of freedom",
-            Parameter::RunCount => "run count",
         })
     }
 }

@@ -59,7 +59,8 @@ pub enum Accum {
 pub const PARALLEL_THRESHOLD: usize = 256;
 
 /// Below this order a lower-triangle product ([`mul_lower`]) is faer's full product, faster
-/// there than its triangular-destination kernel (BENCHMARKS.md, "Lower-triangle products").
+/// there than its triangular-destination kernel (`a294f26`: KF step at n = 12 14 % faster, EKF
+/// 10 %, UKF 6 %).
 const LOWER_TRIANGLE_MIN: usize = 32;
 
 /// `true` when `D` is a compile-time dimension.
@@ -103,8 +104,8 @@ mod sealed {
 
     /// faer's runtime-size operations for one scalar type: the supertrait that seals
     /// [`Real`] to `f32` and `f64`. Non-generic methods, so faer's generic code is compiled
-    /// once, here (each integration test used to carry its own copy: BENCHMARKS.md, "Kernels
-    /// compiled once").
+    /// once, here (each integration test used to carry its own copy; `d3eba7e` halved the
+    /// build of the two largest test binaries).
     pub trait Dense: Sized {
         /// dst (+)= α A B, only the lower triangle of the (square) dst if `lower`.
         fn matmul(
@@ -197,8 +198,8 @@ mod sealed {
 /// `rows mod lanes` rows are one whole vector ending at the last row (one row at a time below
 /// one vector). Compiled for the CPU's widest SIMD by pulp's runtime dispatch (AVX2 at most:
 /// pulp's `x86-v4` is off), so the last bits depend on the instruction set. Our own kernel
-/// because faer's matrix × vector product is much slower at filter sizes (BENCHMARKS.md,
-/// "Matrix × vector").
+/// because faer's product costs 2–3× for one column: the UKF step at n = 50 is 24 % faster
+/// with it (BENCHMARKS.md, "Runtime-size kernels of our own").
 struct Matvec<'a, T> {
     y: &'a mut [T],
     accum: Accum,
@@ -319,12 +320,13 @@ matvec!(
     as_mut_simd_f32s
 );
 
-/// dst (+)= α op(a) op(b) on faer (runtime sizes), op a transpose where asked; only the lower
-/// triangle of dst if `lower`.
+/// dst (+)= α op(a) op(b) on runtime sizes, op a transpose where asked; only the lower
+/// triangle of dst if `lower`. One-column products without transposes go to [`Matvec`], the
+/// rest to faer.
 #[inline(always)]
 #[track_caller]
 #[allow(clippy::too_many_arguments)]
-fn faer_product<T, R, C, RA, CA, RB, CB>(
+fn runtime_product<T, R, C, RA, CA, RB, CB>(
     dst: &mut OMatrix<T, R, C>,
     accum: Accum,
     alpha: T,
@@ -399,7 +401,7 @@ pub fn mul<T, R, K, C>(
     if is_static::<R>() && is_static::<K>() && is_static::<C>() {
         store(dst, accum, alpha, a * b);
     } else {
-        faer_product(dst, accum, alpha, a, false, b, false, false);
+        runtime_product(dst, accum, alpha, a, false, b, false, false);
     }
 }
 
@@ -424,7 +426,7 @@ pub fn mul_tr<T, R, K, C>(
         // `gemm` loops column by column (measured: the filters bench).
         store(dst, accum, alpha, a * b.transpose());
     } else {
-        faer_product(dst, accum, alpha, a, false, b, true, false);
+        runtime_product(dst, accum, alpha, a, false, b, true, false);
     }
 }
 
@@ -450,7 +452,7 @@ pub fn mul_lower<T, D, K>(
     if is_static::<D>() && is_static::<K>() {
         store(dst, accum, alpha, a * b);
     } else {
-        faer_product(dst, accum, alpha, a, false, b, false, true);
+        runtime_product(dst, accum, alpha, a, false, b, false, true);
     }
 }
 
@@ -472,12 +474,12 @@ pub fn mul_tr_lower<T, D, K>(
     if is_static::<D>() && is_static::<K>() {
         store(dst, accum, alpha, a * b.transpose());
     } else {
-        faer_product(dst, accum, alpha, a, false, b, true, true);
+        runtime_product(dst, accum, alpha, a, false, b, true, true);
     }
 }
 
-/// Column `column` of `dst` (+)= α A x: faer's matrix × vector product on runtime sizes, one
-/// dot product per row on static sizes.
+/// Column `column` of `dst` (+)= α A x: [`Matvec`] on runtime sizes, one dot product per row
+/// on static sizes.
 ///
 /// # Panics
 /// If the shapes do not agree or `column` is out of range (a programmer error).

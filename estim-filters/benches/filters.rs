@@ -464,6 +464,8 @@ impl ProcessHessian<f64, U6> for Vehicle {
 }
 
 /// Wraps an angle difference into (−π, π] (the inputs are differences of angles in (−π, π]).
+/// One branch, as a hand-written filter would wrap, shared by the framework model and the
+/// baselines (`estim_core::wrap_angle` takes any angle, at the cost of a `%`).
 #[inline]
 fn wrap(d: f64) -> f64 {
     if d > PI {

@@ -35,7 +35,7 @@
 
 use estim_core::linalg::{ensure_shape, inverse_quadratic_form};
 use estim_core::nalgebra::{self, DefaultAllocator, Dim, OMatrix, OVector, allocator::Allocator};
-use estim_core::{Error, Parameter, Quantity, Real, Stage};
+use estim_core::{Error, Quantity, Real, Stage};
 
 use crate::validation::{Result, Setting, ValidationError};
 
@@ -59,38 +59,37 @@ pub(crate) fn validate_confidence(confidence: f64) -> Result<f64> {
     if confidence > 0.0 && confidence < 1.0 {
         Ok(confidence)
     } else {
-        Err(Error::InvalidParameter {
-            parameter: Parameter::Confidence,
+        Err(ValidationError::InvalidSetting {
+            setting: Setting::Confidence,
             value: confidence,
-        }
-        .into())
+        })
     }
 }
 
 /// Quantiles and two-sided p-values of the reference distributions, from statrs.
 pub(crate) mod dist {
-    use super::{Error, Parameter, Result};
+    use super::{Result, Setting, ValidationError};
     use statrs::distribution::{ChiSquared, ContinuousCDF, Normal, StudentsT};
 
-    fn dof_error(dof: f64) -> Error {
-        Error::InvalidParameter {
-            parameter: Parameter::DegreesOfFreedom,
+    fn dof_error(dof: f64) -> ValidationError {
+        ValidationError::InvalidSetting {
+            setting: Setting::DegreesOfFreedom,
             value: dof,
         }
     }
 
     fn chi2(dof: usize) -> Result<ChiSquared> {
         if dof == 0 {
-            return Err(dof_error(0.0).into());
+            return Err(dof_error(0.0));
         }
-        ChiSquared::new(dof as f64).map_err(|_| dof_error(dof as f64).into())
+        ChiSquared::new(dof as f64).map_err(|_| dof_error(dof as f64))
     }
 
     fn student(dof: usize) -> Result<StudentsT> {
         if dof == 0 {
-            return Err(dof_error(0.0).into());
+            return Err(dof_error(0.0));
         }
-        StudentsT::new(0.0, 1.0, dof as f64).map_err(|_| dof_error(dof as f64).into())
+        StudentsT::new(0.0, 1.0, dof as f64).map_err(|_| dof_error(dof as f64))
     }
 
     /// The `p` quantile of χ²_dof; `p` must be in (0, 1).
@@ -247,16 +246,17 @@ impl ChiSquareBand {
     /// Example: 2 states, 50 runs, 95%: χ²₁₀₀(0.025)/50 = 1.48, χ²₁₀₀(0.975)/50 = 2.59.
     pub fn two_sided(dof: usize, runs: usize, confidence: f64) -> Result<Self> {
         if dof == 0 {
-            return Err(Error::InvalidParameter {
-                parameter: Parameter::DegreesOfFreedom,
+            return Err(ValidationError::InvalidSetting {
+                setting: Setting::DegreesOfFreedom,
                 value: 0.0,
-            }
-            .into());
+            });
         }
-        let total = dof.checked_mul(runs).ok_or(Error::InvalidParameter {
-            parameter: Parameter::RunCount,
-            value: runs as f64,
-        })?;
+        let total = dof
+            .checked_mul(runs)
+            .ok_or(ValidationError::InvalidSetting {
+                setting: Setting::RunCount,
+                value: runs as f64,
+            })?;
         Self::for_sum(total, runs, confidence)
     }
 
@@ -266,11 +266,10 @@ impl ChiSquareBand {
     pub fn for_sum(degrees_of_freedom: usize, terms: usize, confidence: f64) -> Result<Self> {
         let confidence = validate_confidence(confidence)?;
         if terms == 0 {
-            return Err(Error::InvalidParameter {
-                parameter: Parameter::RunCount,
+            return Err(ValidationError::InvalidSetting {
+                setting: Setting::RunCount,
                 value: 0.0,
-            }
-            .into());
+            });
         }
         let alpha = 1.0 - confidence;
         let n = terms as f64;
@@ -336,11 +335,10 @@ impl ChiSquareAverage {
             .into());
         }
         if dof == 0 {
-            return Err(Error::InvalidParameter {
-                parameter: Parameter::DegreesOfFreedom,
+            return Err(ValidationError::InvalidSetting {
+                setting: Setting::DegreesOfFreedom,
                 value: 0.0,
-            }
-            .into());
+            });
         }
         self.sum += value;
         self.terms += 1;
@@ -452,11 +450,10 @@ where
 pub fn autocorrelation_bound(samples: usize, confidence: f64) -> Result<f64> {
     let confidence = validate_confidence(confidence)?;
     if samples == 0 {
-        return Err(Error::InvalidParameter {
-            parameter: Parameter::RunCount,
+        return Err(ValidationError::InvalidSetting {
+            setting: Setting::RunCount,
             value: 0.0,
-        }
-        .into());
+        });
     }
     Ok(dist::normal_two_sided(confidence) / (samples as f64).sqrt())
 }

@@ -87,7 +87,7 @@ use core::ops::Range;
 
 use estim_core::linalg::ensure_shape;
 use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector};
-use estim_core::{Alloc, Error, Parameter, Quantity, Real};
+use estim_core::{Alloc, Error, Quantity, Real};
 
 use crate::validation::{Result, Setting, ValidationError};
 
@@ -644,11 +644,10 @@ impl MonteCarlo {
     /// `runs` ≥ 1 realizations with statistics at `slots` ≥ 1 time slots, master seed 0.
     pub fn new(runs: usize, slots: usize) -> Result<Self> {
         if runs == 0 {
-            return Err(Error::InvalidParameter {
-                parameter: Parameter::RunCount,
+            return Err(ValidationError::InvalidSetting {
+                setting: Setting::RunCount,
                 value: 0.0,
-            }
-            .into());
+            });
         }
         if slots == 0 {
             return Err(slot_error(0));

@@ -1,9 +1,10 @@
 //! The errors of the validation tooling: the [consistency](crate::consistency) statistics and
 //! the [Monte Carlo](crate::monte_carlo) runner.
 //!
-//! Their own settings (a time slot, a correlation lag, a number of work chunks) are checked
-//! here and reported as [`ValidationError::InvalidSetting`]; everything else (shapes,
-//! non-finite values, a covariance that is not positive definite, a confidence level) is an
+//! Their own settings (a time slot, a correlation lag, a number of work chunks or runs, a
+//! confidence level, degrees of freedom) are checked here and reported as
+//! [`ValidationError::InvalidSetting`]; data failures (shapes, non-finite values, a covariance
+//! that is not positive definite, at [`Stage::ConsistencyCheck`](estim_core::Stage)) are an
 //! [`estim_core::Error`], wrapped. A realization's own filter errors convert with `?`.
 //!
 //! ```
@@ -27,6 +28,12 @@ pub enum Setting {
     Lag,
     /// A number of work chunks (at least 1).
     ChunkCount,
+    /// A number of Monte Carlo runs or of averaged terms (at least 1).
+    RunCount,
+    /// A confidence level (strictly between 0 and 1).
+    Confidence,
+    /// Degrees of freedom of a reference distribution (at least 1).
+    DegreesOfFreedom,
 }
 
 impl fmt::Display for Setting {
@@ -35,6 +42,9 @@ impl fmt::Display for Setting {
             Setting::Slot => "slot",
             Setting::Lag => "lag",
             Setting::ChunkCount => "chunk count",
+            Setting::RunCount => "run count",
+            Setting::Confidence => "confidence",
+            Setting::DegreesOfFreedom => "degrees of freedom",
         })
     }
 }

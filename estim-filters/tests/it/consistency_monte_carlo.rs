@@ -461,7 +461,7 @@ fn the_first_failing_run_is_reported() {
     let fail = |run: usize, _: u64, _: &mut estim_filters::Recorder| {
         if run == 37 || run == 150 {
             Err(ValidationError::Estimation(Error::InvalidParameter {
-                parameter: estim_core::Parameter::Tolerance,
+                parameter: estim_core::Parameter::StepSize,
                 value: run as f64,
             }))
         } else {
@@ -472,7 +472,7 @@ fn the_first_failing_run_is_reported() {
         run: 37,
         seed: run_seed(9, 37),
         error: ValidationError::Estimation(Error::InvalidParameter {
-            parameter: estim_core::Parameter::Tolerance,
+            parameter: estim_core::Parameter::StepSize,
             value: 37.0,
         }),
     };

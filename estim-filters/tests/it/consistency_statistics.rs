@@ -72,11 +72,9 @@ fn chi_square_bands_match_tables() {
     assert!(band.p_value(band.expected()).unwrap() > 0.9);
     assert!(band.contains(3.0) && !band.contains(f64::NAN));
     // Invalid parameters.
-    let conf = |c: f64| {
-        ValidationError::Estimation(Error::InvalidParameter {
-            parameter: estim_core::Parameter::Confidence,
-            value: c,
-        })
+    let conf = |c: f64| ValidationError::InvalidSetting {
+        setting: Setting::Confidence,
+        value: c,
     };
     assert_eq!(ChiSquareBand::two_sided(3, 20, 1.0), Err(conf(1.0)));
     assert_eq!(ChiSquareBand::two_sided(3, 20, 0.0), Err(conf(0.0)));

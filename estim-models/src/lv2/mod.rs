@@ -111,9 +111,9 @@
 //! | # | the note | estim | test |
 //! |---|---|---|---|
 //! | E1 | eq 1–7 | no algebraic or numeric error found: eq 5 and eq 6 equal WLS to round-off, eq 6's "2 adds and 3 multiplies" counts correctly | `lv2_fusion::eq5_and_eq6_equal_weighted_least_squares`, `lv2_fusion::worked_example_numbers` |
-//! | E2 | only x̂ is derived; "estimates of x and y" reads as two separate scalar fusions | ŷ is the mirror formula and x̂, ŷ are correlated, cov = −σx²σy²/s₁: a downstream filter must take the full 2×2 P | `lv2_fusion::closed_form_covariance_equals_wls_and_filter`, `lv2_fusion::covariance_by_moment_propagation`, `lv2_monte_carlo::chi2_mean_false_alarm_rate_and_covariance` |
+//! | E2 | only x̂ is derived; "estimates of x and y" reads as two separate scalar fusions | ŷ is the mirror formula and x̂, ŷ are correlated, cov = −σx²σy²/s₁: a downstream filter must take the full 2×2 P | `lv2_fusion::closed_form_covariance_equals_wls_and_filter`, `lv2_fusion::covariance_by_moment_propagation`, `lv2_fusion_example::chi2_mean_false_alarm_rate_and_covariance` (root tests) |
 //! | E3 | eq 3 is "the best estimate … given two measurements with Gaussian statistics" | eq 3 is the minimum-variance *linear unbiased* combination because x̂₁, x̂₂ are independent; Gaussianity is not needed for that (only for "maximum likelihood" and for the χ² false-alarm rate) | `lv2_fusion::eq3_is_the_best_of_the_unbiased_family`, `lv2_monte_carlo::covariance_holds_for_uniform_noise` |
-//! | E4 | eq 7 checks x̂₁ against x̂₂ (no threshold) | the x-check and the y-check are the same residual r; χ² = r²/s₁ with 1 dof, threshold from the χ²₁ quantile; a bias on any axis moves the same r: detection, not isolation (the note says as much) | `lv2_fusion::x_and_y_parity_checks_are_one_residual`, `lv2_monte_carlo::bias_detection_matches_predicted_power` |
+//! | E4 | eq 7 checks x̂₁ against x̂₂ (no threshold) | the x-check and the y-check are the same residual r; χ² = r²/s₁ with 1 dof, threshold from the χ²₁ quantile; a bias on any axis moves the same r: detection, not isolation (the note says as much) | `lv2_fusion::x_and_y_parity_checks_are_one_residual`, `lv2_fusion_example::bias_detection_matches_predicted_power` (root tests) |
 //! | E5 | the equation number "(4)" printed before its equation | cosmetic (PDF layout) | — |
 //!
 //! ## Where things are
