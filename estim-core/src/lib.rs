@@ -35,6 +35,7 @@ pub mod kernel;
 #[doc(hidden)]
 pub mod linalg;
 pub mod linear;
+pub mod manifold;
 pub mod model;
 pub mod propagate;
 pub mod scalar;
@@ -48,6 +49,7 @@ pub use function::{
 pub use gaussian::Gaussian;
 pub use linalg::psd_factor;
 pub use linear::{LinearMeasurement, LinearProcess};
+pub use manifold::{Euclidean, StateSpace};
 pub use model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
     MeasurementModel, Observation, ProcessHessian, ProcessJacobian, ProcessModel, Transition,
