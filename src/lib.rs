@@ -55,10 +55,10 @@ pub mod prelude {
         Affine, Linearized, Sampled, SecondOrder, SecondOrderGaussian, Unscented,
     };
     pub use estim_core::{
-        AffineFunction, Differentiable, Error, Gaussian, LinearMeasurement, LinearMeasurementModel,
-        LinearProcess, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
-        MeasurementModel, MomentPropagator, ProcessHessian, ProcessJacobian, ProcessModel, Real,
-        TwiceDifferentiable, VectorFunction,
+        AffineFunction, Differentiable, Error, Euclidean, Gaussian, LinearMeasurement,
+        LinearMeasurementModel, LinearProcess, LinearProcessModel, MeasurementHessian,
+        MeasurementJacobian, MeasurementModel, MomentPropagator, ProcessHessian, ProcessJacobian,
+        ProcessModel, Real, StateSpace, TwiceDifferentiable, VectorFunction,
     };
     pub use estim_filters::{
         CovarianceUpdate, Ekf, EnsembleStats, Estimator, FadingMemoryRls, GaussianFilter,

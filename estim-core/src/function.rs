@@ -21,6 +21,7 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use crate::alloc::Alloc;
 use crate::error::{Quantity, Result, Stage};
 use crate::linalg::ensure_shape;
+use crate::manifold::add_into;
 use crate::scalar::Real;
 
 /// y = g(x) from an `N`-dimensional to an `M`-dimensional space.
@@ -51,6 +52,22 @@ where
         a - b
     }
 
+    /// x ⊞ δ in the input space, into `out`: the point reached from x along the tangent δ
+    /// (see [`StateSpace`](crate::StateSpace)). Sigma points are formed with it. Defaults to
+    /// x + δ.
+    #[inline(always)]
+    fn input_plus_into(&self, x: &OVector<T, N>, delta: &OVector<T, N>, out: &mut OVector<T, N>) {
+        add_into(x, delta, out);
+    }
+
+    /// y ⊞ δ in the output space, into `out`: how a mean correction δ (the unscented mean of
+    /// the deviations, a second-order bias) is applied to g(μ). Defaults to y + δ;
+    /// [`difference`](Self::difference) is the matching ⊟.
+    #[inline(always)]
+    fn output_plus_into(&self, y: &OVector<T, M>, delta: &OVector<T, M>, out: &mut OVector<T, M>) {
+        add_into(y, delta, out);
+    }
+
     /// [`eval`](Self::eval) into `out`.
     #[inline(always)]
     fn eval_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
@@ -63,11 +80,12 @@ where
         *out = self.difference(a, b);
     }
 
-    /// g at the 2n sigma points μ ± Lⱼ (Lⱼ the columns of the n × n `offsets`): g(μ + Lⱼ)
-    /// into column j of `plus`, g(μ − Lⱼ) into column j of `minus` (both m × n).
+    /// g at the 2n sigma points μ ⊞ ±Lⱼ (Lⱼ the columns of the n × n `offsets`): g(μ ⊞ Lⱼ)
+    /// into column j of `plus`, g(μ ⊞ (−Lⱼ)) into column j of `minus` (both m × n).
     ///
-    /// The default maps the points one at a time through [`eval_into`](Self::eval_into),
-    /// using `scratch` for the point and the value. Override it when the points map together
+    /// The default forms the points with [`input_plus_into`](Self::input_plus_into) and maps
+    /// them one at a time through [`eval_into`](Self::eval_into), using `scratch` for the
+    /// tangent, the point and the value. Override it when the points map together
     /// more cheaply: for g(x) = A x, A μ 1ᵀ ± A L is one matrix product A L for all 2n points
     /// ([`LinearProcess`](crate::LinearProcess) does this). The unscented propagator calls it
     /// for runtime-sized states.
@@ -83,14 +101,20 @@ where
         minus: &mut OMatrix<T, M, N>,
         scratch: &mut SigmaScratch<T, N, M>,
     ) -> Result<()> {
-        sigma_points_one_by_one(mean, offsets, plus, minus, scratch, |x, y| {
-            self.eval_into(x, y)
-        })
+        sigma_points_one_by_one(
+            mean,
+            offsets,
+            plus,
+            minus,
+            scratch,
+            |x, delta, out| self.input_plus_into(x, delta, out),
+            |x, y| self.eval_into(x, y),
+        )
     }
 }
 
-/// The point and value buffers that [`VectorFunction::eval_sigma_points_into`]'s default
-/// (one point at a time) works in. Created by the caller; an implementation that maps all
+/// The tangent, point and value buffers that [`VectorFunction::eval_sigma_points_into`]'s
+/// default (one point at a time) works in. Created by the caller; an implementation that maps all
 /// points at once ignores it.
 ///
 /// ```
@@ -115,6 +139,7 @@ pub struct SigmaScratch<T: Real, N: Dim, M: Dim>
 where
     DefaultAllocator: Alloc<N, M>,
 {
+    delta: OVector<T, N>,
     point: OVector<T, N>,
     value: OVector<T, M>,
 }
@@ -126,15 +151,20 @@ where
     /// Buffers for a map from `n` to `m` dimensions.
     pub fn new(n: N, m: M) -> Self {
         Self {
+            delta: OVector::zeros_generic(n, U1),
             point: OVector::zeros_generic(n, U1),
             value: OVector::zeros_generic(m, U1),
         }
     }
 }
 
-/// The 2n sigma points μ ± Lⱼ mapped one at a time by `eval_into` into the columns of `plus`
-/// and `minus`: the default of every `*_sigma_points_into` method. A value of the wrong length
-/// is a dimension error (quantity `FunctionValue`, stage `Propagation`).
+/// The 2n sigma points μ ⊞ ±Lⱼ, formed by `plus_into` (x, δ, out) and mapped one at a time by
+/// `eval_into` into the columns of `plus` and `minus`: the default of every
+/// `*_sigma_points_into` method. A value of the wrong length is a dimension error (quantity
+/// `FunctionValue`, stage `Propagation`).
+///
+/// With x + δ for ⊞ this is the arithmetic of forming μ + Lⱼ and μ − Lⱼ directly: −Lⱼ is
+/// exact, and μ + (−Lⱼ) is the IEEE result of μ − Lⱼ.
 #[inline(always)]
 pub(crate) fn sigma_points_one_by_one<T: Real, N: Dim, M: Dim>(
     mean: &OVector<T, N>,
@@ -142,6 +172,7 @@ pub(crate) fn sigma_points_one_by_one<T: Real, N: Dim, M: Dim>(
     plus: &mut OMatrix<T, M, N>,
     minus: &mut OMatrix<T, M, N>,
     scratch: &mut SigmaScratch<T, N, M>,
+    mut plus_into: impl FnMut(&OVector<T, N>, &OVector<T, N>, &mut OVector<T, N>),
     mut eval_into: impl FnMut(&OVector<T, N>, &mut OVector<T, M>),
 ) -> Result<()>
 where
@@ -152,13 +183,16 @@ where
     if scratch.point.nrows() != n {
         scratch.point = mean.clone();
     }
+    if scratch.delta.nrows() != n {
+        scratch.delta = mean.clone();
+    }
     for j in 0..n {
         let column = &offsets.as_slice()[j * n..(j + 1) * n];
         for (sign, values) in [(T::one(), &mut *plus), (-T::one(), &mut *minus)] {
-            let pairs = scratch.point.as_mut_slice().iter_mut().zip(mean.as_slice());
-            for ((xi, &mi), &li) in pairs.zip(column) {
-                *xi = mi + sign * li;
+            for (di, &li) in scratch.delta.as_mut_slice().iter_mut().zip(column) {
+                *di = sign * li;
             }
+            plus_into(mean, &scratch.delta, &mut scratch.point);
             eval_into(&scratch.point, &mut scratch.value);
             let stage = Stage::Propagation;
             ensure_shape(&scratch.value, m, 1, stage, Quantity::FunctionValue)?;

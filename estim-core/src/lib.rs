@@ -15,7 +15,53 @@
 //! - [`linear`]: linear-Gaussian models with constant matrices.
 //! - [`derivative`]: checks analytic Jacobians and Hessians against finite differences.
 //! - [`psd_factor`]: the square root of a positive semi-definite covariance.
+//! - [`manifold`]: the state's ⊞ and ⊟ ([`StateSpace`]; [`Euclidean`] by default).
 //! - [`Error`]: the one error type.
+//!
+//! **States with angles.** A heading near ±π is not a vector: x + δ can leave (−π, π] and a
+//! difference of two headings can be off by 2π. Give the state a [`StateSpace`] whose ⊞ and ⊟
+//! wrap (Hertzberg et al. 2013); [`Transition::on`] and [`Observation::on`] carry it into the
+//! propagators, and a filter takes it with `GaussianFilter::with_state_space` (estim-filters).
+//! The default, [`Euclidean`], is plain + and −, to the bit.
+//!
+//! ```
+//! use core::f64::consts::PI;
+//! use estim_core::nalgebra::{Const, Matrix1, Vector1};
+//! use estim_core::{MomentPropagator, ProcessModel, StateSpace, Transition, Unscented, wrap_angle};
+//!
+//! /// A heading in (−π, π].
+//! #[derive(Clone, Debug)]
+//! struct Heading;
+//! impl StateSpace<f64, Const<1>> for Heading {
+//!     fn plus_into(&self, x: &Vector1<f64>, d: &Vector1<f64>, out: &mut Vector1<f64>) {
+//!         out[0] = wrap_angle(x[0] + d[0]);
+//!     }
+//!     fn minus_into(&self, a: &Vector1<f64>, b: &Vector1<f64>, out: &mut Vector1<f64>) {
+//!         out[0] = wrap_angle(a[0] - b[0]);
+//!     }
+//! }
+//! /// θ⁺ = wrap(θ + ω Δt).
+//! struct Turn;
+//! impl ProcessModel<f64, Const<1>> for Turn {
+//!     type Input = f64;
+//!     fn transition(&self, x: &Vector1<f64>, omega: &f64, dt: f64) -> Vector1<f64> {
+//!         Vector1::new(wrap_angle(x[0] + omega * dt))
+//!     }
+//!     fn process_noise(&self, _: &Vector1<f64>, _: &f64, _: f64) -> Matrix1<f64> {
+//!         Matrix1::new(1e-4)
+//!     }
+//! }
+//! let (mean, covariance) = (Vector1::new(PI - 0.05), Matrix1::new(0.01));
+//! let cubature = Unscented::cubature();
+//! let on_circle = Transition::on(&Heading, &Turn, &0.1, 1.0);
+//! let (m, p) = cubature.propagate_mean_covariance(&mean, &covariance, &on_circle)?;
+//! assert!(wrap_angle(m[0] - (-PI + 0.05)).abs() < 1e-12 && (p[(0, 0)] - 0.01).abs() < 1e-12);
+//! // With + and −, one sigma point's deviation is ≈ 2π and the variance explodes.
+//! let on_line = Transition::new(&Turn, &0.1, 1.0);
+//! let (_, p) = cubature.propagate_mean_covariance(&mean, &covariance, &on_line)?;
+//! assert!(p[(0, 0)] > 1.0);
+//! # Ok::<(), estim_core::Error>(())
+//! ```
 //!
 //! Sizes are generic: the same code serves `SVector<f64, 6>` (stack only, no heap allocation)
 //! and `DVector<f64>` (heavy kernels on faer; allocation-free once a propagator's
@@ -35,6 +81,7 @@ pub mod kernel;
 #[doc(hidden)]
 pub mod linalg;
 pub mod linear;
+pub mod manifold;
 pub mod model;
 pub mod propagate;
 pub mod scalar;
@@ -48,6 +95,7 @@ pub use function::{
 pub use gaussian::Gaussian;
 pub use linalg::psd_factor;
 pub use linear::{LinearMeasurement, LinearProcess};
+pub use manifold::{Euclidean, StateSpace};
 pub use model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
     MeasurementModel, Observation, ProcessHessian, ProcessJacobian, ProcessModel, Transition,

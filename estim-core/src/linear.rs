@@ -16,6 +16,7 @@ use crate::alloc::Alloc;
 use crate::error::Result;
 use crate::function::{SigmaScratch, sigma_points_one_by_one};
 use crate::kernel::{self, Accum, is_static};
+use crate::manifold::add_into;
 use crate::model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
     MeasurementModel, ProcessHessian, ProcessJacobian, ProcessModel,
@@ -107,7 +108,9 @@ where
         if !fits {
             // Point by point, where the filter reports the wrong shapes.
             let eval = |x: &OVector<T, N>, y: &mut OVector<T, N>| self.transition_into(x, u, dt, y);
-            return sigma_points_one_by_one::<T, N, N>(mean, offsets, plus, minus, scratch, eval);
+            return sigma_points_one_by_one::<T, N, N>(
+                mean, offsets, plus, minus, scratch, add_into, eval,
+            );
         }
         kernel::mul(plus, Accum::Replace, T::one(), f, offsets);
         // The centre F μ + B u in the first column of `minus`, then spread.
@@ -267,9 +270,15 @@ where
             && minus.shape() == (m, n);
         if !fits {
             // Point by point, where the filter reports the wrong shapes.
-            return sigma_points_one_by_one(mean, offsets, plus, minus, scratch, |x, y| {
-                self.measure_into(x, y)
-            });
+            return sigma_points_one_by_one(
+                mean,
+                offsets,
+                plus,
+                minus,
+                scratch,
+                add_into,
+                |x, y| self.measure_into(x, y),
+            );
         }
         kernel::mul(plus, Accum::Replace, T::one(), h, offsets);
         if n > 0 {

@@ -34,6 +34,7 @@ use crate::function::{
     AffineFunction, Differentiable, SigmaScratch, TwiceDifferentiable, VectorFunction,
     sigma_points_one_by_one, store_hessian,
 };
+use crate::manifold::{Euclidean, StateSpace, add_into};
 use crate::scalar::Real;
 
 /// A discrete-time process model x⁺ = f(x, u, Δt) + w, w ~ N(0, Q(x, u, Δt)).
@@ -83,7 +84,7 @@ where
         minus: &mut OMatrix<T, N, N>,
         scratch: &mut SigmaScratch<T, N, N>,
     ) -> Result<()> {
-        sigma_points_one_by_one(mean, offsets, plus, minus, scratch, |x, y| {
+        sigma_points_one_by_one(mean, offsets, plus, minus, scratch, add_into, |x, y| {
             self.transition_into(x, u, dt, y)
         })
     }
@@ -205,7 +206,7 @@ where
         minus: &mut OMatrix<T, M, N>,
         scratch: &mut SigmaScratch<T, N, M>,
     ) -> Result<()> {
-        sigma_points_one_by_one(mean, offsets, plus, minus, scratch, |x, y| {
+        sigma_points_one_by_one(mean, offsets, plus, minus, scratch, add_into, |x, y| {
             self.measure_into(x, y)
         })
     }
@@ -257,26 +258,60 @@ where
 {
 }
 
-/// The map x ↦ f(x, u, Δt) of a process model at a fixed input and step.
+/// The map x ↦ f(x, u, Δt) of a process model at a fixed input and step, on the state space
+/// `S` (the ⊞ of its sigma points and the ⊟ of its deviations; [`Euclidean`] by default).
+///
+/// ```
+/// use estim_core::{Euclidean, LinearProcess, Transition, VectorFunction};
+/// use estim_core::nalgebra::{Matrix1, Vector1};
+///
+/// let model = LinearProcess {
+///     transition: Matrix1::new(2.0),
+///     input: Matrix1::new(1.0),
+///     noise: Matrix1::new(0.1),
+/// };
+/// let u = Vector1::new(0.5);
+/// let f = Transition::new(&model, &u, 1.0);
+/// assert_eq!(f.eval(&Vector1::new(1.0)), Vector1::new(2.5));
+/// // The same map with the state space named.
+/// let f = Transition::on(&Euclidean, &model, &u, 1.0);
+/// assert_eq!(f.eval(&Vector1::new(1.0)), Vector1::new(2.5));
+/// ```
 #[derive(Debug)]
-pub struct Transition<'a, P, U, T> {
+pub struct Transition<'a, P, U, T, S = Euclidean> {
+    // A reference, not a value: the filter owns its state space and lends it per step, so a
+    // space holding data (say, which components are angles) is never cloned.
+    space: &'a S,
     model: &'a P,
     input: &'a U,
     dt: T,
 }
 
 impl<'a, P, U, T: Copy> Transition<'a, P, U, T> {
-    /// The map x ↦ f(x, u, Δt).
+    /// The map x ↦ f(x, u, Δt) on ℝⁿ.
     pub fn new(model: &'a P, input: &'a U, dt: T) -> Self {
-        Self { model, input, dt }
+        Self::on(&Euclidean, model, input, dt)
     }
 }
 
-impl<P, U, T, N> VectorFunction<T, N, N> for Transition<'_, P, U, T>
+impl<'a, P, U, T: Copy, S> Transition<'a, P, U, T, S> {
+    /// The map x ↦ f(x, u, Δt) on the state space `space`.
+    pub fn on(space: &'a S, model: &'a P, input: &'a U, dt: T) -> Self {
+        Self {
+            space,
+            model,
+            input,
+            dt,
+        }
+    }
+}
+
+impl<P, U, T, N, S> VectorFunction<T, N, N> for Transition<'_, P, U, T, S>
 where
     T: Real,
     N: Dim,
     P: ProcessModel<T, N, Input = U>,
+    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, N> {
@@ -289,6 +324,18 @@ where
     }
 
     #[inline(always)]
+    fn input_plus_into(&self, x: &OVector<T, N>, delta: &OVector<T, N>, out: &mut OVector<T, N>) {
+        self.space.plus_into(x, delta, out);
+    }
+
+    #[inline(always)]
+    fn output_plus_into(&self, y: &OVector<T, N>, delta: &OVector<T, N>, out: &mut OVector<T, N>) {
+        self.space.plus_into(y, delta, out);
+    }
+
+    /// The model's batch hook on a vector space; otherwise the points one at a time through
+    /// ⊞ (a batch hook forms μ ± Lⱼ with + and would bypass it).
+    #[inline(always)]
     fn eval_sigma_points_into(
         &self,
         mean: &OVector<T, N>,
@@ -297,13 +344,32 @@ where
         minus: &mut OMatrix<T, N, N>,
         scratch: &mut SigmaScratch<T, N, N>,
     ) -> Result<()> {
-        self.model
-            .transition_sigma_points_into(mean, offsets, self.input, self.dt, plus, minus, scratch)
+        if S::VECTOR {
+            self.model.transition_sigma_points_into(
+                mean, offsets, self.input, self.dt, plus, minus, scratch,
+            )
+        } else {
+            sigma_points_one_by_one(
+                mean,
+                offsets,
+                plus,
+                minus,
+                scratch,
+                |x, delta, out| self.space.plus_into(x, delta, out),
+                |x, y| self.eval_into(x, y),
+            )
+        }
+    }
+
+    fn difference(&self, a: &OVector<T, N>, b: &OVector<T, N>) -> OVector<T, N> {
+        let mut out = a.clone();
+        self.space.minus_into(a, b, &mut out);
+        out
     }
 
     #[inline(always)]
     fn difference_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
-        subtract_into(a, b, out);
+        self.space.minus_into(a, b, out);
     }
 }
 
@@ -324,11 +390,12 @@ pub(crate) fn subtract_into<T: Real, D: Dim>(
     *out -= b;
 }
 
-impl<P, U, T, N> Differentiable<T, N, N> for Transition<'_, P, U, T>
+impl<P, U, T, N, S> Differentiable<T, N, N> for Transition<'_, P, U, T, S>
 where
     T: Real,
     N: Dim,
     P: ProcessJacobian<T, N, Input = U>,
+    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, N, N> {
@@ -342,11 +409,12 @@ where
     }
 }
 
-impl<P, U, T, N> TwiceDifferentiable<T, N, N> for Transition<'_, P, U, T>
+impl<P, U, T, N, S> TwiceDifferentiable<T, N, N> for Transition<'_, P, U, T, S>
 where
     T: Real,
     N: Dim,
     P: ProcessHessian<T, N, Input = U>,
+    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
@@ -360,25 +428,52 @@ where
     }
 }
 
-/// The map x ↦ h(x) of a measurement model; differences go through its residual.
+/// The map x ↦ h(x) of a measurement model on the state space `S` ([`Euclidean`] by
+/// default): sigma points are formed with the state's ⊞, differences of measurements go
+/// through the model's residual, and a mean correction is added with + (a predicted
+/// measurement off by 2π is harmless: innovations go through the residual).
+///
+/// ```
+/// use estim_core::{Euclidean, LinearMeasurement, Observation, VectorFunction};
+/// use estim_core::nalgebra::{Matrix1x2, Matrix1, Vector1, Vector2};
+///
+/// let sensor = LinearMeasurement {
+///     observation: Matrix1x2::new(1.0, 1.0),
+///     noise: Matrix1::new(0.1),
+/// };
+/// let h = Observation::new(&sensor);
+/// assert_eq!(h.eval(&Vector2::new(1.0, 2.0)), Vector1::new(3.0));
+/// let h = Observation::on(&Euclidean, &sensor);
+/// assert_eq!(h.eval(&Vector2::new(1.0, 2.0)), Vector1::new(3.0));
+/// ```
 #[derive(Debug)]
-pub struct Observation<'a, H> {
+pub struct Observation<'a, H, S = Euclidean> {
+    // By reference, as in `Transition`.
+    space: &'a S,
     model: &'a H,
 }
 
 impl<'a, H> Observation<'a, H> {
-    /// The map x ↦ h(x).
+    /// The map x ↦ h(x) on ℝⁿ.
     pub fn new(model: &'a H) -> Self {
-        Self { model }
+        Self::on(&Euclidean, model)
     }
 }
 
-impl<H, T, N, M> VectorFunction<T, N, M> for Observation<'_, H>
+impl<'a, H, S> Observation<'a, H, S> {
+    /// The map x ↦ h(x) on the state space `space`.
+    pub fn on(space: &'a S, model: &'a H) -> Self {
+        Self { space, model }
+    }
+}
+
+impl<H, T, N, M, S> VectorFunction<T, N, M> for Observation<'_, H, S>
 where
     T: Real,
     N: Dim,
     M: Dim,
     H: MeasurementModel<T, N, M>,
+    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N, M>,
 {
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, M> {
@@ -395,6 +490,13 @@ where
     }
 
     #[inline(always)]
+    fn input_plus_into(&self, x: &OVector<T, N>, delta: &OVector<T, N>, out: &mut OVector<T, N>) {
+        self.space.plus_into(x, delta, out);
+    }
+
+    /// The model's batch hook on a vector space; otherwise the points one at a time through
+    /// ⊞.
+    #[inline(always)]
     fn eval_sigma_points_into(
         &self,
         mean: &OVector<T, N>,
@@ -403,8 +505,20 @@ where
         minus: &mut OMatrix<T, M, N>,
         scratch: &mut SigmaScratch<T, N, M>,
     ) -> Result<()> {
-        self.model
-            .measure_sigma_points_into(mean, offsets, plus, minus, scratch)
+        if S::VECTOR {
+            self.model
+                .measure_sigma_points_into(mean, offsets, plus, minus, scratch)
+        } else {
+            sigma_points_one_by_one(
+                mean,
+                offsets,
+                plus,
+                minus,
+                scratch,
+                |x, delta, out| self.space.plus_into(x, delta, out),
+                |x, y| self.eval_into(x, y),
+            )
+        }
     }
 
     #[inline(always)]
@@ -413,11 +527,12 @@ where
     }
 }
 
-impl<H, T, N, M> Differentiable<T, N, M> for Observation<'_, H>
+impl<H, T, N, M, S> Differentiable<T, N, M> for Observation<'_, H, S>
 where
     T: Real,
     N: Dim,
     M: Dim,
+    S: StateSpace<T, N>,
     H: MeasurementJacobian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
@@ -431,11 +546,12 @@ where
     }
 }
 
-impl<H, T, N, M> TwiceDifferentiable<T, N, M> for Observation<'_, H>
+impl<H, T, N, M, S> TwiceDifferentiable<T, N, M> for Observation<'_, H, S>
 where
     T: Real,
     N: Dim,
     M: Dim,
+    S: StateSpace<T, N>,
     H: MeasurementHessian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
@@ -449,20 +565,22 @@ where
     }
 }
 
-impl<P, U, T, N> AffineFunction<T, N, N> for Transition<'_, P, U, T>
+impl<P, U, T, N, S> AffineFunction<T, N, N> for Transition<'_, P, U, T, S>
 where
     T: Real,
     N: Dim,
     P: LinearProcessModel<T, N, Input = U>,
+    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
 }
 
-impl<H, T, N, M> AffineFunction<T, N, M> for Observation<'_, H>
+impl<H, T, N, M, S> AffineFunction<T, N, M> for Observation<'_, H, S>
 where
     T: Real,
     N: Dim,
     M: Dim,
+    S: StateSpace<T, N>,
     H: LinearMeasurementModel<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {

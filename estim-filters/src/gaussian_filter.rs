@@ -8,9 +8,9 @@ use estim_core::propagate::{
     SecondOrderGaussian, Unscented,
 };
 use estim_core::{
-    AffineFunction, Alloc, Error, Gaussian, LinearMeasurementModel, LinearProcessModel,
-    MeasurementModel, Observation, ProcessModel, Quantity, Real, Stage, Transition, VectorFunction,
-    error::Result,
+    AffineFunction, Alloc, Error, Euclidean, Gaussian, LinearMeasurementModel, LinearProcessModel,
+    MeasurementModel, Observation, ProcessModel, Quantity, Real, Stage, StateSpace, Transition,
+    VectorFunction, error::Result,
 };
 
 use crate::correlated::Decorrelated;
@@ -34,6 +34,11 @@ use crate::update::{self, CovarianceUpdate, UpdateSettings};
 /// Every step computes the new estimate aside and commits it only when all checks pass, so an
 /// error leaves the filter unchanged.
 ///
+/// The state lives in the state space `S` ([`Euclidean`] by default): sigma points are
+/// μ ⊞ δ, the update is x̂⁺ = x̂ ⊞ K ν, and deviations of predicted states are x ⊟ x̂ (Hertzberg
+/// et al. 2013). For a state with angles give it a [`StateSpace`] that wraps them, with
+/// [`with_state_space`](Self::with_state_space).
+///
 /// # Static or dynamic sizes
 ///
 /// The same code runs on nalgebra's static sizes (`SVector<f64, 6>`, on the stack) and runtime
@@ -51,20 +56,22 @@ use crate::update::{self, CovarianceUpdate, UpdateSettings};
 /// faster and the UKF breaks even); at n = 24 static steps are 1.2–2.7× slower (nalgebra's
 /// fixed-size products are not blocked).
 #[derive(Debug)]
-pub struct GaussianFilter<T: Real, N: Dim, Pr: PropagatorWorkspace<T>>
+pub struct GaussianFilter<T: Real, N: Dim, Pr: PropagatorWorkspace<T>, S = Euclidean>
 where
     DefaultAllocator: Alloc<N>,
 {
     state: OVector<T, N>,
     covariance: OMatrix<T, N, N>,
     propagator: Pr,
+    space: S,
     settings: UpdateSettings<T>,
     scratch: ScratchCache<T, Pr>,
 }
 
-/// A copy of the estimate and the settings; the runtime-size buffers are not copied (the
-/// clone sizes its own on first use).
-impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T> + Clone> Clone for GaussianFilter<T, N, Pr>
+/// A copy of the estimate, the state space and the settings; the runtime-size buffers are not
+/// copied (the clone sizes its own on first use).
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T> + Clone, S: Clone> Clone
+    for GaussianFilter<T, N, Pr, S>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -73,14 +80,17 @@ where
             state: self.state.clone(),
             covariance: self.covariance.clone(),
             propagator: self.propagator.clone(),
+            space: self.space.clone(),
             settings: self.settings,
             scratch: ScratchCache::default(),
         }
     }
 }
 
-/// Equal estimates, propagators and settings (the runtime-size buffers are not compared).
-impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T> + PartialEq> PartialEq for GaussianFilter<T, N, Pr>
+/// Equal estimates, propagators, state spaces and settings (the runtime-size buffers are not
+/// compared).
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T> + PartialEq, S: PartialEq> PartialEq
+    for GaussianFilter<T, N, Pr, S>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -88,6 +98,7 @@ where
         self.state == other.state
             && self.covariance == other.covariance
             && self.propagator == other.propagator
+            && self.space == other.space
             && self.settings == other.settings
     }
 }
@@ -143,9 +154,58 @@ where
             state,
             covariance,
             propagator,
+            space: Euclidean,
             settings: UpdateSettings::new(),
             scratch: ScratchCache::default(),
         }
+    }
+}
+
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>, S> GaussianFilter<T, N, Pr, S>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// The same filter on the state space `space`: sigma points μ ⊞ δ, update x̂ ⊞ K ν,
+    /// deviations of predicted states x ⊟ x̂. The models are unchanged; a measurement of an
+    /// angle also wraps its residual.
+    ///
+    /// ```
+    /// use core::f64::consts::PI;
+    /// use estim_core::nalgebra::{Const, Matrix1, Vector1};
+    /// use estim_core::{Gaussian, StateSpace, wrap_angle};
+    /// use estim_filters::{Estimator, Ukf};
+    ///
+    /// /// A heading in (−π, π].
+    /// #[derive(Clone, Debug, PartialEq)]
+    /// struct Heading;
+    /// impl StateSpace<f64, Const<1>> for Heading {
+    ///     fn plus_into(&self, x: &Vector1<f64>, d: &Vector1<f64>, out: &mut Vector1<f64>) {
+    ///         out[0] = wrap_angle(x[0] + d[0]);
+    ///     }
+    ///     fn minus_into(&self, a: &Vector1<f64>, b: &Vector1<f64>, out: &mut Vector1<f64>) {
+    ///         out[0] = wrap_angle(a[0] - b[0]);
+    ///     }
+    /// }
+    /// let prior = Gaussian::new(Vector1::new(PI - 0.01), Matrix1::new(0.1))?;
+    /// let filter = Ukf::new(prior).with_state_space(Heading);
+    /// assert_eq!(filter.state()[0], PI - 0.01);
+    /// assert_eq!(filter.state_space(), &Heading);
+    /// # Ok::<(), estim_core::Error>(())
+    /// ```
+    pub fn with_state_space<S2: StateSpace<T, N>>(self, space: S2) -> GaussianFilter<T, N, Pr, S2> {
+        GaussianFilter {
+            state: self.state,
+            covariance: self.covariance,
+            propagator: self.propagator,
+            space,
+            settings: self.settings,
+            scratch: self.scratch,
+        }
+    }
+
+    /// The state space.
+    pub fn state_space(&self) -> &S {
+        &self.space
     }
 
     /// Uses `form` for the covariance update (default: Joseph).
@@ -178,7 +238,7 @@ where
     }
 }
 
-impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>> Estimator<T, N> for GaussianFilter<T, N, Pr>
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>, S> Estimator<T, N> for GaussianFilter<T, N, Pr, S>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -324,12 +384,13 @@ pub(crate) fn ensure_time_step<T: Real>(dt: T) -> Result<()> {
     }
 }
 
-impl<T, N, Pr, P> Predict<T, N, P> for GaussianFilter<T, N, Pr>
+impl<T, N, Pr, P, S> Predict<T, N, P> for GaussianFilter<T, N, Pr, S>
 where
     T: Real,
     N: Dim,
     P: ProcessModel<T, N>,
-    Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T>>,
+    S: StateSpace<T, N>,
+    Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
     DefaultAllocator: Alloc<N>,
 {
     #[inline(always)]
@@ -342,7 +403,7 @@ where
     }
 }
 
-impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>> GaussianFilter<T, N, Pr>
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>, S: StateSpace<T, N>> GaussianFilter<T, N, Pr, S>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -351,17 +412,18 @@ where
     fn process_step<P>(&mut self, model: &P, input: &P::Input, dt: T, step: Step) -> Result<()>
     where
         P: ProcessModel<T, N>,
-        Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T>>,
+        Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
     {
         ensure_time_step(dt)?;
         let Self {
             state,
             covariance,
             propagator,
+            space,
             scratch,
             ..
         } = self;
-        let map = Transition::new(model, input, dt);
+        let map = Transition::on(&*space, model, input, dt);
         let noise =
             |x: &OVector<T, N>, q: &mut OMatrix<T, N, N>| model.process_noise_into(x, input, dt, q);
         predict_step(propagator, scratch, state, covariance, &map, noise, step)
@@ -378,7 +440,8 @@ where
     Pr: for<'a> MomentPropagator<T, N, N, Decorrelated<'a, P, P::Input, H, T, N, M>>,
     DefaultAllocator: Alloc<N, M>,
 {
-    /// Runs through the same prediction code; building the decorrelated map allocates for
+    /// Runs through the same prediction code (vector states only: the filter's state space is
+    /// [`Euclidean`]); building the decorrelated map allocates for
     /// runtime sizes (it solves with R once per call).
     #[inline(always)]
     fn predict_correlated(
@@ -413,11 +476,14 @@ where
 }
 
 /// The measurement update of any filter whose predicted-measurement moments come from
-/// `propagator` at (`state`, `covariance`): the report goes to `report`, the posterior to
-/// `scratch.state` and `scratch.covariance` (uncommitted); `Ok(false)` if gated.
+/// `propagator` at (`state`, `covariance`) on the state space `space`: the report goes to
+/// `report`, the posterior to `scratch.state` and `scratch.covariance` (uncommitted);
+/// `Ok(false)` if gated.
 #[inline(always)]
-pub(crate) fn measurement_update<T, N, M, Pr, H>(
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn measurement_update<T, N, M, Pr, H, S>(
     propagator: &Pr,
+    space: &S,
     state: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
     model: &H,
@@ -431,7 +497,8 @@ where
     N: Dim,
     M: Dim,
     H: MeasurementModel<T, N, M>,
-    Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
+    S: StateSpace<T, N>,
+    Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H, S>>,
     DefaultAllocator: Alloc<N, M>,
 {
     let m = z.nrows();
@@ -439,7 +506,7 @@ where
         .propagate_into(
             state,
             covariance,
-            &Observation::new(model),
+            &Observation::on(space, model),
             Outputs::moments(&mut scratch.predicted),
             &mut scratch.propagation,
         )
@@ -447,7 +514,7 @@ where
     report.fit(z.shape_generic().0);
     model.residual_into(z, &scratch.predicted.mean, &mut report.innovation);
     model.measurement_noise_into(state, &mut scratch.noise);
-    update::apply(state, covariance, scratch, report, settings)
+    update::apply(space, state, covariance, scratch, report, settings)
 }
 
 /// The buffers are sized from z, so a model whose h(x) has another length fails in the
@@ -474,13 +541,14 @@ fn measurement_length_error(e: Error, z_len: usize) -> Error {
     }
 }
 
-impl<T, N, M, Pr, H> Update<T, N, M, H> for GaussianFilter<T, N, Pr>
+impl<T, N, M, Pr, H, S> Update<T, N, M, H> for GaussianFilter<T, N, Pr, S>
 where
     T: Real,
     N: Dim,
     M: Dim,
     H: MeasurementModel<T, N, M>,
-    Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
+    S: StateSpace<T, N>,
+    Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H, S>>,
     DefaultAllocator: Alloc<N, M>,
 {
     #[inline(always)]
@@ -499,7 +567,7 @@ where
     }
 }
 
-impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>> GaussianFilter<T, N, Pr>
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>, S: StateSpace<T, N>> GaussianFilter<T, N, Pr, S>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -517,18 +585,20 @@ where
     where
         M: Dim,
         H: MeasurementModel<T, N, M>,
-        Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
+        Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H, S>>,
         DefaultAllocator: Alloc<N, M>,
     {
         let Self {
             state,
             covariance,
             propagator,
+            space,
             settings,
             scratch,
         } = self;
         update_step(
-            propagator, scratch, state, covariance, forgetting, model, z, *settings, report, step,
+            propagator, space, scratch, state, covariance, forgetting, model, z, *settings, report,
+            step,
         )
     }
 }
@@ -537,8 +607,9 @@ where
 /// filter's cached one for `Dyn`) and committed only if applied. With `forgetting` = Some(γ)
 /// the prior covariance is γ⁻¹P (the fading-memory filter).
 #[inline(always)]
-pub(crate) fn update_step<T, N, M, Pr, H>(
+pub(crate) fn update_step<T, N, M, Pr, H, S>(
     propagator: &Pr,
+    space: &S,
     cache: &mut ScratchCache<T, Pr>,
     state: &mut OVector<T, N>,
     covariance: &mut OMatrix<T, N, N>,
@@ -554,7 +625,8 @@ where
     N: Dim,
     M: Dim,
     H: MeasurementModel<T, N, M>,
-    Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H>>,
+    S: StateSpace<T, N>,
+    Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H, S>>,
     DefaultAllocator: Alloc<N, M>,
 {
     let (n, m) = (state.shape_generic().0, z.shape_generic().0);
@@ -568,7 +640,7 @@ where
     };
     let result = match forgetting {
         None => measurement_update(
-            propagator, state, covariance, model, z, settings, work, report,
+            propagator, space, state, covariance, model, z, settings, work, report,
         ),
         Some(gamma) => {
             // γ⁻¹P in its own buffer, taken out of the scratch while the update borrows it.
@@ -581,7 +653,7 @@ where
             };
             inflated /= gamma;
             let result = measurement_update(
-                propagator, state, &inflated, model, z, settings, work, report,
+                propagator, space, state, &inflated, model, z, settings, work, report,
             );
             work.inflated = Some(inflated);
             result

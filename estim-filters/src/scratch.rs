@@ -63,6 +63,8 @@ where
     pub(crate) covariance: OMatrix<T, N, N>,
     /// The posterior state, then the committed state's old buffer.
     pub(crate) state: OVector<T, N>,
+    /// K ν for a state space other than ℝⁿ (created on first use).
+    pub(crate) step: Option<OVector<T, N>>,
     /// P/γ for the fading-memory filter (created on first use).
     pub(crate) inflated: Option<OMatrix<T, N, N>>,
     pub(crate) cholesky: estim_core::kernel::CholeskyScratch,
@@ -85,6 +87,7 @@ where
             gain_s_gain: OMatrix::zeros_generic(n, n),
             covariance: OMatrix::zeros_generic(n, n),
             state: OVector::zeros_generic(n, U1),
+            step: None,
             inflated: None,
             cholesky: Default::default(),
         }

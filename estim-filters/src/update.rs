@@ -6,7 +6,7 @@
 //! ```text
 //! S  = cov(ẑ) + R                       (factorised by Cholesky, S = L Lᵀ; never inverted)
 //! K  = Pₓᵤ S⁻¹                          (solved from the right: K = Pₓᵤ L⁻ᵀ L⁻¹)
-//! x⁺ = x + K ν
+//! x⁺ = x ⊞ K ν                         (x + K ν on ℝⁿ; see estim_core::StateSpace)
 //! P⁺ = P − K Pₓᵤᵀ − Pₓᵤ Kᵀ + K S Kᵀ     (Joseph)
 //! NIS = |L⁻¹ ν|²,   ln p(z) = −½ (NIS + 2 Σ ln Lᵢᵢ + m ln 2π)
 //! ```
@@ -26,7 +26,7 @@ use estim_core::linalg::{
 };
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::scalar::real;
-use estim_core::{Alloc, Error, Parameter, Quantity, Real, Stage, error::Result};
+use estim_core::{Alloc, Error, Parameter, Quantity, Real, Stage, StateSpace, error::Result};
 
 use crate::report::{UpdateOutcome, UpdateReport};
 use crate::scratch::UpdateScratch;
@@ -108,7 +108,8 @@ where
 ///
 /// The gain is solved in place from the right, K = Pₓᵤ L⁻ᵀ L⁻¹ (two triangular solves).
 #[inline(always)]
-pub(crate) fn apply<T: Real, N: Dim, M: Dim, Pr: PropagatorWorkspace<T>>(
+pub(crate) fn apply<T: Real, N: Dim, M: Dim, Pr: PropagatorWorkspace<T>, S: StateSpace<T, N>>(
+    space: &S,
     state: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
     scratch: &mut UpdateScratch<T, N, M, Pr>,
@@ -129,6 +130,7 @@ where
         gain_s_gain,
         state: new_state,
         covariance: new_covariance,
+        step: tangent,
         cholesky,
         ..
     } = scratch;
@@ -196,9 +198,21 @@ where
     kernel::copy(gain, cross);
     kernel::solve_right_lower_transpose_in_place(factor, gain);
     kernel::solve_right_lower_in_place(factor, gain);
-    // x⁺ = x + K ν
-    kernel::copy(new_state, state);
-    kernel::mul(new_state, Accum::Add, T::one(), gain, &report.innovation);
+    if S::VECTOR {
+        // x⁺ = x + K ν, fused.
+        kernel::copy(new_state, state);
+        kernel::mul(new_state, Accum::Add, T::one(), gain, &report.innovation);
+    } else {
+        // x⁺ = x ⊞ δ, δ = K ν. Both products add the finished K ν to x, so with ⊞ = + this
+        // gives the fused form's bits.
+        let delta = tangent.get_or_insert_with(|| state.clone());
+        if delta.shape() != state.shape() {
+            *delta = state.clone();
+        }
+        kernel::mul(delta, Accum::Replace, T::one(), gain, &report.innovation);
+        space.plus_into(state, delta, new_state);
+        ensure_shape(new_state, state.nrows(), 1, stage, Quantity::Mean)?;
+    }
     // X = −K Pₓᵤᵀ (n × n, in the posterior's buffer).
     kernel::mul_tr(new_covariance, Accum::Replace, -T::one(), gain, cross);
     let finite = match settings.form {

@@ -12,7 +12,8 @@ use crate::scalar::Real;
 /// ȳ = g(μ), cov(y) = J C Jᵀ, cov(x, y) = C Jᵀ for an affine g: the same arithmetic as
 /// [`Linearized`](super::Linearized), but only accepted for functions marked
 /// [`AffineFunction`], where it is exact. This is what makes the linear Kalman filter refuse
-/// a nonlinear model at compile time.
+/// a nonlinear model at compile time. The Jacobian is meant in the ⊞ sense, as for
+/// [`Linearized`](super::Linearized).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Affine;
 

@@ -13,7 +13,9 @@ use crate::scalar::Real;
 
 /// Linearisation at the mean: ȳ = g(μ), cov(y) = J C Jᵀ, cov(x, y) = C Jᵀ, with J = ∂g/∂x(μ).
 ///
-/// Exact for affine g. Requirements on g: [`Differentiable`].
+/// Exact for affine g. Requirements on g: [`Differentiable`]. On a state space with a ⊞
+/// ([`StateSpace`](crate::StateSpace)) g(μ) needs none, and J is meant in the ⊞ sense,
+/// J = ∂(g(μ ⊞ δ) ⊟ g(μ))/∂δ at δ = 0 (for + and −, the ordinary Jacobian).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Linearized;
 

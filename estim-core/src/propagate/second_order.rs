@@ -1,7 +1,7 @@
 //! Second-order propagation: Papoulis' approximation (as used by Boje) and its Gaussian
 //! refinement.
 
-use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 
 use super::linearized::linear_moments_into;
 use super::workspace::buffer;
@@ -9,7 +9,7 @@ use super::{LinearizedWorkspace, MomentPropagator, Outputs, PropagatorWorkspace}
 use crate::alloc::Alloc;
 use crate::error::{Quantity, Result, Stage};
 use crate::function::TwiceDifferentiable;
-use crate::kernel::{Accum, mul};
+use crate::kernel::{self, Accum, mul};
 use crate::linalg::ensure_shape;
 use crate::scalar::{Real, real};
 
@@ -21,7 +21,10 @@ use crate::scalar::{Real, real};
 /// cov(x,y) ≈ C Jᵀ
 /// ```
 ///
-/// Density-free: only the mean and covariance of x enter. The mean is exact for quadratic g
+/// The correction is applied with the function's
+/// [`output_plus_into`](crate::VectorFunction::output_plus_into): ȳ = g(μ) ⊞ δ, δₖ the
+/// second-order term (by default +, to the bit the in-place sum). Density-free: only the mean
+/// and covariance of x enter. The mean is exact for quadratic g
 /// under any density; the covariance is first order. Requirements on g: [`TwiceDifferentiable`]
 /// (components declared affine cost nothing).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -67,6 +70,44 @@ where
     }
 }
 
+/// The mean-correction buffer δ, shaped like `mean` and filled with −0: x + (−0) = x for every
+/// x (+0 would turn a −0 into +0), so components without a correction keep their bits under
+/// the default ⊞.
+#[inline(always)]
+fn zero_correction<'w, T: Real, M: Dim>(
+    slot: &'w mut Option<OMatrix<T, M, U1>>,
+    mean: &OVector<T, M>,
+) -> &'w mut OMatrix<T, M, U1>
+where
+    DefaultAllocator: nalgebra::allocator::Allocator<M>,
+{
+    let delta = buffer(slot, mean.shape_generic().0, U1);
+    delta.fill(-T::zero());
+    delta
+}
+
+/// ȳ ← g(μ) ⊞ δ, g(μ) taken from `mean` and moved aside into `centre`.
+#[inline(always)]
+fn correct_mean<T, N, M, G>(
+    g: &G,
+    mean: &mut OVector<T, M>,
+    delta: &OVector<T, M>,
+    centre: &mut Option<OMatrix<T, M, U1>>,
+) -> Result<()>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    G: TwiceDifferentiable<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    let (m_dim, m) = (mean.shape_generic().0, mean.nrows());
+    let y0 = buffer(centre, m_dim, U1);
+    kernel::copy(y0, mean);
+    g.output_plus_into(y0, delta, mean);
+    ensure_shape(mean, m, 1, Stage::Propagation, Quantity::FunctionValue)
+}
+
 /// The buffers of [`SecondOrder`] and [`SecondOrderGaussian`]: the linearised part's, and
 /// the Hessians and products of the second-order terms.
 #[derive(Debug)]
@@ -79,6 +120,8 @@ where
     other_hessian: Option<OMatrix<T, N, N>>,
     product: Option<OMatrix<T, N, N>>,
     sandwich: Option<OMatrix<T, N, N>>,
+    correction: Option<OMatrix<T, M, U1>>,
+    centre: Option<OMatrix<T, M, U1>>,
 }
 
 impl<T: Real, N: Dim, M: Dim> Default for SecondOrderWorkspace<T, N, M>
@@ -92,6 +135,8 @@ where
             other_hessian: None,
             product: None,
             sandwich: None,
+            correction: None,
+            centre: None,
         }
     }
 }
@@ -125,11 +170,17 @@ where
         let half = real::<T>(0.5);
         let n = mean.shape_generic().0;
         let h = buffer(&mut workspace.hessian, n, n);
+        let delta = zero_correction(&mut workspace.correction, out.mean);
+        let mut nonlinear = false;
         for k in 0..out.mean.nrows() {
             if hessian_into(g, mean, k, h)? {
                 // Σᵢⱼ (Hₖ ∘ C)ᵢⱼ is the Frobenius inner product ⟨Hₖ, C⟩.
-                out.mean[k] += half * h.dot(covariance);
+                delta[k] = half * h.dot(covariance);
+                nonlinear = true;
             }
+        }
+        if nonlinear {
+            correct_mean(g, out.mean, delta, &mut workspace.centre)?;
         }
         out.finish()
     }
@@ -166,6 +217,8 @@ where
         let hl = buffer(&mut workspace.other_hessian, n, n);
         let product = buffer(&mut workspace.product, n, n);
         let bk = buffer(&mut workspace.sandwich, n, n);
+        let delta = zero_correction(&mut workspace.correction, out.mean);
+        let mut nonlinear = false;
         // tr(Hₖ C Hₗ C) = ⟨C Hₖ C, Hₗ⟩ (Frobenius, Hₗ symmetric): one O(n³) product pair per k,
         // O(n²) per pair. Hessians of earlier components are re-evaluated rather than stored
         // (m + m(m−1)/2 evaluations in all), so the workspace holds two n × n Hessians, not m.
@@ -173,7 +226,8 @@ where
             if !hessian_into(g, mean, k, hk)? {
                 continue;
             }
-            out.mean[k] += half * hk.dot(covariance);
+            delta[k] = half * hk.dot(covariance);
+            nonlinear = true;
             mul(product, Accum::Replace, T::one(), covariance, hk);
             mul(bk, Accum::Replace, T::one(), product, covariance);
             out.covariance[(k, k)] += half * bk.dot(hk);
@@ -183,6 +237,9 @@ where
                     out.covariance[(k, l)] += half * bk.dot(hl);
                 }
             }
+        }
+        if nonlinear {
+            correct_mean(g, out.mean, delta, &mut workspace.centre)?;
         }
         out.finish()
     }

@@ -7,21 +7,26 @@ use super::{MomentPropagator, Outputs, PropagatorWorkspace, check_inputs};
 use crate::alloc::Alloc;
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
 use crate::function::{SigmaScratch, VectorFunction};
-use crate::kernel::{Accum, CholeskyScratch, is_static, mul_tr, mul_tr_lower};
+use crate::kernel::{self, Accum, CholeskyScratch, is_static, mul_tr, mul_tr_lower};
 use crate::linalg::{ensure_shape, psd_factor_into};
 use crate::scalar::{Real, real};
 
 /// The scaled unscented transform (Julier 2002; Wan & van der Merwe 2000).
 ///
 /// With c = α²(n + κ) and L Lᵀ = C, the 2n + 1 sigma points are χ₀ = μ and
-/// χ±ⱼ = μ ± √c Lⱼ (Lⱼ the j-th column of L), with weights w = 1/(2c) for χ±ⱼ. Writing
+/// χ±ⱼ = μ ⊞ ±√c Lⱼ (Lⱼ the j-th column of L), with weights w = 1/(2c) for χ±ⱼ. Writing
 /// dᵢ = g(χᵢ) ⊖ g(μ) (so d₀ = 0) and d̄ = w Σᵢ dᵢ:
 ///
 /// ```text
-/// ȳ        = g(μ) + d̄
+/// ȳ        = g(μ) ⊞ d̄
 /// cov(y)   = w Σᵢ dᵢ dᵢᵀ + (β − α²) d̄ d̄ᵀ
-/// cov(x,y) = w Σᵢ (χᵢ − μ) dᵢᵀ
+/// cov(x,y) = w Σᵢ (χᵢ ⊟ μ) dᵢᵀ,   χ±ⱼ ⊟ μ = ±√c Lⱼ
 /// ```
+///
+/// ⊞ in the input is the function's [`input_plus_into`](VectorFunction::input_plus_into), in
+/// the output its [`output_plus_into`](VectorFunction::output_plus_into), ⊖ its
+/// [`difference`](VectorFunction::difference) (Hertzberg et al. 2013); by default +, + and −,
+/// and then this is the plain transform to the bit.
 ///
 /// This is algebraically the textbook form with W₀ᵐ = 1 − n/c and W₀ᶜ = W₀ᵐ + 1 − α² + β, but it
 /// never multiplies by the centre weight (≈ −10⁶ for α = 10⁻³), so the covariance keeps full
@@ -109,7 +114,7 @@ impl<T: Real> Default for Unscented<T> {
 }
 
 /// [`Unscented`]'s buffers: the scaled factor √c L, the deviations D₊ and D₋, their mean, and
-/// the point and value of one sigma point at a time.
+/// the tangent, point and value of one sigma point at a time.
 #[derive(Debug)]
 pub struct UnscentedWorkspace<T: Real, N: Dim, M: Dim>
 where
@@ -117,6 +122,7 @@ where
 {
     factor: Option<OMatrix<T, N, N>>,
     cholesky: CholeskyScratch,
+    tangent: Option<OMatrix<T, N, U1>>,
     point: Option<OMatrix<T, N, U1>>,
     value: Option<OMatrix<T, M, U1>>,
     deviation: Option<OMatrix<T, M, U1>>,
@@ -134,6 +140,7 @@ where
         Self {
             factor: None,
             cholesky: CholeskyScratch::default(),
+            tangent: None,
             point: None,
             value: None,
             deviation: None,
@@ -188,10 +195,11 @@ where
         psd_factor_into(covariance, l, &mut workspace.cholesky, stage)?;
         *l *= c.sqrt();
 
-        // ȳ is accumulated as g(μ) + d̄: out.mean holds g(μ) until the end.
+        // ȳ is formed as g(μ) ⊞ d̄: out.mean holds g(μ) until the end.
         let out_mean = &mut *out.mean;
         g.eval_into(mean, out_mean);
         ensure_shape(out_mean, m, 1, stage, Quantity::FunctionValue)?;
+        let delta = buffer(&mut workspace.tangent, n_dim, U1);
         let x = buffer(&mut workspace.point, n_dim, U1);
         let y = buffer(&mut workspace.value, m_dim, U1);
         let d = buffer(&mut workspace.deviation, m_dim, U1);
@@ -220,10 +228,11 @@ where
             for j in 0..n {
                 let column = &l.as_slice()[j * n..(j + 1) * n];
                 for (sign, deviations) in [(T::one(), &mut *plus), (-T::one(), &mut *minus)] {
-                    let pairs = x.as_mut_slice().iter_mut().zip(mean.as_slice());
-                    for ((xi, &mi), &li) in pairs.zip(column) {
-                        *xi = mi + sign * li;
+                    // χ = μ ⊞ ±√c Lⱼ; with + the bits of μ ± √c Lⱼ (−Lⱼ is exact).
+                    for (di, &li) in delta.as_mut_slice().iter_mut().zip(column) {
+                        *di = sign * li;
                     }
+                    g.input_plus_into(mean, delta, x);
                     g.eval_into(x, y);
                     ensure_shape(y, m, 1, stage, Quantity::FunctionValue)?;
                     g.difference_into(y, out_mean, d);
@@ -259,7 +268,10 @@ where
             minus.zip_apply(plus, |dm, dp| *dm = dp - *dm);
             mul_tr(cross, Accum::Replace, w, l, minus);
         }
-        *out.mean += &*d_bar;
+        // ȳ = g(μ) ⊞ d̄, with g(μ) moved aside (with + the bits of g(μ) + d̄ in place).
+        kernel::copy(y, out.mean);
+        g.output_plus_into(y, d_bar, out.mean);
+        ensure_shape(out.mean, m, 1, stage, Quantity::FunctionValue)?;
         out.finish()
     }
 }

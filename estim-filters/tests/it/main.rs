@@ -28,3 +28,4 @@ mod no_alloc;
 mod no_alloc_dynamic;
 mod rls;
 mod second_order;
+mod state_space;
