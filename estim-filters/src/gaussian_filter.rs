@@ -44,7 +44,7 @@ use crate::update::{self, CovarianceUpdate, UpdateSettings};
 /// The same code runs on nalgebra's static sizes (`SVector<f64, 6>`, on the stack) and runtime
 /// sizes (`DVector<f64>`); switching is changing the types. Static sizes allocate nothing. With
 /// runtime sizes the heavy kernels (products, Cholesky, triangular solves) run on faer (and
-/// our own SIMD kernels for a matrix times a vector and a Cholesky factor below n = 96) in
+/// our own SIMD kernel for a matrix times a vector) in
 /// buffers the filter keeps, sized by [`prepare_predict`](Predict::prepare_predict) and
 /// [`prepare_update`](Update::prepare_update) (once per sensor) right after construction, or
 /// else by the first prediction and the first update with each measurement length; after that
@@ -281,7 +281,7 @@ where
 {
     let n = state.shape_generic().0;
     // Chosen here rather than through a closure over the whole step: a local the compiler
-    // sees whole stays in registers for small static sizes (BENCHMARKS.md, issue #6).
+    // sees whole stays in registers for small static sizes (issue #6: the 3/2 KF step 85 → 67 ns).
     let mut local;
     let (work, cached) = match cache.predict(n) {
         Some(work) => (work, true),
