@@ -314,6 +314,8 @@ where
     S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
+    const VECTOR_SPACES: bool = S::VECTOR;
+
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, N> {
         self.model.transition(x, self.input, self.dt)
     }
@@ -476,6 +478,9 @@ where
     S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N, M>,
 {
+    // The output ⊞ stays +: the state space decides.
+    const VECTOR_SPACES: bool = S::VECTOR;
+
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, M> {
         self.model.measure(x)
     }

@@ -199,7 +199,8 @@ where
         let out_mean = &mut *out.mean;
         g.eval_into(mean, out_mean);
         ensure_shape(out_mean, m, 1, stage, Quantity::FunctionValue)?;
-        let delta = buffer(&mut workspace.tangent, n_dim, U1);
+        // The tangent ±√c Lⱼ, needed apart from the point only off vector spaces.
+        let mut delta = (!G::VECTOR_SPACES).then(|| buffer(&mut workspace.tangent, n_dim, U1));
         let x = buffer(&mut workspace.point, n_dim, U1);
         let y = buffer(&mut workspace.value, m_dim, U1);
         let d = buffer(&mut workspace.deviation, m_dim, U1);
@@ -229,10 +230,19 @@ where
                 let column = &l.as_slice()[j * n..(j + 1) * n];
                 for (sign, deviations) in [(T::one(), &mut *plus), (-T::one(), &mut *minus)] {
                     // χ = μ ⊞ ±√c Lⱼ; with + the bits of μ ± √c Lⱼ (−Lⱼ is exact).
-                    for (di, &li) in delta.as_mut_slice().iter_mut().zip(column) {
-                        *di = sign * li;
+                    if let Some(delta) = delta.as_deref_mut() {
+                        for (di, &li) in delta.as_mut_slice().iter_mut().zip(column) {
+                            *di = sign * li;
+                        }
+                        g.input_plus_into(mean, delta, x);
+                    } else {
+                        let pairs = x.as_mut_slice().iter_mut().zip(mean.as_slice());
+                        for ((xi, &mi), &li) in pairs.zip(column) {
+                            *xi = mi + sign * li;
+                        }
+                        #[cfg(debug_assertions)]
+                        check_vector_input(g, mean, column, sign, x);
                     }
-                    g.input_plus_into(mean, delta, x);
                     g.eval_into(x, y);
                     ensure_shape(y, m, 1, stage, Quantity::FunctionValue)?;
                     g.difference_into(y, out_mean, d);
@@ -269,9 +279,45 @@ where
             mul_tr(cross, Accum::Replace, w, l, minus);
         }
         // ȳ = g(μ) ⊞ d̄, with g(μ) moved aside (with + the bits of g(μ) + d̄ in place).
-        kernel::copy(y, out.mean);
-        g.output_plus_into(y, d_bar, out.mean);
-        ensure_shape(out.mean, m, 1, stage, Quantity::FunctionValue)?;
+        if G::VECTOR_SPACES {
+            *out.mean += &*d_bar;
+        } else {
+            kernel::copy(y, out.mean);
+            g.output_plus_into(y, d_bar, out.mean);
+            ensure_shape(out.mean, m, 1, stage, Quantity::FunctionValue)?;
+        }
         out.finish()
     }
+}
+
+/// Debug builds: a function that declares [`VectorFunction::VECTOR_SPACES`] must form its
+/// points by plain addition, or the fused sigma-point pass would ignore its ⊞.
+#[cfg(debug_assertions)]
+#[track_caller]
+fn check_vector_input<T, N, M, G>(
+    g: &G,
+    mean: &OVector<T, N>,
+    column: &[T],
+    sign: T,
+    x: &OVector<T, N>,
+) where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    G: VectorFunction<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    let mut delta = mean.clone();
+    for (di, &li) in delta.iter_mut().zip(column) {
+        *di = sign * li;
+    }
+    let mut expected = x.clone();
+    g.input_plus_into(mean, &delta, &mut expected);
+    debug_assert!(
+        expected
+            .iter()
+            .zip(x.iter())
+            .all(|(a, b)| a == b || (a.partial_cmp(a).is_none() && b.partial_cmp(b).is_none())),
+        "VECTOR_SPACES is true but input_plus_into is not x + δ: set VECTOR_SPACES = false"
+    );
 }
