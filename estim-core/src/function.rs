@@ -108,15 +108,7 @@ where
         minus: &mut OMatrix<T, M, N>,
         scratch: &mut SigmaScratch<T, N, M>,
     ) -> Result<()> {
-        sigma_points_one_by_one(
-            mean,
-            offsets,
-            plus,
-            minus,
-            scratch,
-            |x, delta, out| self.input_plus_into(x, delta, out),
-            |x, y| self.eval_into(x, y),
-        )
+        sigma_points_through(self, mean, offsets, plus, minus, scratch)
     }
 }
 
@@ -207,6 +199,35 @@ where
         }
     }
     Ok(())
+}
+
+/// [`VectorFunction::eval_sigma_points_into`]'s default: g at μ ⊞ ±Lⱼ one point at a time,
+/// through g's own ⊞ and value (also what a non-vector state space falls back to).
+#[inline(always)]
+pub(crate) fn sigma_points_through<T, N, M, G>(
+    g: &G,
+    mean: &OVector<T, N>,
+    offsets: &OMatrix<T, N, N>,
+    plus: &mut OMatrix<T, M, N>,
+    minus: &mut OMatrix<T, M, N>,
+    scratch: &mut SigmaScratch<T, N, M>,
+) -> Result<()>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    G: VectorFunction<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    sigma_points_one_by_one(
+        mean,
+        offsets,
+        plus,
+        minus,
+        scratch,
+        |x, delta, out| g.input_plus_into(x, delta, out),
+        |x, y| g.eval_into(x, y),
+    )
 }
 
 /// A [`VectorFunction`] with an analytic Jacobian.

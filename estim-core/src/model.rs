@@ -32,7 +32,7 @@ use crate::alloc::Alloc;
 use crate::error::Result;
 use crate::function::{
     AffineFunction, Differentiable, SigmaScratch, TwiceDifferentiable, VectorFunction,
-    sigma_points_one_by_one, store_hessian,
+    sigma_points_one_by_one, sigma_points_through, store_hessian,
 };
 use crate::manifold::{Euclidean, StateSpace, add_into};
 use crate::scalar::Real;
@@ -351,15 +351,7 @@ where
                 mean, offsets, self.input, self.dt, plus, minus, scratch,
             )
         } else {
-            sigma_points_one_by_one(
-                mean,
-                offsets,
-                plus,
-                minus,
-                scratch,
-                |x, delta, out| self.space.plus_into(x, delta, out),
-                |x, y| self.eval_into(x, y),
-            )
+            sigma_points_through(self, mean, offsets, plus, minus, scratch)
         }
     }
 
@@ -514,15 +506,7 @@ where
             self.model
                 .measure_sigma_points_into(mean, offsets, plus, minus, scratch)
         } else {
-            sigma_points_one_by_one(
-                mean,
-                offsets,
-                plus,
-                minus,
-                scratch,
-                |x, delta, out| self.space.plus_into(x, delta, out),
-                |x, y| self.eval_into(x, y),
-            )
+            sigma_points_through(self, mean, offsets, plus, minus, scratch)
         }
     }
 
