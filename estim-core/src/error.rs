@@ -20,6 +20,8 @@ pub enum Stage {
     Prediction,
     /// A filter's measurement update.
     Update,
+    /// A smoother's backward pass.
+    Smoothing,
     /// Checking derivatives by finite differences.
     DerivativeCheck,
     /// Computing consistency statistics (NEES, NIS, whiteness, Monte Carlo ensembles).
@@ -159,6 +161,7 @@ impl fmt::Display for Stage {
             Stage::Propagation => "moment propagation",
             Stage::Prediction => "prediction",
             Stage::Update => "update",
+            Stage::Smoothing => "smoothing",
             Stage::DerivativeCheck => "derivative check",
             Stage::ConsistencyCheck => "consistency check",
         })

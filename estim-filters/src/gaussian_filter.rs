@@ -428,6 +428,51 @@ where
             |x: &OVector<T, N>, q: &mut OMatrix<T, N, N>| model.process_noise_into(x, input, dt, q);
         predict_step(propagator, scratch, state, covariance, &map, noise, step)
     }
+
+    /// [`Predict::predict`] that also returns C = cov(xₖ, xₖ₊₁), the covariance of the state
+    /// before and after the step (the propagator's cross-covariance; Q adds none): what a
+    /// Rauch–Tung–Striebel smoother needs ([`crate::smoother::Rts`]). Allocates its result
+    /// and, for runtime sizes, its buffers; on an error the filter is unchanged.
+    ///
+    /// ```
+    /// use estim_filters::{Ekf, Estimator};
+    /// use estim_core::{Gaussian, LinearProcess};
+    /// use estim_core::nalgebra::{Matrix2, Matrix2x1, Vector1, Vector2};
+    ///
+    /// let f = Matrix2::new(1.0, 0.1, 0.0, 1.0);
+    /// let process = LinearProcess { transition: f, input: Matrix2x1::zeros(), noise: Matrix2::identity() * 0.01 };
+    /// let mut ekf = Ekf::new(Gaussian::new(Vector2::zeros(), Matrix2::identity())?);
+    /// let c = ekf.predict_with_cross_covariance(&process, &Vector1::zeros(), 0.1)?;
+    /// assert!((c - f.transpose()).abs().max() < 1e-15); // cov(x, F x) = P Fᵀ with P = I
+    /// # Ok::<(), estim_core::Error>(())
+    /// ```
+    pub fn predict_with_cross_covariance<P>(
+        &mut self,
+        model: &P,
+        input: &P::Input,
+        dt: T,
+    ) -> Result<OMatrix<T, N, N>>
+    where
+        P: ProcessModel<T, N>,
+        Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
+    {
+        ensure_time_step(dt)?;
+        let stage = Stage::Prediction;
+        let n = self.state.shape_generic().0;
+        let mut q = OMatrix::zeros_generic(n, n);
+        model.process_noise_into(&self.state, input, dt, &mut q);
+        ensure_shape(&q, n.value(), n.value(), stage, Quantity::ProcessNoise)?;
+        ensure_nonnegative_diagonal(&q, stage, Quantity::ProcessNoise)?;
+        let map = Transition::on(&self.space, model, input, dt);
+        let mut moments = estim_core::Moments::zeros(n, n);
+        let mut workspace = Default::default();
+        let out = Outputs::moments(&mut moments).with_noise(&q);
+        self.propagator
+            .propagate_into(&self.state, &self.covariance, &map, out, &mut workspace)?;
+        self.state = moments.mean;
+        self.covariance = moments.covariance;
+        Ok(moments.cross_covariance)
+    }
 }
 
 impl<T, N, M, Pr, P, H> PredictCorrelated<T, N, M, P, H> for GaussianFilter<T, N, Pr>

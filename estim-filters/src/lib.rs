@@ -58,6 +58,7 @@ pub mod proptest_support;
 mod report;
 mod rls;
 mod scratch;
+pub mod smoother;
 mod traits;
 pub mod update;
 pub mod validation;
@@ -70,6 +71,7 @@ pub use gaussian_filter::{
 pub use monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Recorder};
 pub use report::{UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
+pub use smoother::{Rts, SmootherError};
 pub use traits::{Estimator, Predict, PredictCorrelated, Update};
 pub use update::CovarianceUpdate;
 pub use validation::ValidationError;

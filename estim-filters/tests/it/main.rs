@@ -28,4 +28,5 @@ mod no_alloc;
 mod no_alloc_dynamic;
 mod rls;
 mod second_order;
+mod smoother;
 mod state_space;

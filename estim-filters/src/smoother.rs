@@ -1,0 +1,211 @@
+//! Rauch–Tung–Striebel smoothing of a recorded forward pass, for every Gaussian filter.
+//!
+//! The forward pass is the user's own loop over a [`GaussianFilter`], with [`Rts::predict`]
+//! in place of `predict` (so time-varying models, inputs, Δt, state-dependent Q, several
+//! sensors and steps without a measurement all work as in filtering). Each prediction records
+//! the filtered estimate (x̂ₖ, Pₖ), the prediction (x̂⁻ₖ₊₁, P⁻ₖ₊₁) and the cross-covariance
+//! Cₖ = cov(xₖ, xₖ₊₁) that the filter's moment propagator computes: C = P Fᵀ for the
+//! (extended) Kalman filter, the sigma-point sum for the UKF (unscented RTS), the linearised
+//! one for the second-order filters. The backward pass ([`Rts::smooth`]) is then, from the
+//! last estimate back (Särkkä, *Bayesian Filtering and Smoothing*, 2013, §8.2 and Thm 9.1):
+//!
+//! ```text
+//! Gₖ   = Cₖ (P⁻ₖ₊₁)⁻¹                       (two triangular solves with the Cholesky factor
+//!                                           of P⁻ₖ₊₁; never an inverse)
+//! x̂ˢₖ  = x̂ₖ ⊞ Gₖ (x̂ˢₖ₊₁ ⊟ x̂⁻ₖ₊₁)
+//! Pˢₖ  = Pₖ + Gₖ (Pˢₖ₊₁ − P⁻ₖ₊₁) Gₖᵀ          (symmetrised)
+//! ```
+//!
+//! with ⊞/⊟ the filter's [`StateSpace`](estim_core::StateSpace) (+/− by default).
+//!
+//! ```
+//! use estim_filters::{KalmanFilter, Update};
+//! use estim_filters::smoother::Rts;
+//! use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+//! use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Matrix2x1, Vector1, Vector2};
+//!
+//! let dt = 1.0;
+//! let process = LinearProcess {
+//!     transition: Matrix2::new(1.0, dt, 0.0, 1.0),
+//!     input: Matrix2x1::zeros(),
+//!     noise: Matrix2::identity() * 1e-2,
+//! };
+//! let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.5) };
+//! let mut kf = KalmanFilter::new(Gaussian::new(Vector2::zeros(), Matrix2::identity() * 10.0)?);
+//! let mut rts = Rts::new();
+//! for (k, z) in [0.1, 1.2, 1.9, 3.1, 3.9].into_iter().enumerate() {
+//!     if k > 0 {
+//!         rts.predict(&mut kf, &process, &Vector1::zeros(), dt)?;
+//!     }
+//!     kf.update(&sensor, &Vector1::new(z))?;
+//! }
+//! let smoothed = rts.smooth(&kf)?;
+//! assert_eq!(smoothed.len(), 5);
+//! // Every estimate now uses all five positions: the first is much better known.
+//! assert!(smoothed[0].covariance()[(1, 1)] < 0.5);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use estim_core::kernel::{self, CholeskyScratch};
+use estim_core::linalg::{all_finite, symmetrize};
+use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
+use estim_core::propagate::{MomentPropagator, PropagatorWorkspace};
+use estim_core::{
+    Alloc, Error, Gaussian, ProcessModel, Quantity, Real, Stage, StateSpace, Transition,
+    error::Result,
+};
+
+use crate::gaussian_filter::GaussianFilter;
+use crate::traits::Estimator;
+
+/// A failed backward step, with the index k of the estimate it was computing (0 = the first).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error("smoothing step {step}: {error}")]
+pub struct SmootherError {
+    /// The index of the smoothed estimate that failed.
+    pub step: usize,
+    /// What failed.
+    pub error: Error,
+}
+
+/// What one prediction of the forward pass leaves for the backward pass.
+#[derive(Clone, Debug)]
+struct Record<T: Real, N: Dim>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    state: OVector<T, N>,
+    covariance: OMatrix<T, N, N>,
+    predicted_state: OVector<T, N>,
+    predicted_covariance: OMatrix<T, N, N>,
+    cross: OMatrix<T, N, N>,
+}
+
+/// A Rauch–Tung–Striebel smoother over a forward pass driven through [`Rts::predict`]
+/// (module docs). Memory: three n-vectors' and three n × n matrices' worth per prediction.
+#[derive(Clone, Debug)]
+pub struct Rts<T: Real, N: Dim>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    records: Vec<Record<T, N>>,
+}
+
+impl<T: Real, N: Dim> Default for Rts<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    fn default() -> Self {
+        Self {
+            records: Vec::new(),
+        }
+    }
+}
+
+impl<T: Real, N: Dim> Rts<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// An empty record.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The number of predictions recorded.
+    pub fn len(&self) -> usize {
+        self.records.len()
+    }
+
+    /// Whether no prediction is recorded.
+    pub fn is_empty(&self) -> bool {
+        self.records.is_empty()
+    }
+
+    /// Predicts `filter` through `model` ([`GaussianFilter::predict_with_cross_covariance`])
+    /// and records what the backward pass needs. On an error nothing is recorded and the
+    /// filter is unchanged.
+    pub fn predict<Pr, S, P>(
+        &mut self,
+        filter: &mut GaussianFilter<T, N, Pr, S>,
+        model: &P,
+        input: &P::Input,
+        dt: T,
+    ) -> Result<()>
+    where
+        P: ProcessModel<T, N>,
+        Pr: PropagatorWorkspace<T>
+            + for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
+        S: StateSpace<T, N>,
+    {
+        let (state, covariance) = (filter.state().clone(), filter.covariance().clone());
+        let cross = filter.predict_with_cross_covariance(model, input, dt)?;
+        self.records.push(Record {
+            state,
+            covariance,
+            predicted_state: filter.state().clone(),
+            predicted_covariance: filter.covariance().clone(),
+            cross,
+        });
+        Ok(())
+    }
+
+    /// The smoothed estimates at the times of the forward pass: `len() + 1` of them, the first
+    /// at the state before the first recorded prediction, the last `filter`'s current estimate
+    /// (the end of the forward pass, whose ⊞/⊟ are used). Leaves the record as it is.
+    ///
+    /// Errors, with the index of the estimate being computed: a predicted covariance that is
+    /// not positive definite ([`Error::NotPositiveDefinite`], stage
+    /// [`Smoothing`](Stage::Smoothing)), a non-finite result ([`Error::NonFinite`]).
+    pub fn smooth<Pr, S>(
+        &self,
+        filter: &GaussianFilter<T, N, Pr, S>,
+    ) -> core::result::Result<Vec<Gaussian<T, N>>, SmootherError>
+    where
+        Pr: PropagatorWorkspace<T>,
+        S: StateSpace<T, N>,
+    {
+        let space = filter.state_space();
+        let n = filter.state().shape_generic().0;
+        let mut smoothed = vec![Gaussian::new_unchecked(
+            filter.state().clone(),
+            filter.covariance().clone(),
+        )];
+        let mut cholesky = CholeskyScratch::default();
+        let (mut factor, mut gain) = (OMatrix::zeros_generic(n, n), OMatrix::zeros_generic(n, n));
+        let (mut dx, mut correction) =
+            (OVector::zeros_generic(n, U1), OVector::zeros_generic(n, U1));
+        for (step, record) in self.records.iter().enumerate().rev() {
+            let fail = |error| SmootherError { step, error };
+            let next = smoothed.last().expect("starts with the last estimate");
+            // G = C (P⁻)⁻¹ = C L⁻ᵀ L⁻¹, solved from the right in G's own storage.
+            factor.copy_from(&record.predicted_covariance);
+            if !kernel::cholesky_in_place(&mut factor, &mut cholesky) {
+                return Err(fail(Error::NotPositiveDefinite {
+                    stage: Stage::Smoothing,
+                    quantity: Quantity::Covariance,
+                }));
+            }
+            gain.copy_from(&record.cross);
+            kernel::solve_right_lower_transpose_in_place(&factor, &mut gain);
+            kernel::solve_right_lower_in_place(&factor, &mut gain);
+            // x̂ˢ = x̂ ⊞ G (x̂ˢₖ₊₁ ⊟ x̂⁻).
+            space.minus_into(next.mean(), &record.predicted_state, &mut dx);
+            correction.gemv(T::one(), &gain, &dx, T::zero());
+            let mut state = record.state.clone();
+            space.plus_into(&record.state, &correction, &mut state);
+            // Pˢ = P + G (Pˢₖ₊₁ − P⁻) Gᵀ, symmetrised.
+            let difference = next.covariance() - &record.predicted_covariance;
+            let mut covariance = &record.covariance + &gain * difference * gain.transpose();
+            symmetrize(&mut covariance);
+            if !(all_finite(&state) && all_finite(&covariance)) {
+                return Err(fail(Error::NonFinite {
+                    stage: Stage::Smoothing,
+                    quantity: Quantity::Covariance,
+                }));
+            }
+            smoothed.push(Gaussian::new_unchecked(state, covariance));
+        }
+        smoothed.reverse();
+        Ok(smoothed)
+    }
+}
