@@ -46,6 +46,8 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+use std::collections::VecDeque;
+
 use estim_core::kernel::{self, CholeskyScratch};
 use estim_core::linalg::{all_finite, symmetrize};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
@@ -82,13 +84,15 @@ where
 }
 
 /// A Rauch–Tung–Striebel smoother over a forward pass driven through [`Rts::predict`]
-/// (module docs). Memory: three n-vectors' and three n × n matrices' worth per prediction.
+/// (module docs). Memory: two n-vectors and three n × n matrices per recorded prediction; with
+/// [`with_lag`](Self::with_lag), at most `lag` of them (a fixed-lag smoother).
 #[derive(Clone, Debug)]
 pub struct Rts<T: Real, N: Dim>
 where
     DefaultAllocator: Alloc<N>,
 {
-    records: Vec<Record<T, N>>,
+    records: VecDeque<Record<T, N>>,
+    lag: Option<usize>,
 }
 
 impl<T: Real, N: Dim> Default for Rts<T, N>
@@ -97,7 +101,8 @@ where
 {
     fn default() -> Self {
         Self {
-            records: Vec::new(),
+            records: VecDeque::new(),
+            lag: None,
         }
     }
 }
@@ -106,9 +111,45 @@ impl<T: Real, N: Dim> Rts<T, N>
 where
     DefaultAllocator: Alloc<N>,
 {
-    /// An empty record.
+    /// An empty record of the whole forward pass.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// A fixed-lag smoother: only the last `lag` predictions are kept (memory fixed once
+    /// `lag` are recorded), and [`smooth`](Self::smooth)'s first estimate is x̂ₖ₋ₗ given the
+    /// data up to k: exact, because the backward recursion from k down to k − lag needs only
+    /// the filtered estimates and predictions in between. `lag = 0` keeps nothing (the
+    /// smoothed estimate is the filtered one).
+    ///
+    /// ```
+    /// use estim_filters::{KalmanFilter, Update};
+    /// use estim_filters::smoother::Rts;
+    /// use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+    /// use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Matrix2x1, Vector1, Vector2};
+    ///
+    /// let process = LinearProcess {
+    ///     transition: Matrix2::new(1.0, 1.0, 0.0, 1.0),
+    ///     input: Matrix2x1::zeros(),
+    ///     noise: Matrix2::identity() * 1e-2,
+    /// };
+    /// let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.5) };
+    /// let mut kf = KalmanFilter::new(Gaussian::new(Vector2::zeros(), Matrix2::identity())?);
+    /// let mut lagged = Rts::with_lag(3);
+    /// for k in 0..100 {
+    ///     lagged.predict(&mut kf, &process, &Vector1::zeros(), 1.0)?;
+    ///     kf.update(&sensor, &Vector1::new(k as f64))?;
+    ///     let three_steps_back = &lagged.smooth(&kf)?[0];
+    ///     assert!(lagged.len() <= 3);
+    /// #   let _ = three_steps_back;
+    /// }
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn with_lag(lag: usize) -> Self {
+        Self {
+            records: VecDeque::with_capacity(lag),
+            lag: Some(lag),
+        }
     }
 
     /// The number of predictions recorded.
@@ -139,7 +180,10 @@ where
     {
         let (state, covariance) = (filter.state().clone(), filter.covariance().clone());
         let cross = filter.predict_with_cross_covariance(model, input, dt)?;
-        self.records.push(Record {
+        if self.lag == Some(self.records.len()) && self.records.pop_front().is_none() {
+            return Ok(()); // lag 0: nothing is kept
+        }
+        self.records.push_back(Record {
             state,
             covariance,
             predicted_state: filter.state().clone(),
@@ -151,7 +195,8 @@ where
 
     /// The smoothed estimates at the times of the forward pass: `len() + 1` of them, the first
     /// at the state before the first recorded prediction, the last `filter`'s current estimate
-    /// (the end of the forward pass, whose ⊞/⊟ are used). Leaves the record as it is.
+    /// (the end of the forward pass, whose ⊞/⊟ are used). Leaves the record as it is; allocates
+    /// the estimates and, for runtime sizes, a few n × n buffers.
     ///
     /// Errors, with the index of the estimate being computed: a predicted covariance that is
     /// not positive definite ([`Error::NotPositiveDefinite`], stage

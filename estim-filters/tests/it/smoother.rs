@@ -267,3 +267,43 @@ fn an_indefinite_prediction_is_a_typed_error_naming_the_step() {
     assert_eq!(rts.smooth(&kf).unwrap_err(), expected);
     assert_eq!(rts.len(), 3);
 }
+
+/// The fixed-lag smoother: at every time t its first estimate equals the full RTS over the
+/// data up to t at time t − L (the same arithmetic on the same records, so bit for bit), and
+/// it never holds more than L records; with L at least the sequence length it is the full RTS.
+#[test]
+fn fixed_lag_equals_rts_over_the_data_so_far_with_bounded_memory() {
+    let s = Scenario::new();
+    let sensor = s.sensor();
+    let lag = 3;
+    let prior = Gaussian::new(s.prior.0, s.prior.1).unwrap();
+    let (mut kf, mut lagged, mut long, mut full) = (
+        KalmanFilter::new(prior),
+        Rts::with_lag(lag),
+        Rts::with_lag(100),
+        Rts::new(),
+    );
+    let mut kf_full = kf.clone();
+    for k in 0..=s.dts.len() {
+        if k > 0 {
+            let process = Scenario::process(s.dts[k - 1]);
+            let u = Vector1::new(s.inputs[k - 1]);
+            let mut kf_long = kf.clone();
+            lagged.predict(&mut kf, &process, &u, s.dts[k - 1]).unwrap();
+            long.predict(&mut kf_long, &process, &u, s.dts[k - 1])
+                .unwrap();
+            full.predict(&mut kf_full, &process, &u, s.dts[k - 1])
+                .unwrap();
+        }
+        if let Some(z) = s.measurements[k] {
+            kf.update(&sensor, &Vector1::new(z)).unwrap();
+            kf_full.update(&sensor, &Vector1::new(z)).unwrap();
+        }
+        assert!(lagged.len() <= lag);
+        let window = lagged.smooth(&kf).unwrap();
+        let everything = full.smooth(&kf_full).unwrap();
+        assert_eq!(window.len(), k.min(lag) + 1);
+        assert_eq!(window[0], everything[k - k.min(lag)], "t = {k}");
+        assert_eq!(long.smooth(&kf).unwrap(), everything, "t = {k}");
+    }
+}
