@@ -71,7 +71,7 @@ pub use gaussian_filter::{
 pub use monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Recorder};
 pub use report::{UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
-pub use smoother::{Rts, SmootherError};
+pub use smoother::{Rts, Sequence, SmootherError, filter_sequence, smooth_sequence};
 pub use traits::{Estimator, Predict, PredictCorrelated, Update};
 pub use update::CovarianceUpdate;
 pub use validation::ValidationError;

@@ -53,12 +53,13 @@ use estim_core::linalg::{all_finite, symmetrize};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::{MomentPropagator, PropagatorWorkspace};
 use estim_core::{
-    Alloc, Error, Gaussian, ProcessModel, Quantity, Real, Stage, StateSpace, Transition,
-    error::Result,
+    Alloc, Error, Gaussian, MeasurementModel, ProcessModel, Quantity, Real, Stage, StateSpace,
+    Transition, error::Result,
 };
 
 use crate::gaussian_filter::GaussianFilter;
-use crate::traits::Estimator;
+use crate::report::{UpdateOutcome, UpdateReport};
+use crate::traits::{Estimator, Predict, Update};
 
 /// A failed backward step, with the index k of the estimate it was computing (0 = the first).
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
@@ -253,4 +254,193 @@ where
         smoothed.reverse();
         Ok(smoothed)
     }
+}
+
+/// A recorded sequence filtered ([`filter_sequence`]) or smoothed ([`smooth_sequence`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sequence<T: Real, N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// The estimate at each of the K + 1 times: filtered (after that time's measurement), or
+    /// smoothed (given all of them).
+    pub estimates: Vec<Gaussian<T, N>>,
+    /// The update report at each time, `None` where the measurement was missing.
+    pub updates: Vec<Option<UpdateReport<T, M>>>,
+    /// Σ ln p(zₖ | z₀ … zₖ₋₁) over the measurements used (missing ones contribute nothing, gated
+    /// ones neither): the prediction-error log-likelihood of the sequence.
+    pub log_likelihood: T,
+}
+
+/// The filter run over a recorded sequence: at each time k = 0 … K the measurement
+/// `measurements[k]` if present (missing ones are skipped, not replaced), then, for k < K, a
+/// prediction with `inputs[k]` over `dt`. `measurements` has one entry more than `inputs`.
+/// The filter ends at time K; on an error it is left where the failing step found it, and the
+/// error names that time.
+///
+/// ```
+/// use estim_filters::KalmanFilter;
+/// use estim_filters::smoother::filter_sequence;
+/// use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+/// use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Matrix2x1, Vector1, Vector2};
+///
+/// let process = LinearProcess {
+///     transition: Matrix2::new(1.0, 1.0, 0.0, 1.0),
+///     input: Matrix2x1::zeros(),
+///     noise: Matrix2::identity() * 1e-2,
+/// };
+/// let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.5) };
+/// let mut kf = KalmanFilter::new(Gaussian::new(Vector2::zeros(), Matrix2::identity())?);
+/// let zs = [Some(Vector1::new(0.1)), None, Some(Vector1::new(2.1))];
+/// let run = filter_sequence(&mut kf, &process, &[Vector1::zeros(); 2], 1.0, &sensor, &zs)?;
+/// assert_eq!(run.estimates.len(), 3);
+/// assert!(run.updates[1].is_none() && f64::is_finite(run.log_likelihood));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn filter_sequence<T, N, M, Pr, S, P, H>(
+    filter: &mut GaussianFilter<T, N, Pr, S>,
+    process: &P,
+    inputs: &[P::Input],
+    dt: T,
+    measurement: &H,
+    measurements: &[Option<OVector<T, M>>],
+) -> core::result::Result<Sequence<T, N, M>, SmootherError>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    P: ProcessModel<T, N>,
+    H: MeasurementModel<T, N, M>,
+    Pr: PropagatorWorkspace<T>
+        + for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
+    S: StateSpace<T, N>,
+    GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    run(filter, process, inputs, dt, measurement, measurements, None)
+}
+
+/// [`filter_sequence`], then the Rauch–Tung–Striebel backward pass ([`Rts`]): the estimates
+/// are smoothed (given every measurement); the update reports and the log-likelihood are the
+/// forward pass's.
+///
+/// ```
+/// use estim_filters::Ukf;
+/// use estim_filters::smoother::smooth_sequence;
+/// use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+/// use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Matrix2x1, Vector1, Vector2};
+///
+/// let process = LinearProcess {
+///     transition: Matrix2::new(1.0, 1.0, 0.0, 1.0),
+///     input: Matrix2x1::zeros(),
+///     noise: Matrix2::identity() * 1e-2,
+/// };
+/// let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.5) };
+/// let mut ukf = Ukf::new(Gaussian::new(Vector2::zeros(), Matrix2::identity())?);
+/// let zs = [Some(Vector1::new(0.1)), None, Some(Vector1::new(2.1)), Some(Vector1::new(2.9))];
+/// let run = smooth_sequence(&mut ukf, &process, &[Vector1::zeros(); 3], 1.0, &sensor, &zs)?;
+/// // The missing position at time 1 is estimated from both sides.
+/// assert!(f64::abs(run.estimates[1].mean()[0] - 1.0) < 0.3);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn smooth_sequence<T, N, M, Pr, S, P, H>(
+    filter: &mut GaussianFilter<T, N, Pr, S>,
+    process: &P,
+    inputs: &[P::Input],
+    dt: T,
+    measurement: &H,
+    measurements: &[Option<OVector<T, M>>],
+) -> core::result::Result<Sequence<T, N, M>, SmootherError>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    P: ProcessModel<T, N>,
+    H: MeasurementModel<T, N, M>,
+    Pr: PropagatorWorkspace<T>
+        + for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
+    S: StateSpace<T, N>,
+    GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    let mut rts = Rts::new();
+    let mut sequence = run(
+        filter,
+        process,
+        inputs,
+        dt,
+        measurement,
+        measurements,
+        Some(&mut rts),
+    )?;
+    sequence.estimates = rts.smooth(filter)?;
+    Ok(sequence)
+}
+
+/// The forward pass of [`filter_sequence`], recording into `rts` if given.
+fn run<T, N, M, Pr, S, P, H>(
+    filter: &mut GaussianFilter<T, N, Pr, S>,
+    process: &P,
+    inputs: &[P::Input],
+    dt: T,
+    measurement: &H,
+    measurements: &[Option<OVector<T, M>>],
+    mut rts: Option<&mut Rts<T, N>>,
+) -> core::result::Result<Sequence<T, N, M>, SmootherError>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    P: ProcessModel<T, N>,
+    H: MeasurementModel<T, N, M>,
+    Pr: PropagatorWorkspace<T>
+        + for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
+    S: StateSpace<T, N>,
+    GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    if measurements.len() != inputs.len() + 1 {
+        return Err(SmootherError {
+            step: measurements.len().min(inputs.len() + 1),
+            error: Error::DimensionMismatch {
+                stage: Stage::Smoothing,
+                quantity: Quantity::Measurement,
+                expected_rows: inputs.len() + 1,
+                expected_cols: 1,
+                found_rows: measurements.len(),
+                found_cols: 1,
+            },
+        });
+    }
+    let mut sequence = Sequence {
+        estimates: Vec::with_capacity(measurements.len()),
+        updates: Vec::with_capacity(measurements.len()),
+        log_likelihood: T::zero(),
+    };
+    for (step, z) in measurements.iter().enumerate() {
+        let fail = |error| SmootherError { step, error };
+        let report = match z {
+            Some(z) => {
+                let report = filter.update(measurement, z).map_err(fail)?;
+                if report.outcome == UpdateOutcome::Applied {
+                    sequence.log_likelihood += report.log_likelihood;
+                }
+                Some(report)
+            }
+            None => None,
+        };
+        sequence.updates.push(report);
+        sequence.estimates.push(Gaussian::new_unchecked(
+            filter.state().clone(),
+            filter.covariance().clone(),
+        ));
+        if let Some(input) = inputs.get(step) {
+            match rts.as_deref_mut() {
+                Some(rts) => rts.predict(filter, process, input, dt),
+                None => filter.predict(process, input, dt),
+            }
+            .map_err(fail)?;
+        }
+    }
+    Ok(sequence)
 }

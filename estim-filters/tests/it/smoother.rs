@@ -10,7 +10,7 @@ use estim_core::nalgebra::{
 };
 use estim_core::propagate::Unscented;
 use estim_core::{Error, Gaussian, LinearMeasurement, LinearProcess, Quantity, Stage};
-use estim_filters::smoother::{Rts, SmootherError};
+use estim_filters::smoother::{Rts, SmootherError, filter_sequence, smooth_sequence};
 use estim_filters::{Ekf, GaussianFilter, KalmanFilter, Update};
 
 /// A time-varying 2-state system: Δt changes each step (so does F), Q scales with Δt, an input
@@ -98,7 +98,7 @@ impl Scenario {
     /// The joint posterior of (x₀, …, x_K) from the information form: Λ X = η with
     /// Λ = Σ (prior, dynamics and measurement terms) Aᵀ W⁻¹ A. Returns the mean, the
     /// covariance Λ⁻¹ and the condition number of Λ.
-    fn batch(&self) -> (DVector<f64>, DMatrix<f64>, f64) {
+    fn batch(&self, with_measurements: bool) -> (DVector<f64>, DMatrix<f64>, f64) {
         let states = self.dts.len() + 1;
         let dim = 2 * states;
         let mut info = DMatrix::zeros(dim, dim);
@@ -122,7 +122,7 @@ impl Scenario {
             eta += a.transpose() * &q_inv * bu;
         }
         for (k, z) in self.measurements.iter().enumerate() {
-            if let Some(z) = z {
+            if let (Some(z), true) = (z, with_measurements) {
                 info[(2 * k, 2 * k)] += 1.0 / self.r;
                 eta[2 * k] += z / self.r;
             }
@@ -153,7 +153,7 @@ fn assert_close(a: &[f64], b: &[f64], tol: f64, what: &str) {
 #[test]
 fn rts_equals_the_batch_posterior_of_a_linear_gaussian_system() {
     let s = Scenario::new();
-    let (mean, covariance, condition) = s.batch();
+    let (mean, covariance, condition) = s.batch(true);
     let steps = s.dts.len() as f64;
     let tol = 100.0 * steps * condition * f64::EPSILON;
     assert!(tol < 1e-8, "the check would be too weak: κ = {condition:e}");
@@ -306,4 +306,90 @@ fn fixed_lag_equals_rts_over_the_data_so_far_with_bounded_memory() {
         assert_eq!(window[0], everything[k - k.min(lag)], "t = {k}");
         assert_eq!(long.smooth(&kf).unwrap(), everything, "t = {k}");
     }
+}
+
+/// The batch API on a constant-Δt version of the scenario: `smooth_sequence` equals the batch
+/// posterior, and `filter_sequence`'s log-likelihood equals the marginal likelihood of the
+/// stacked measurements, N(z; Φ m, Φ Σ Φᵀ + r I) with (m, Σ) the joint prior of the states
+/// (the information form without the measurement terms).
+#[test]
+fn sequences_match_the_batch_posterior_and_the_marginal_likelihood() {
+    let mut s = Scenario::new();
+    s.dts = vec![0.5; s.dts.len()];
+    let process = Scenario::process(0.5);
+    let inputs: Vec<_> = s.inputs.iter().map(|&u| Vector1::new(u)).collect();
+    let zs: Vec<_> = s.measurements.iter().map(|z| z.map(Vector1::new)).collect();
+    let prior = Gaussian::new(s.prior.0, s.prior.1).unwrap();
+
+    let (mean, covariance, condition) = s.batch(true);
+    let tol = 100.0 * s.dts.len() as f64 * condition * f64::EPSILON;
+    let mut kf = KalmanFilter::new(prior.clone());
+    let smoothed = smooth_sequence(&mut kf, &process, &inputs, 0.5, &s.sensor(), &zs).unwrap();
+    for (k, g) in smoothed.estimates.iter().enumerate() {
+        assert_close(
+            g.mean().as_slice(),
+            mean.rows(2 * k, 2).as_slice(),
+            tol,
+            "mean",
+        );
+        let block = covariance.view((2 * k, 2 * k), (2, 2)).clone_owned();
+        assert_close(
+            g.covariance().as_slice(),
+            block.as_slice(),
+            tol,
+            "covariance",
+        );
+    }
+
+    let (prior_mean, prior_cov, prior_condition) = s.batch(false);
+    let measured: Vec<usize> = (0..zs.len()).filter(|&k| zs[k].is_some()).collect();
+    let m = measured.len();
+    let phi = DMatrix::from_fn(m, prior_mean.len(), |i, j| f64::from(j == 2 * measured[i]));
+    let z = DVector::from_iterator(m, measured.iter().map(|&k| s.measurements[k].unwrap()));
+    let cov_z = &phi * &prior_cov * phi.transpose() + DMatrix::identity(m, m) * s.r;
+    let residual = z - &phi * &prior_mean;
+    let chol = cov_z.clone().cholesky().unwrap();
+    let quadratic = residual.dot(&chol.solve(&residual));
+    let log_det = 2.0 * chol.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
+    let expected = -0.5 * (quadratic + log_det + m as f64 * (2.0 * std::f64::consts::PI).ln());
+
+    let mut kf = KalmanFilter::new(prior);
+    let run = filter_sequence(&mut kf, &process, &inputs, 0.5, &s.sensor(), &zs).unwrap();
+    let tol = 100.0 * s.dts.len() as f64 * prior_condition * f64::EPSILON;
+    assert!(
+        tol < 1e-6,
+        "the check would be too weak: κ = {prior_condition:e}"
+    );
+    assert_close(&[run.log_likelihood], &[expected], tol, "log-likelihood");
+    assert_eq!(run.updates.iter().filter(|u| u.is_none()).count(), 4);
+    // The filtered estimates are the smoother's forward pass: the last ones agree.
+    assert_eq!(run.estimates.last(), smoothed.estimates.last());
+}
+
+/// Sequences whose lengths disagree are a typed error, and nothing runs.
+#[test]
+fn sequence_lengths_must_agree() {
+    let s = Scenario::new();
+    let mut kf = KalmanFilter::new(Gaussian::new(s.prior.0, s.prior.1).unwrap());
+    let before = kf.clone();
+    let zs = vec![Some(Vector1::new(1.0)); 3];
+    let inputs = vec![Vector1::new(0.0); 3];
+    let error = filter_sequence(
+        &mut kf,
+        &Scenario::process(0.5),
+        &inputs,
+        0.5,
+        &s.sensor(),
+        &zs,
+    )
+    .unwrap_err();
+    assert!(matches!(
+        error.error,
+        Error::DimensionMismatch {
+            expected_rows: 4,
+            found_rows: 3,
+            ..
+        }
+    ));
+    assert_eq!(kf, before);
 }
