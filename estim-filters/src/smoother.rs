@@ -16,7 +16,7 @@
 //! Pˢₖ  = Pₖ + Gₖ (Pˢₖ₊₁ − P⁻ₖ₊₁) Gₖᵀ          (symmetrised)
 //! ```
 //!
-//! with ⊞/⊟ the filter's [`StateSpace`](estim_core::StateSpace) (+/− by default).
+//! with ⊞/⊟ the filter's [`StateSpace`] (+/− by default).
 //!
 //! ```
 //! use estim_filters::{KalmanFilter, Update};
