@@ -92,7 +92,7 @@ pub use error::{Error, Parameter, Quantity, Stage};
 pub use function::{
     AffineFunction, Differentiable, SigmaScratch, TwiceDifferentiable, VectorFunction,
 };
-pub use gaussian::Gaussian;
+pub use gaussian::{Gaussian, GaussianSampler};
 pub use linalg::psd_factor;
 pub use linear::{LinearMeasurement, LinearProcess};
 pub use manifold::{Euclidean, StateSpace};
@@ -108,3 +108,8 @@ pub use scalar::Real;
 
 /// The nalgebra this crate is built on, re-exported so users get the same version.
 pub use nalgebra;
+
+/// The rand and rand_distr that [`Gaussian::sampler`] and the sampled propagator use,
+/// re-exported so users seed and draw with the same versions.
+pub use rand;
+pub use rand_distr;
