@@ -10,7 +10,9 @@
 //!   moment propagators (linearised, second order after Papoulis/Boje, Gaussian second order,
 //!   unscented, sampled) and the derivative checker.
 //! - [`filters`] (`estim-filters`): the filters and their step traits.
-//! - [`models`] (`estim-models`): the paper models.
+//! - `models` (`estim-models`, default feature `models`): the paper models. A program that
+//!   needs only the filters depends on `estim` with `default-features = false` and never
+//!   compiles them.
 //!
 //! `use estim::prelude::*;` brings in what a typical program needs.
 //!
@@ -43,22 +45,28 @@
 
 pub use estim_core as core;
 pub use estim_filters as filters;
+#[cfg(feature = "models")]
 pub use estim_models as models;
 
 /// The nalgebra estim uses, re-exported so users get the same version.
 pub use estim_core::nalgebra;
+/// The rand (and rand_distr) estim samples with, re-exported so users seed the same versions.
+pub use estim_core::{rand, rand_distr};
 
 /// The types and traits a typical estimation program needs.
 pub mod prelude {
-    pub use estim_core::derivative::{check_derivatives, check_jacobian};
+    pub use estim_core::derivative::{
+        check_derivatives, check_jacobian, check_measurement_jacobian, check_measurement_model,
+        check_process_jacobian, check_process_model,
+    };
     pub use estim_core::propagate::{
         Affine, Linearized, Sampled, SecondOrder, SecondOrderGaussian, Unscented,
     };
     pub use estim_core::{
-        AffineFunction, Differentiable, Error, Euclidean, Gaussian, LinearMeasurement,
+        AffineFunction, Alloc, Differentiable, Error, Euclidean, Gaussian, LinearMeasurement,
         LinearMeasurementModel, LinearProcess, LinearProcessModel, MeasurementHessian,
         MeasurementJacobian, MeasurementModel, MomentPropagator, ProcessHessian, ProcessJacobian,
-        ProcessModel, Real, StateSpace, TwiceDifferentiable, VectorFunction,
+        ProcessModel, Real, StateSpace, TwiceDifferentiable, VectorFunction, wrap_angle,
     };
     pub use estim_filters::{
         CovarianceUpdate, Ekf, EnsembleStats, Estimator, FadingMemoryRls, GaussianFilter,

@@ -75,3 +75,7 @@ pub use smoother::{Rts, Sequence, SmootherError, filter_sequence, smooth_sequenc
 pub use traits::{Estimator, Predict, PredictCorrelated, Update};
 pub use update::CovarianceUpdate;
 pub use validation::ValidationError;
+
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+struct ReadmeDoctests;

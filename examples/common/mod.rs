@@ -58,11 +58,14 @@ pub fn quick_requested() -> bool {
     std::env::args().any(|a| a == "--quick")
 }
 
-/// `target/figures/` under the workspace root (created if missing).
+/// `figures/` in cargo's target directory (created if missing): `$CARGO_TARGET_DIR` when set
+/// (at run time, else when the example was built), else `target/` under the workspace root.
 pub fn figure_dir() -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("target")
-        .join("figures");
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .or_else(|| option_env!("CARGO_TARGET_DIR").map(PathBuf::from))
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target"));
+    let dir = target.join("figures");
     let _ = std::fs::create_dir_all(&dir);
     dir
 }
