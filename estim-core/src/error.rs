@@ -82,6 +82,9 @@ pub enum Parameter {
     GateThreshold,
     /// A finite-difference step (must be finite and > 0).
     StepSize,
+    /// A prediction's time step Δt (must be ≥ 0: a filter predicts forward; backward
+    /// estimates come from a smoother).
+    TimeStep,
 }
 
 /// Every error an estim algorithm returns.
@@ -200,6 +203,7 @@ impl fmt::Display for Parameter {
             Parameter::ForgettingFactor => "forgetting factor",
             Parameter::GateThreshold => "gate threshold",
             Parameter::StepSize => "step size",
+            Parameter::TimeStep => "time step",
         })
     }
 }

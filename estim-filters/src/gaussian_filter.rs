@@ -9,8 +9,8 @@ use estim_core::propagate::{
 };
 use estim_core::{
     AffineFunction, Alloc, Error, Euclidean, Gaussian, LinearMeasurementModel, LinearProcessModel,
-    MeasurementModel, Observation, ProcessModel, Quantity, Real, Stage, StateSpace, Transition,
-    VectorFunction, error::Result,
+    MeasurementModel, Observation, Parameter, ProcessModel, Quantity, Real, Stage, StateSpace,
+    Transition, VectorFunction, error::Result,
 };
 
 use crate::correlated::Decorrelated;
@@ -372,15 +372,23 @@ pub(crate) fn commit<T: Real, N: Dim>(
     core::mem::swap(covariance, new_covariance);
 }
 
+/// Δt must be finite and ≥ 0: a negative step is a timestamp bug far more often than a wish
+/// to predict backwards (which a process noise Q(Δt) cannot express; use a smoother), so it is
+/// an error even for models whose Q ignores Δt.
 #[inline(always)]
 pub(crate) fn ensure_time_step<T: Real>(dt: T) -> Result<()> {
-    if dt.is_finite() {
-        Ok(())
-    } else {
+    if !dt.is_finite() {
         Err(Error::NonFinite {
             stage: Stage::Prediction,
             quantity: Quantity::TimeStep,
         })
+    } else if dt < T::zero() {
+        Err(Error::InvalidParameter {
+            parameter: Parameter::TimeStep,
+            value: estim_core::nalgebra::try_convert::<T, f64>(dt).unwrap_or(f64::NAN),
+        })
+    } else {
+        Ok(())
     }
 }
 

@@ -7,6 +7,40 @@ use crate::report::UpdateReport;
 
 /// The read/reset side of any estimator of an `N`-dimensional state. Object safe, so a
 /// filter chosen at run time can live in a `Box<dyn Estimator<T, N>>`.
+///
+/// To box a filter that can also *step*, name the models your program uses in one trait of
+/// your own over [`Predict`] and [`Update`] (both object safe for a concrete model type), with
+/// a blanket impl; every filter that accepts those models is then one `Box<dyn ...>`:
+///
+/// ```
+/// use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Matrix2x1, U1, U2, Vector1, Vector2};
+/// use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+/// use estim_filters::{Ekf, Estimator, KalmanFilter, Predict, Ukf, Update};
+///
+/// type Process = LinearProcess<f64, U2, U1>;
+/// type Sensor = LinearMeasurement<f64, U2, U1>;
+/// /// Any filter of a 2-state cart with a position sensor.
+/// trait CartFilter: Predict<f64, U2, Process> + Update<f64, U2, U1, Sensor> {}
+/// impl<F: Predict<f64, U2, Process> + Update<f64, U2, U1, Sensor>> CartFilter for F {}
+///
+/// let prior = Gaussian::new(Vector2::zeros(), Matrix2::identity())?;
+/// let choice = "ukf"; // from a configuration file, say
+/// let mut filter: Box<dyn CartFilter> = match choice {
+///     "kf" => Box::new(KalmanFilter::new(prior)),
+///     "ekf" => Box::new(Ekf::new(prior)),
+///     _ => Box::new(Ukf::new(prior)),
+/// };
+/// let process = LinearProcess {
+///     transition: Matrix2::new(1.0, 1.0, 0.0, 1.0),
+///     input: Matrix2x1::zeros(),
+///     noise: Matrix2::identity() * 1e-3,
+/// };
+/// let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.1) };
+/// filter.predict(&process, &Vector1::zeros(), 1.0)?;
+/// filter.update(&sensor, &Vector1::new(0.3))?;
+/// assert!(filter.covariance()[(0, 0)] < 1.0);
+/// # Ok::<(), estim_core::Error>(())
+/// ```
 pub trait Estimator<T: Real, N: Dim>
 where
     DefaultAllocator: Alloc<N>,
@@ -33,9 +67,11 @@ where
 {
     /// Propagates the estimate through x⁺ = f(x, u, Δt) + w.
     ///
-    /// On error the filter is left exactly as it was. Q must be finite and have no negative
-    /// variance on its diagonal (checked each step, O(n); its full positive
-    /// semi-definiteness is not, which would cost a factorisation per step).
+    /// On error the filter is left exactly as it was. Δt must be finite and ≥ 0
+    /// ([`Parameter::TimeStep`](estim_core::Parameter::TimeStep): a negative step is refused
+    /// even when Q ignores Δt). Q must be finite and have no negative variance on its diagonal
+    /// (checked each step, O(n); its full positive semi-definiteness is not, which would cost
+    /// a factorisation per step).
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()>;
 
     /// Sizes ahead of time every buffer that [`predict`](Self::predict) with this model needs,

@@ -193,6 +193,15 @@ where
             |f| f.predict(&m.process, &u, dt),
         );
     }
+    // A negative time step, even though this Q does not depend on Δt.
+    assert_fails_atomically(
+        &mut filter,
+        Error::InvalidParameter {
+            parameter: Parameter::TimeStep,
+            value: -0.1,
+        },
+        |f| f.predict(&m.process, &u, -0.1),
+    );
     // NaN in Q.
     let mut nan_q = m.process.clone();
     nan_q.noise[(1, 2)] = f64::NAN;
