@@ -14,7 +14,9 @@
 //!   needs only the filters depends on `estim` with `default-features = false` and never
 //!   compiles them.
 //!
-//! `use estim::prelude::*;` brings in what a typical program needs.
+//! `use estim::prelude::*;` brings in what a typical program needs; the [`guide`] shows how to
+//! do the common things (choosing a filter, runtime sizes, verifying, smoothing, `f32`,
+//! coming from FilterPy).
 //!
 //! ```
 //! use estim::prelude::*;
@@ -42,6 +44,8 @@
 //! ```
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
+
+pub mod guide;
 
 pub use estim_core as core;
 pub use estim_filters as filters;

@@ -1,0 +1,20 @@
+//! The user guide: how to do the common things, each page a set of compiled examples.
+//!
+//! | page | for |
+//! |---|---|
+//! | [`choosing_a_filter`] | which filter for which model, and the one-line swap |
+//! | [`runtime_sizes`] | states whose size comes from configuration (`DVector`) |
+//! | [`verifying`] | NEES/NIS, the Monte Carlo runner, checking your derivatives |
+//! | [`smoothing`] | Rauch–Tung–Striebel, fixed lag, and whole recorded sequences |
+//! | [`single_precision`] | what changes in `f32`, and the settings that survive it |
+//! | [`from_filterpy`] | a table of FilterPy (and pykalman) equivalents |
+//!
+//! The API reference is the rest of these docs; the papers reproduced with estim are the
+//! repository's examples (`cargo run --release --example papers`).
+
+pub mod choosing_a_filter;
+pub mod from_filterpy;
+pub mod runtime_sizes;
+pub mod single_precision;
+pub mod smoothing;
+pub mod verifying;

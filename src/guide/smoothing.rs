@@ -1,0 +1,31 @@
+//! # Smoothing recorded data
+//!
+//! Offline, every estimate can use every measurement, before and after it. The
+//! Rauch–Tung–Striebel smoother ([`smoother`](crate::filters::smoother)) serves every Gaussian
+//! filter through the cross-covariance its propagator already computes (so the UKF gives the
+//! unscented RTS smoother). For a recorded sequence with missing measurements:
+//!
+//! ```
+//! use estim::prelude::*;
+//! use estim::filters::smoother::smooth_sequence;
+//! use estim::nalgebra::{Matrix1, Matrix1x2, Matrix2, Matrix2x1, Vector1, Vector2};
+//!
+//! let process = LinearProcess {
+//!     transition: Matrix2::new(1.0, 1.0, 0.0, 1.0),
+//!     input: Matrix2x1::zeros(),
+//!     noise: Matrix2::identity() * 1e-2,
+//! };
+//! let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.5) };
+//! let zs = [Some(Vector1::new(0.0)), Some(Vector1::new(1.1)), None, Some(Vector1::new(2.9))];
+//! let mut kf = KalmanFilter::new(Gaussian::new(Vector2::zeros(), Matrix2::identity() * 10.0)?);
+//! let run = smooth_sequence(&mut kf, &process, &[Vector1::zeros(); 3], 1.0, &sensor, &zs)?;
+//! // Time 2 had no measurement: its smoothed position comes from both neighbours.
+//! assert!(f64::abs(run.estimates[2].mean()[0] - 2.0) < 0.3);
+//! println!("log-likelihood of the record: {}", run.log_likelihood);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! Drive your own loop with [`Rts::predict`](crate::filters::Rts::predict) in place of
+//! `predict` (several sensors, varying Δt and inputs), then call
+//! [`Rts::smooth`](crate::filters::Rts::smooth); [`Rts::with_lag`](crate::filters::Rts::with_lag)
+//! keeps only the last L steps, a fixed-lag smoother for online use.
