@@ -78,6 +78,15 @@ pub struct Series<'a> {
     pub points: Vec<(f64, f64)>,
 }
 
+/// A shaded band (e.g. ±σ about an estimate) drawn under the lines of a plot. Band i takes
+/// the colour of line i, so a band given in the same order as its estimate's line matches it.
+pub struct Band<'a> {
+    /// Legend label.
+    pub label: &'a str,
+    /// (x, lower, upper) points.
+    pub points: Vec<(f64, f64, f64)>,
+}
+
 /// Writes an SVG line plot of `series` to `target/figures/<file>` and returns its path.
 /// Non-finite points are skipped. Errors are returned, not panicked on: a figure that fails
 /// to render should not stop an example's numbers.
@@ -88,32 +97,76 @@ pub fn line_plot(
     y_label: &str,
     series: &[Series<'_>],
 ) -> Result<PathBuf, Box<dyn std::error::Error>> {
+    band_plot(file, title, x_label, y_label, series, &[])
+}
+
+/// [`line_plot`] with shaded `bands` under the lines (a ±σ envelope reads as one region, not
+/// as two more curves).
+pub fn band_plot(
+    file: &str,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series<'_>],
+    bands: &[Band<'_>],
+) -> Result<PathBuf, Box<dyn std::error::Error>> {
     let path = figure_dir().join(file);
-    draw_lines(&path, title, x_label, y_label, series)?;
+    draw(&path, title, x_label, y_label, series, bands)?;
     Ok(path)
 }
 
-/// Renders the line plot of [`line_plot`] into `path`.
-fn draw_lines(
+/// Okabe & Ito's colour-blind-safe palette (Wong, *Nature Methods* 8, 2011), without its
+/// yellow, which has too little contrast on white.
+const PALETTE: [RGBColor; 7] = [
+    RGBColor(0, 114, 178),   // blue
+    RGBColor(213, 94, 0),    // vermillion
+    RGBColor(0, 158, 115),   // bluish green
+    RGBColor(204, 121, 167), // reddish purple
+    RGBColor(230, 159, 0),   // orange
+    RGBColor(86, 180, 233),  // sky blue
+    RGBColor(0, 0, 0),       // black
+];
+
+/// A tick label with 4 significant digits at most, no "-0", and 0 for a value that is zero
+/// up to rounding on an axis spanning `span` (a tick at −1.1e-16 is the zero tick).
+fn tick(v: f64, span: f64) -> String {
+    if v.abs() <= 1e-9 * span.abs() {
+        return "0".to_string();
+    }
+    if v.abs() >= 1e5 || v.abs() < 1e-3 {
+        return format!("{v:.2e}");
+    }
+    let text = format!("{v:.4}");
+    text.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// Renders the plot of [`band_plot`] into `path`: the chart on the left, its legend in a
+/// panel of its own on the right, so it never covers the data.
+fn draw(
     path: &std::path::Path,
     title: &str,
     x_label: &str,
     y_label: &str,
     series: &[Series<'_>],
+    bands: &[Band<'_>],
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let finite = || {
-        series
-            .iter()
-            .flat_map(|s| s.points.iter())
-            .filter(|(x, y)| x.is_finite() && y.is_finite())
-    };
+    let finite = |&(x, y): &(f64, f64)| x.is_finite() && y.is_finite();
+    let points = series
+        .iter()
+        .flat_map(|s| s.points.iter().copied())
+        .chain(
+            bands
+                .iter()
+                .flat_map(|b| b.points.iter().flat_map(|&(x, lo, hi)| [(x, lo), (x, hi)])),
+        )
+        .filter(finite);
     let (mut x0, mut x1, mut y0, mut y1) = (
         f64::INFINITY,
         f64::NEG_INFINITY,
         f64::INFINITY,
         f64::NEG_INFINITY,
     );
-    for &(x, y) in finite() {
+    for (x, y) in points {
         x0 = x0.min(x);
         x1 = x1.max(x);
         y0 = y0.min(y);
@@ -126,9 +179,10 @@ fn draw_lines(
         y1 = y0 + 1.0;
     }
     let pad = 0.05 * (y1 - y0);
-    let root = SVGBackend::new(path, (900, 540)).into_drawing_area();
+    let root = SVGBackend::new(path, (1100, 540)).into_drawing_area();
     root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
+    let (plot_area, legend_area) = root.split_horizontally(860);
+    let mut chart = ChartBuilder::on(&plot_area)
         .caption(title, ("sans-serif", 20))
         .margin(12)
         .x_label_area_size(40)
@@ -138,27 +192,52 @@ fn draw_lines(
         .configure_mesh()
         .x_desc(x_label)
         .y_desc(y_label)
+        .x_label_formatter(&|v| tick(*v, x1 - x0))
+        .y_label_formatter(&|v| tick(*v, y1 - y0))
+        .light_line_style(RGBColor(235, 235, 235))
         .draw()?;
-    for (i, s) in series.iter().enumerate() {
-        let color = Palette99::pick(i).to_rgba();
-        chart
-            .draw_series(LineSeries::new(
-                s.points
-                    .iter()
-                    .copied()
-                    .filter(|(x, y)| x.is_finite() && y.is_finite()),
-                color.stroke_width(2),
-            ))?
-            .label(s.label)
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
+    let colour = |i: usize| PALETTE[i % PALETTE.len()];
+    for (i, b) in bands.iter().enumerate() {
+        let kept: Vec<_> = b
+            .points
+            .iter()
+            .copied()
+            .filter(|&(x, lo, hi)| x.is_finite() && lo.is_finite() && hi.is_finite())
+            .collect();
+        let outline = kept
+            .iter()
+            .map(|&(x, _, hi)| (x, hi))
+            .chain(kept.iter().rev().map(|&(x, lo, _)| (x, lo)));
+        chart.draw_series(std::iter::once(Polygon::new(
+            outline.collect::<Vec<_>>(),
+            colour(i).mix(0.18).filled(),
+        )))?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
+    for (i, s) in series.iter().enumerate() {
+        let style = colour(i).stroke_width(2);
+        chart.draw_series(LineSeries::new(
+            s.points.iter().copied().filter(finite),
+            style,
+        ))?;
+    }
+    // The legend panel: one row per band (a swatch) and per line (a stroke).
+    let row = |k: usize| 60 + 26 * k as i32;
+    let font = ("sans-serif", 14).into_font();
+    for (k, b) in bands.iter().enumerate() {
+        legend_area.draw(&Rectangle::new(
+            [(8, row(k) - 6), (34, row(k) + 6)],
+            colour(k).mix(0.18).filled(),
+        ))?;
+        legend_area.draw(&Text::new(b.label, (42, row(k) - 7), font.clone()))?;
+    }
+    for (i, s) in series.iter().enumerate() {
+        let k = bands.len() + i;
+        legend_area.draw(&PathElement::new(
+            vec![(8, row(k)), (34, row(k))],
+            colour(i).stroke_width(2),
+        ))?;
+        legend_area.draw(&Text::new(s.label, (42, row(k) - 7), font.clone()))?;
+    }
     root.present()?;
     Ok(())
 }
