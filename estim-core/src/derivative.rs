@@ -174,21 +174,65 @@ impl<T: Real> DerivativeReport<T> {
     }
 }
 
+/// `J[row, col]` or `H_component[row, col]`.
+impl fmt::Display for Entry {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Entry::Jacobian { row, col } => write!(f, "J[{row}, {col}]"),
+            Entry::Hessian {
+                component,
+                row,
+                col,
+            } => write!(f, "H{component}[{row}, {col}]"),
+        }
+    }
+}
+
+/// One line per distinct worst entry, naming which errors it is worst by:
+///
+/// ```
+/// use estim_core::derivative::{Comparison, DerivativeReport, Entry};
+///
+/// let c = Comparison { entry: Entry::Jacobian { row: 1, col: 0 }, analytic: 2.0, numeric: 2.5 };
+/// let report = DerivativeReport { entries: 4, worst_abs: Some(c), worst_rel: Some(c), worst_mixed: Some(c) };
+/// assert_eq!(
+///     report.to_string(),
+///     "4 entries compared; worst by abs, rel, mixed error: J[1, 0] analytic 2 numeric 2.5 \
+///      (abs error 0.5, rel 0.2)"
+/// );
+/// ```
 impl<T: Real + fmt::Display> fmt::Display for DerivativeReport<T> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{} entries compared", self.entries)?;
-        for (name, c) in [
-            ("abs", &self.worst_abs),
-            ("rel", &self.worst_rel),
-            ("mixed", &self.worst_mixed),
-        ] {
-            if let Some(c) = c {
-                write!(
-                    f,
-                    "; worst {name}: {:?} analytic {} numeric {}",
-                    c.entry, c.analytic, c.numeric
-                )?;
+        let worst = [
+            ("abs", self.worst_abs),
+            ("rel", self.worst_rel),
+            ("mixed", self.worst_mixed),
+        ];
+        for (i, (_, c)) in worst.iter().enumerate() {
+            let Some(c) = c else { continue };
+            if worst[..i]
+                .iter()
+                .any(|(_, earlier)| earlier.as_ref() == Some(c))
+            {
+                continue; // printed already, under the first error it is worst by
             }
+            f.write_str("; worst by ")?;
+            let by = worst[i..]
+                .iter()
+                .filter(|(_, other)| other.as_ref() == Some(c));
+            for (k, (name, _)) in by.enumerate() {
+                write!(f, "{}{name}", if k > 0 { ", " } else { "" })?;
+            }
+            write!(
+                f,
+                " error: {} analytic {} numeric {} (abs error {}, rel {})",
+                c.entry,
+                c.analytic,
+                c.numeric,
+                c.abs_error(),
+                c.rel_error()
+            )?;
         }
         Ok(())
     }

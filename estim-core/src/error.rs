@@ -80,6 +80,8 @@ pub enum Parameter {
     ForgettingFactor,
     /// A gating threshold (must be finite and > 0).
     GateThreshold,
+    /// A gate's probability (must be in (0, 1)).
+    GateProbability,
     /// A finite-difference step (must be finite and > 0).
     StepSize,
     /// A prediction's time step Δt (must be ≥ 0: a filter predicts forward; backward
@@ -202,6 +204,7 @@ impl fmt::Display for Parameter {
             Parameter::SampleCount => "sample count",
             Parameter::ForgettingFactor => "forgetting factor",
             Parameter::GateThreshold => "gate threshold",
+            Parameter::GateProbability => "gate probability",
             Parameter::StepSize => "step size",
             Parameter::TimeStep => "time step",
         })

@@ -300,6 +300,49 @@ impl ChiSquareBand {
     }
 }
 
+/// The band and what it is for, e.g. for 2 states over 50 runs at 95 %:
+///
+/// ```
+/// use estim_filters::consistency::ChiSquareBand;
+/// let band = ChiSquareBand::two_sided(2, 50, 0.95)?;
+/// assert_eq!(
+///     band.to_string(),
+///     "[1.48, 2.59] (95% band for the average of 50 terms, chi-square with 100 dof in all; expected 2)"
+/// );
+/// # Ok::<(), estim_filters::ValidationError>(())
+/// ```
+impl core::fmt::Display for ChiSquareBand {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let digits = f.precision().unwrap_or(3);
+        let sig = |v: f64| format_significant(v, digits);
+        write!(
+            f,
+            "[{}, {}] ({}% band for the average of {} terms, chi-square with {} dof in all; expected {})",
+            sig(self.lower),
+            sig(self.upper),
+            self.confidence * 100.0,
+            self.terms,
+            self.degrees_of_freedom,
+            sig(self.expected()),
+        )
+    }
+}
+
+/// `v` with `digits` significant digits, trailing zeros dropped (2.590 → 2.59, 2.000 → 2).
+fn format_significant(v: f64, digits: usize) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return v.to_string();
+    }
+    let magnitude = v.abs().log10().floor() as i32;
+    let decimals = (digits as i32 - 1 - magnitude).max(0) as usize;
+    let text = format!("{v:.decimals$}");
+    if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        text
+    }
+}
+
 /// Running average of χ² statistics (NEES or NIS) of possibly different dimensions, e.g. the
 /// NIS over the K updates of one run: Σ εₖ ~ χ²_{Σ dₖ} when consistent.
 ///

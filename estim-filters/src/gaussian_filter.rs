@@ -17,7 +17,7 @@ use crate::correlated::Decorrelated;
 use crate::report::UpdateReport;
 use crate::scratch::{PredictScratch, ScratchCache, UpdateScratch};
 use crate::traits::{Estimator, Predict, PredictCorrelated, Update};
-use crate::update::{self, CovarianceUpdate, UpdateSettings};
+use crate::update::{self, CovarianceUpdate, Gate, UpdateSettings};
 
 /// A Gaussian filter: the estimate is N(x̂, P), and both steps ask the propagator `Pr` for the
 /// moments of a function of it.
@@ -128,7 +128,8 @@ pub type SecondOrderEkf<T, N> = GaussianFilter<T, N, SecondOrder>;
 pub type GaussianSecondOrderEkf<T, N> = GaussianFilter<T, N, SecondOrderGaussian>;
 
 /// The unscented Kalman filter (Julier & Uhlmann 1997; Wan & van der Merwe 2000), with the
-/// scaled sigma points of [`Unscented`] (default α = 10⁻³, β = 2, κ = 0; use
+/// scaled sigma points of [`Unscented`] (default β = 2, κ = 0 and α = 10⁻³ in `f64`, 0.5 in
+/// `f32`, where α = 10⁻³ would cost the mean all its precision; use
 /// [`GaussianFilter::with_propagator`] for others, e.g. [`Unscented::cubature`] for the
 /// cubature Kalman filter). Requirements on the model: values only.
 pub type Ukf<T, N> = GaussianFilter<T, N, Unscented<T>>;
@@ -214,11 +215,12 @@ where
         self
     }
 
-    /// Rejects (and reports as [`Gated`](crate::UpdateOutcome::Gated)) any measurement whose
-    /// NIS exceeds `threshold`, e.g. the 99% χ² quantile for the measurement's dimension.
-    /// `threshold` must be finite and > 0.
-    pub fn with_gate(mut self, threshold: T) -> Result<Self> {
-        self.settings = self.settings.with_gate(threshold)?;
+    /// Rejects (and reports as [`Gated`](crate::UpdateOutcome::Gated)) the measurements `gate`
+    /// says: a NIS threshold ([`Gate::Nis`]) or a probability ([`Gate::Probability`], the χ²
+    /// quantile for each measurement's dimension). A threshold must be finite and > 0, a
+    /// probability in (0, 1) ([`Error::InvalidParameter`](estim_core::Error)).
+    pub fn with_gate(mut self, gate: impl Into<Gate<T>>) -> Result<Self> {
+        self.settings = self.settings.with_gate(gate.into())?;
         Ok(self)
     }
 
@@ -232,8 +234,8 @@ where
         self.settings.form
     }
 
-    /// The gate threshold, if any.
-    pub fn gate(&self) -> Option<T> {
+    /// The gate, if any.
+    pub fn gate(&self) -> Option<Gate<T>> {
         self.settings.gate
     }
 }

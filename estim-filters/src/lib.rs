@@ -73,7 +73,7 @@ pub use report::{UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
 pub use smoother::{Rts, Sequence, SmootherError, filter_sequence, smooth_sequence};
 pub use traits::{Estimator, Predict, PredictCorrelated, Update};
-pub use update::CovarianceUpdate;
+pub use update::{CovarianceUpdate, Gate};
 pub use validation::ValidationError;
 
 #[doc = include_str!("../README.md")]

@@ -6,7 +6,7 @@ use estim_core::{Alloc, Error, Gaussian, MeasurementJacobian, Parameter, Real, e
 use crate::gaussian_filter::{Ekf, Step};
 use crate::report::UpdateReport;
 use crate::traits::{Estimator, Update};
-use crate::update::CovarianceUpdate;
+use crate::update::{CovarianceUpdate, Gate};
 
 /// Recursive least squares with exponential forgetting (the own-ship trajectory estimator,
 /// OTE, of Lee & Huang 2002, eq 46-48), for observations z = B θ + v, v ~ N(0, S):
@@ -65,9 +65,9 @@ where
         self
     }
 
-    /// Rejects updates whose NIS exceeds `threshold` (finite, > 0).
-    pub fn with_gate(mut self, threshold: T) -> Result<Self> {
-        self.filter = self.filter.with_gate(threshold)?;
+    /// Rejects the updates `gate` says ([`GaussianFilter::with_gate`](crate::GaussianFilter::with_gate)).
+    pub fn with_gate(mut self, gate: impl Into<Gate<T>>) -> Result<Self> {
+        self.filter = self.filter.with_gate(gate)?;
         Ok(self)
     }
 

@@ -45,14 +45,59 @@ pub enum CovarianceUpdate {
     Symmetrized,
 }
 
+/// Which measurements an update rejects (and reports as [`Gated`](crate::UpdateOutcome::Gated),
+/// leaving the estimate unchanged).
+///
+/// ```
+/// use estim_filters::{Estimator, Gate, KalmanFilter, Update, UpdateOutcome};
+/// use estim_core::{Gaussian, LinearMeasurement};
+/// use estim_core::nalgebra::{Matrix2, Vector2};
+///
+/// // Reject what a consistent filter would see with probability below 1 %, whatever the
+/// // measurement's dimension (for 2 components the threshold is χ²₂(0.99) = 9.21).
+/// let prior = Gaussian::new(Vector2::zeros(), Matrix2::identity())?;
+/// let mut kf = KalmanFilter::new(prior).with_gate(Gate::Probability(0.99))?;
+/// let sensor = LinearMeasurement { observation: Matrix2::identity(), noise: Matrix2::identity() };
+/// // S = P + R = 2 I: NIS = (2² + 2²)/2 = 4 < 9.21, used.
+/// assert_eq!(kf.update(&sensor, &Vector2::new(2.0, 2.0))?.outcome, UpdateOutcome::Applied);
+/// // A 10σ outlier: rejected, the estimate unchanged.
+/// let before = kf.state().clone();
+/// assert_eq!(kf.update(&sensor, &Vector2::new(10.0, -10.0))?.outcome, UpdateOutcome::Gated);
+/// assert_eq!(kf.state(), &before);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Gate<T> {
+    /// Rejects a measurement whose NIS exceeds this threshold (finite, > 0), whatever its
+    /// dimension.
+    Nis(T),
+    /// Rejects a measurement whose NIS exceeds the χ²ₘ quantile at this probability (in
+    /// (0, 1)), m its dimension: a consistent filter then rejects the fraction 1 − p of correct
+    /// measurements from every sensor. The quantiles for m ≤ 16 are computed once, when the
+    /// gate is set; larger m compute theirs at each update (a few microseconds).
+    Probability(f64),
+}
+
+/// A bare threshold is a [`Gate::Nis`]: `with_gate(9.21)`.
+impl<T: Real> From<T> for Gate<T> {
+    fn from(threshold: T) -> Self {
+        Gate::Nis(threshold)
+    }
+}
+
+/// The quantiles a [`Gate::Probability`] keeps, for m = 1..=GATE_TABLE.
+const GATE_TABLE: usize = 16;
+
 /// What every filter's measurement update is configured with: the covariance form and an
-/// optional NIS gate. Shared by the Kalman family and the fading-memory RLS.
+/// optional gate. Shared by the Kalman family and the fading-memory RLS.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct UpdateSettings<T> {
     /// The covariance update form.
     pub(crate) form: CovarianceUpdate,
-    /// The NIS gate threshold, if any.
-    pub(crate) gate: Option<T>,
+    /// The gate, if any.
+    pub(crate) gate: Option<Gate<T>>,
+    /// For a [`Gate::Probability`]: its χ²ₘ quantiles, m = 1..=GATE_TABLE.
+    quantiles: [T; GATE_TABLE],
 }
 
 impl<T: Real> UpdateSettings<T> {
@@ -61,23 +106,59 @@ impl<T: Real> UpdateSettings<T> {
         Self {
             form: CovarianceUpdate::default(),
             gate: None,
+            quantiles: [T::zero(); GATE_TABLE],
         }
     }
 
-    /// Gates at `threshold`, which must be finite and > 0.
-    pub(crate) fn with_gate(self, threshold: T) -> Result<Self> {
-        if threshold.is_finite() && threshold > T::zero() {
-            Ok(Self {
-                gate: Some(threshold),
-                ..self
-            })
-        } else {
-            Err(Error::InvalidParameter {
-                parameter: Parameter::GateThreshold,
-                value: estim_core::nalgebra::try_convert::<T, f64>(threshold).unwrap_or(f64::NAN),
-            })
+    /// Gates with `gate`: a threshold must be finite and > 0, a probability in (0, 1).
+    pub(crate) fn with_gate(self, gate: Gate<T>) -> Result<Self> {
+        let mut quantiles = [T::zero(); GATE_TABLE];
+        match gate {
+            Gate::Nis(threshold) if !(threshold.is_finite() && threshold > T::zero()) => {
+                return Err(Error::InvalidParameter {
+                    parameter: Parameter::GateThreshold,
+                    value: estim_core::nalgebra::try_convert::<T, f64>(threshold)
+                        .unwrap_or(f64::NAN),
+                });
+            }
+            Gate::Nis(_) => {}
+            Gate::Probability(p) => {
+                let invalid = Error::InvalidParameter {
+                    parameter: Parameter::GateProbability,
+                    value: p,
+                };
+                if !(p > 0.0 && p < 1.0) {
+                    return Err(invalid);
+                }
+                for (m, q) in quantiles.iter_mut().enumerate() {
+                    *q = real(chi2_quantile(m + 1, p).ok_or(invalid)?);
+                }
+            }
+        }
+        Ok(Self {
+            gate: Some(gate),
+            quantiles,
+            ..self
+        })
+    }
+
+    /// The NIS above which an m-component measurement is rejected, if any.
+    fn threshold(&self, m: usize) -> Option<T> {
+        match self.gate? {
+            Gate::Nis(threshold) => Some(threshold),
+            Gate::Probability(_) if m == 0 => None,
+            Gate::Probability(_) if m <= GATE_TABLE => Some(self.quantiles[m - 1]),
+            // Always representable: p was validated when the gate was set.
+            Gate::Probability(p) => chi2_quantile(m, p).map(real),
         }
     }
+}
+
+/// χ²_dof's `p` quantile, if finite.
+fn chi2_quantile(dof: usize, p: f64) -> Option<f64> {
+    crate::consistency::dist::chi2_quantile(dof, p)
+        .ok()
+        .filter(|q| q.is_finite())
 }
 
 /// ln det S = 2 Σ ln Lᵢᵢ from the Cholesky factor: one logarithm of the product of the diagonal
@@ -187,7 +268,7 @@ where
     report.nis = nis;
     report.log_likelihood = -real::<T>(0.5)
         * (nis + log_det + real::<T>(m as f64 * (2.0 * core::f64::consts::PI).ln()));
-    if settings.gate.is_some_and(|g| !(nis <= g)) {
+    if settings.threshold(m).is_some_and(|g| !(nis <= g)) {
         report.outcome = UpdateOutcome::Gated;
         return Ok(false);
     }

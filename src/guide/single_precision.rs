@@ -3,9 +3,10 @@
 //! Every filter is generic over the scalar: write `f32` where you wrote `f64`. What changes is
 //! the rounding, ε = 1.2·10⁻⁷ instead of 2.2·10⁻¹⁶, and with it three things to watch:
 //!
-//! - **The unscented spread.** `Ukf::new` uses α = 10⁻³, whose centre weight is about −10⁶ for
-//!   a small state: in `f32` that cancels most of the covariance's digits. Use a spread of
-//!   order one in `f32`, e.g. the cubature rule (`Unscented::cubature()`, all weights 1/2n).
+//! - **The unscented spread.** The unscented mean's round-off grows as ε/α², so the `f64`
+//!   default α = 10⁻³ (centre weight about −10⁶) would cost an `f32` mean all its digits.
+//!   `Ukf::new` in `f32` therefore uses α = 0.5; if you set α yourself, keep it of order one
+//!   in `f32`, or use the cubature rule (`Unscented::cubature()`, all weights 1/2n).
 //! - **The covariance form.** Keep the default Joseph form
 //!   ([`CovarianceUpdate::Joseph`](crate::filters::CovarianceUpdate::Joseph)): the standard
 //!   form P − K S Kᵀ loses symmetry and definiteness first.

@@ -33,7 +33,8 @@ use crate::scalar::{Real, real};
 /// precision for small α. The mean cannot: it is g(μ) plus w Σᵢ dᵢ, and the round-off ε‖y‖ in
 /// each function value is multiplied by nw = 1/(2α²), so the mean carries an error of about
 /// ε‖y‖/α² (any formulation does). In `f64` with α = 10⁻³ that is ≈ 10⁻¹⁰ ‖y‖; in `f32` it is of
-/// the order of ‖y‖ itself, so with `f32` use α ≳ 0.3 or [`Unscented::cubature`].
+/// the order of ‖y‖ itself, so with `f32` use α ≳ 0.3 (the `f32` [`Default`] takes 0.5) or
+/// [`Unscented::cubature`].
 /// Deviations go through the function's [`difference`](VectorFunction::difference), so
 /// wrapped outputs (angles) are handled. The factor L is a semi-definite square root
 /// ([`psd_factor`](crate::linalg::psd_factor); for runtime sizes a plain Cholesky factor first), so directions with zero variance
@@ -103,10 +104,20 @@ impl<T: Real> Unscented<T> {
 }
 
 impl<T: Real> Default for Unscented<T> {
-    /// α = 10⁻³, β = 2, κ = 0 (Wan & van der Merwe's recommendation for Gaussian priors).
+    /// β = 2, κ = 0 and α = 10⁻³ (Wan & van der Merwe's recommendation for Gaussian priors)
+    /// in `f64`. In a scalar with less than 10 significant digits (`f32`), α = 0.5: the mean's
+    /// round-off grows as ε/α² (type docs), which for α = 10⁻³ in `f32` is of the order of
+    /// the mean itself, for α = 0.5 about 4 ε.
+    ///
+    /// ```
+    /// use estim_core::propagate::Unscented;
+    /// assert_eq!(Unscented::<f64>::default().alpha(), 1e-3);
+    /// assert_eq!(Unscented::<f32>::default().alpha(), 0.5);
+    /// ```
     fn default() -> Self {
+        let low_precision = T::default_epsilon() > real(1e-10);
         Self {
-            alpha: real(1e-3),
+            alpha: real(if low_precision { 0.5 } else { 1e-3 }),
             beta: real(2.0),
             kappa: T::zero(),
         }

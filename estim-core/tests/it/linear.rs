@@ -382,13 +382,14 @@ proptest! {
     }
 }
 
-/// The default α = 10⁻³ in f32. The unscented mean is g(μ) + w Σᵢ dᵢ with w = 1/(2α²n): the
-/// round-off of each deviation (≈ ε₃₂ |g|) is multiplied by 1/α² = 10⁶, so for an affine g the
-/// mean is off by up to n e/c ≈ ε₃₂/α² |g| ≈ 0.1 |g| (see `unscented_roundoff`). This test pins
-/// the behaviour to that model (and shows it is real): the mean error exceeds what cubature
-/// (α = 1) gives by orders of magnitude, yet stays within the derived round-off bound.
+/// α = 10⁻³ (the f64 default) in f32. The unscented mean is g(μ) + w Σᵢ dᵢ with
+/// w = 1/(2α²n): the round-off of each deviation (≈ ε₃₂ |g|) is multiplied by 1/α² = 10⁶, so
+/// for an affine g the mean is off by up to n e/c ≈ ε₃₂/α² |g| ≈ 0.1 |g| (see
+/// `unscented_roundoff`). This test pins the behaviour to that model (and shows it is real):
+/// the mean error exceeds what cubature (α = 1) and the f32 default (α = 0.5) give by orders
+/// of magnitude, yet stays within the derived round-off bound.
 #[test]
-fn default_unscented_in_f32_loses_mean_precision_as_modelled() {
+fn small_alpha_unscented_in_f32_loses_mean_precision_as_modelled() {
     let f = AffineMap {
         a: mat(U3, U3, &[1.0, 0.3, -0.2, 0.5, 2.0, 0.1, -0.7, 0.4, 1.5]),
         b: vector(U3, &[10.0, -20.0, 5.0]),
@@ -402,24 +403,25 @@ fn default_unscented_in_f32_loses_mean_precision_as_modelled() {
     };
     let (mur, cr) = (to64(&mu32), to64(&c32));
     let exact = fr.exact(&mur, &cr);
-    let default = moments_f64(
-        &Unscented::<f32>::default()
-            .propagate(&mu32, &c32, &f32_map)
-            .unwrap(),
-    );
-    let cubature = moments_f64(
-        &Unscented::<f32>::cubature()
-            .propagate(&mu32, &c32, &f32_map)
-            .unwrap(),
-    );
+    let run = |ut: Unscented<f32>| moments_f64(&ut.propagate(&mu32, &c32, &f32_map).unwrap());
+    let small = run(Unscented::new(1e-3, 2.0, 0.0).unwrap());
+    let default = run(Unscented::default());
+    let cubature = run(Unscented::cubature());
     let tol = unscented_roundoff(&fr, &mur, &cr, (1e-3, 2.0, 0.0), gamma32);
+    assert_moments("f32 Unscented α = 1e-3", &small, &exact, &tol);
+    let tol = unscented_roundoff(&fr, &mur, &cr, (0.5, 2.0, 0.0), gamma32);
     assert_moments("f32 default Unscented", &default, &exact, &tol);
     let err = |m: &Moments<f64, U3, U3>| (m.mean - exact.mean).amax();
     eprintln!(
-        "f32 unscented mean error: default α=1e-3 {:e}, cubature {:e} (|y| ≈ {:e})",
+        "f32 unscented mean error: α=1e-3 {:e}, default α=0.5 {:e}, cubature {:e} (|y| ≈ {:e})",
+        err(&small),
         err(&default),
         err(&cubature),
         exact.mean.amax()
+    );
+    assert!(
+        err(&default) <= 1e-4 * exact.mean.amax(),
+        "the f32 default keeps f32 precision"
     );
     assert!(
         err(&cubature) <= 1e-4 * exact.mean.amax(),

@@ -16,8 +16,8 @@ use estim_core::{
     Alloc, Error, Gaussian, LinearMeasurement, LinearProcess, Parameter, Quantity, Stage,
 };
 use estim_filters::{
-    Ekf, Estimator, FadingMemoryRls, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, Predict,
-    PredictCorrelated, SecondOrderEkf, Ukf, Update, UpdateOutcome,
+    Ekf, Estimator, FadingMemoryRls, Gate, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter,
+    Predict, PredictCorrelated, SecondOrderEkf, Ukf, Update, UpdateOutcome,
 };
 
 /// Runs `op`, which must fail with `expected`, and asserts the filter is unchanged: equal as a
@@ -646,7 +646,7 @@ fn gate_rejects_outliers_without_touching_the_filter() {
     let mut kf = KalmanFilter::new(m.prior.clone())
         .with_gate(threshold)
         .unwrap();
-    assert_eq!(kf.gate(), Some(threshold));
+    assert_eq!(kf.gate(), Some(Gate::Nis(threshold)));
     let outlier = Vector2::new(50.0, -50.0);
     let before = kf.clone();
     let (_, _, nis, _) = hand_report(&kf, &m.measurement, &outlier);

@@ -22,6 +22,7 @@ mod covariance_forms;
 mod dyn_estimator;
 mod dynamic;
 mod equivalence;
+mod gating;
 mod multirate;
 mod nees;
 mod no_alloc;
