@@ -69,11 +69,12 @@ pub mod prelude {
     pub use estim_core::{
         AffineFunction, Alloc, Differentiable, Error, Euclidean, Gaussian, LinearMeasurement,
         LinearMeasurementModel, LinearProcess, LinearProcessModel, MeasurementHessian,
-        MeasurementJacobian, MeasurementModel, MomentPropagator, ProcessHessian, ProcessJacobian,
-        ProcessModel, Real, StateSpace, TwiceDifferentiable, VectorFunction, wrap_angle,
+        MeasurementJacobian, MeasurementModel, MomentPropagator, NoInput, Offset, ProcessHessian,
+        ProcessJacobian, ProcessModel, Real, StateSpace, TwiceDifferentiable, VectorFunction,
+        wrap_angle,
     };
     pub use estim_filters::{
-        CovarianceUpdate, Ekf, EnsembleStats, Estimator, FadingMemoryRls, GaussianFilter,
+        CovarianceUpdate, Ekf, EnsembleStats, Estimator, FadingMemoryRls, Gate, GaussianFilter,
         GaussianSecondOrderEkf, KalmanFilter, MonteCarlo, Predict, PredictCorrelated, Recorder,
         SecondOrderEkf, Ukf, Update, UpdateOutcome, UpdateReport, Verdict,
     };

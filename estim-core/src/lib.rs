@@ -70,6 +70,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod adapter;
 pub mod alloc;
 pub mod angle;
 pub mod derivative;
@@ -86,6 +87,7 @@ pub mod model;
 pub mod propagate;
 pub mod scalar;
 
+pub use adapter::{NoInput, Offset};
 pub use alloc::Alloc;
 pub use angle::{wrap_angle, wrap_components};
 pub use error::{Error, Parameter, Quantity, Stage};

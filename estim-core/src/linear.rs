@@ -2,8 +2,10 @@
 //!
 //! [`LinearProcess`]: x⁺ = F x + B u + w, w ~ N(0, Q). [`LinearMeasurement`]: z = H x + v,
 //! v ~ N(0, R). Both implement every model capability (their Hessians are zero), so they work
-//! with every filter, including the linear Kalman filter. For matrices that depend on Δt,
-//! implement the model traits on your own type.
+//! with every filter, including the linear Kalman filter. Their matrices are per step: Δt is
+//! accepted (filters pass it) and ignored. For matrices that depend on Δt, implement the model
+//! traits on your own type. A process without input: [`LinearProcess::without_input`] (called
+//! with `&()`); a measurement with a constant offset: [`LinearMeasurement::with_offset`].
 //!
 //! Both implement the `_into` forms, so with `Dyn` sizes a filter step over them allocates
 //! nothing. Matrices whose shapes disagree with the state are reported by the filter as a
@@ -23,7 +25,8 @@ use crate::model::{
 };
 use crate::scalar::Real;
 
-/// x⁺ = F x + B u + w, w ~ N(0, Q), with `U` inputs (use `U0`… or a zero-column B for none).
+/// x⁺ = F x + B u + w, w ~ N(0, Q), with `U` inputs, for one step: Δt is ignored (module
+/// docs). Without input: [`LinearProcess::without_input`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinearProcess<T: Real, N: Dim, U: Dim>
 where

@@ -48,7 +48,8 @@ where
     /// f(x, u, Δt): the state after one step.
     fn transition(&self, x: &OVector<T, N>, u: &Self::Input, dt: T) -> OVector<T, N>;
 
-    /// Q(x, u, Δt): covariance of the additive process noise over the step.
+    /// Q(x, u, Δt): covariance of the additive process noise over the step. The filters
+    /// evaluate it once per prediction, at the filtered mean x̂ the step starts from.
     fn process_noise(&self, x: &OVector<T, N>, u: &Self::Input, dt: T) -> OMatrix<T, N, N>;
 
     /// [`transition`](Self::transition) into `out`.
@@ -165,7 +166,8 @@ where
     /// h(x): the predicted measurement.
     fn measure(&self, x: &OVector<T, N>) -> OVector<T, M>;
 
-    /// R(x): covariance of the additive measurement noise.
+    /// R(x): covariance of the additive measurement noise. The filters evaluate it once per
+    /// update, at the predicted state x̂⁻ (the mean before the update), for every propagator.
     fn measurement_noise(&self, x: &OVector<T, N>) -> OMatrix<T, M, M>;
 
     /// The residual a ⊖ b between two measurements (innovations, deviations). Defaults to

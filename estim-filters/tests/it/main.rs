@@ -13,6 +13,7 @@ mod consistency_common;
 #[path = "../../../estim-core/tests/it/counting.rs"]
 mod counting;
 
+mod adapters;
 mod atomicity;
 mod consistency_monte_carlo;
 mod consistency_proptest;
