@@ -68,7 +68,7 @@ pub use correlated::Decorrelated;
 pub use gaussian_filter::{
     Ekf, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, SecondOrderEkf, Ukf,
 };
-pub use monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Recorder};
+pub use monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Progress, Recorder};
 pub use report::{UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
 pub use smoother::{Rts, Sequence, SmootherError, filter_sequence, smooth_sequence};

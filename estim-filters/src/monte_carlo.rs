@@ -83,6 +83,7 @@
 //! with their spread.
 
 use core::fmt;
+use core::marker::PhantomData;
 use core::ops::Range;
 
 use estim_core::linalg::ensure_shape;
@@ -111,10 +112,11 @@ pub fn run_seed(master: u64, run: usize) -> u64 {
     z ^ (z >> 31)
 }
 
-/// Why a Monte Carlo run failed.
+/// Why a Monte Carlo run failed. `E` is the error type realizations return
+/// ([`MonteCarlo::with_error`]; [`ValidationError`] by default).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
-pub enum MonteCarloError {
+pub enum MonteCarloError<E = ValidationError> {
     /// A realization returned an error, or recorded something invalid (a slot out of range,
     /// a record made twice, a shape different from earlier runs' in the same chunk, a
     /// covariance that is not positive definite). It is the failing run with the smallest
@@ -125,7 +127,7 @@ pub enum MonteCarloError {
         /// Its seed ([`run_seed`]).
         seed: u64,
         /// The error.
-        error: ValidationError,
+        error: E,
     },
     /// Runs in different chunks recorded different shapes at the same slot or residual pair.
     Shape {
@@ -143,7 +145,7 @@ impl MonteCarloError {
     }
 }
 
-impl fmt::Display for MonteCarloError {
+impl<E: fmt::Display> fmt::Display for MonteCarloError<E> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             MonteCarloError::Run { run, seed, error } => {
@@ -156,10 +158,11 @@ impl fmt::Display for MonteCarloError {
     }
 }
 
-impl std::error::Error for MonteCarloError {
+impl<E: std::error::Error + 'static> std::error::Error for MonteCarloError<E> {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
-            MonteCarloError::Run { error, .. } | MonteCarloError::Shape { error } => Some(error),
+            MonteCarloError::Run { error, .. } => Some(error),
+            MonteCarloError::Shape { error } => Some(error),
         }
     }
 }
@@ -167,6 +170,23 @@ impl std::error::Error for MonteCarloError {
 impl From<MonteCarloError> for ValidationError {
     fn from(e: MonteCarloError) -> Self {
         e.error()
+    }
+}
+
+/// How far a Monte Carlo run has got: reported to the `progress` callback of
+/// [`MonteCarlo::run_with_progress`] each time a chunk of runs is merged, in chunk order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Progress {
+    /// Realizations finished and merged.
+    pub runs_done: usize,
+    /// Realizations in all.
+    pub runs: usize,
+}
+
+impl Progress {
+    /// The fraction done, in [0, 1].
+    pub fn fraction(&self) -> f64 {
+        self.runs_done as f64 / self.runs as f64
     }
 }
 
@@ -475,8 +495,8 @@ impl Recorder {
     /// ensemble mean and covariance, the NEES eᵀP⁻¹e (Cholesky, in f64), P the mean filter
     /// covariance, and (e, x̂) the orthogonality statistics.
     ///
-    /// At most once per slot and run. Errors: slot out of range or recorded twice
-    /// ([`Setting::Slot`]), shapes, non-finite values, P not positive definite.
+    /// At most once per slot and run. Errors: slot out of range ([`Setting::Slot`]), recorded
+    /// twice ([`ValidationError::RecordedTwice`]), shapes, non-finite values, P not positive definite.
     pub fn record_estimate<T: Real, N: Dim>(
         &mut self,
         slot: usize,
@@ -489,7 +509,7 @@ impl Recorder {
     {
         self.check_slot(slot)?;
         if self.estimate_seen[slot] == self.run {
-            return Err(slot_error(slot));
+            return Err(ValidationError::RecordedTwice { slot });
         }
         let n = truth.nrows();
         ensure_shape(estimate, n, 1, STAGE, Quantity::Mean)?;
@@ -561,7 +581,7 @@ impl Recorder {
     {
         self.check_slot(slot)?;
         if self.innovation_seen[slot] == self.run {
-            return Err(slot_error(slot));
+            return Err(ValidationError::RecordedTwice { slot });
         }
         let (nis, ll) = (to_f64(report.nis), to_f64(report.log_likelihood));
         if !(nis >= 0.0) || !nis.is_finite() || !ll.is_finite() {
@@ -601,7 +621,7 @@ impl Recorder {
         };
         let pending = &mut self.pending[k];
         if pending.set {
-            return Err(slot_error(slot));
+            return Err(ValidationError::RecordedTwice { slot });
         }
         if !residual.iter().all(|v| v.is_finite()) {
             return Err(Error::NonFinite {
@@ -627,21 +647,62 @@ fn slot_error(slot: usize) -> ValidationError {
 
 /// A Monte Carlo consistency experiment: how many runs, how many time slots, the master seed,
 /// the residual pairs, and the chunking that makes results independent of the thread count.
-/// See the [module docs](self).
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct MonteCarlo {
+/// `E` is the error type the realizations return ([`with_error`](Self::with_error)). See the
+/// [module docs](self).
+pub struct MonteCarlo<E = ValidationError> {
     runs: usize,
     slots: usize,
     seed: u64,
     chunks: usize,
     pairs: Vec<(usize, usize)>,
+    error: PhantomData<fn() -> E>,
 }
+
+// Written out, not derived: a derive would require E: Clone, Debug, PartialEq, and the error
+// type is only a marker here.
+impl<E> Clone for MonteCarlo<E> {
+    fn clone(&self) -> Self {
+        Self {
+            pairs: self.pairs.clone(),
+            error: PhantomData,
+            ..*self
+        }
+    }
+}
+
+impl<E> fmt::Debug for MonteCarlo<E> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("MonteCarlo")
+            .field("runs", &self.runs)
+            .field("slots", &self.slots)
+            .field("seed", &self.seed)
+            .field("chunks", &self.chunks)
+            .field("pairs", &self.pairs)
+            .finish()
+    }
+}
+
+impl<E> PartialEq for MonteCarlo<E> {
+    fn eq(&self, other: &Self) -> bool {
+        (self.runs, self.slots, self.seed, self.chunks, &self.pairs)
+            == (
+                other.runs,
+                other.slots,
+                other.seed,
+                other.chunks,
+                &other.pairs,
+            )
+    }
+}
+
+impl<E> Eq for MonteCarlo<E> {}
 
 impl MonteCarlo {
     /// The default number of chunks the runs are split into.
     pub const DEFAULT_CHUNKS: usize = 64;
 
     /// `runs` ≥ 1 realizations with statistics at `slots` ≥ 1 time slots, master seed 0.
+    /// A slot count whose accumulators cannot be allocated is refused ([`Setting::Slot`]).
     pub fn new(runs: usize, slots: usize) -> Result<Self> {
         if runs == 0 {
             return Err(ValidationError::InvalidSetting {
@@ -652,13 +713,59 @@ impl MonteCarlo {
         if slots == 0 {
             return Err(slot_error(0));
         }
+        // Each chunk in flight holds an accumulator per slot: refuse a count whose accumulators
+        // could not even be addressed or reserved (an error, not a "capacity overflow" panic or
+        // an allocation abort at the first run).
+        let mut probe: Vec<SlotAcc> = Vec::new();
+        probe
+            .try_reserve_exact(slots)
+            .map_err(|_| slot_error(slots))?;
+        drop(probe);
         Ok(Self {
             runs,
             slots,
             seed: 0,
             chunks: Self::DEFAULT_CHUNKS,
             pairs: Vec::new(),
+            error: PhantomData,
         })
+    }
+}
+
+impl<E> MonteCarlo<E> {
+    /// The same experiment with realizations that return `Result<(), E2>`: your own error
+    /// type, which must take the recorder's errors (`From<ValidationError>`, so `?` works on
+    /// them); a failure comes back as [`MonteCarloError::Run`] with your error in it.
+    ///
+    /// ```
+    /// use estim_filters::monte_carlo::{MonteCarlo, MonteCarloError};
+    /// use estim_filters::ValidationError;
+    ///
+    /// #[derive(Debug, PartialEq)]
+    /// enum SimError { Diverged(f64), Recording(ValidationError) }
+    /// impl From<ValidationError> for SimError {
+    ///     fn from(e: ValidationError) -> Self { SimError::Recording(e) }
+    /// }
+    ///
+    /// let mc = MonteCarlo::new(10, 1)?.with_error::<SimError>();
+    /// let result = mc.run_sequential(|run, _seed, _rec| {
+    ///     if run == 3 { Err(SimError::Diverged(1e9)) } else { Ok(()) }
+    /// });
+    /// assert!(matches!(
+    ///     result,
+    ///     Err(MonteCarloError::Run { run: 3, error: SimError::Diverged(_), .. })
+    /// ));
+    /// # Ok::<(), ValidationError>(())
+    /// ```
+    pub fn with_error<E2: From<ValidationError>>(self) -> MonteCarlo<E2> {
+        MonteCarlo {
+            runs: self.runs,
+            slots: self.slots,
+            seed: self.seed,
+            chunks: self.chunks,
+            pairs: self.pairs,
+            error: PhantomData,
+        }
     }
 
     /// Sets the master seed from which every run's seed is derived ([`run_seed`]).
@@ -725,38 +832,63 @@ impl MonteCarlo {
         (0..k).map(|c| bound(c)..bound(c + 1)).collect()
     }
 
-    fn run_chunk<F>(&self, range: Range<usize>, f: &F) -> Result<Accumulator, MonteCarloError>
+    fn run_chunk<F>(
+        &self,
+        range: Range<usize>,
+        f: &mut F,
+    ) -> Result<Accumulator, MonteCarloError<E>>
     where
-        F: Fn(usize, u64, &mut Recorder) -> Result<()>,
+        F: FnMut(usize, u64, &mut Recorder) -> Result<(), E>,
+        E: From<ValidationError>,
     {
         let mut recorder = Recorder::new(self.slots, &self.pairs);
         for run in range {
             let seed = self.run_seed(run);
             recorder.begin(run, seed);
             f(run, seed, &mut recorder)
-                .and_then(|()| recorder.end_run())
+                .and_then(|()| recorder.end_run().map_err(E::from))
                 .map_err(|error| MonteCarloError::Run { run, seed, error })?;
         }
         Ok(recorder.acc)
     }
 
-    fn merge_into(total: &mut Accumulator, chunk: &Accumulator) -> Result<(), MonteCarloError> {
+    fn merge_into(total: &mut Accumulator, chunk: &Accumulator) -> Result<(), MonteCarloError<E>> {
         total
             .merge(chunk)
             .map_err(|error| MonteCarloError::Shape { error })
     }
 
     /// Runs every realization on this thread: `simulate(run, seed, recorder)` for run = 0 … N−1.
+    /// `simulate` may keep state between runs (`FnMut`: a reused buffer, a counter), but the
+    /// statistics stay reproducible only if each run depends on its seed alone.
     ///
     /// Returns the first failure in run order, or the ensemble statistics.
-    pub fn run_sequential<F>(&self, simulate: F) -> Result<EnsembleStats, MonteCarloError>
+    pub fn run_sequential<F>(&self, simulate: F) -> Result<EnsembleStats, MonteCarloError<E>>
     where
-        F: Fn(usize, u64, &mut Recorder) -> Result<()>,
+        F: FnMut(usize, u64, &mut Recorder) -> Result<(), E>,
+        E: From<ValidationError>,
+    {
+        self.run_sequential_with_progress(simulate, |_| {})
+    }
+
+    fn run_sequential_with_progress<F>(
+        &self,
+        mut simulate: F,
+        mut progress: impl FnMut(Progress),
+    ) -> Result<EnsembleStats, MonteCarloError<E>>
+    where
+        F: FnMut(usize, u64, &mut Recorder) -> Result<(), E>,
+        E: From<ValidationError>,
     {
         let mut total = Accumulator::new(self.slots, self.pairs.len());
         for range in self.chunk_ranges() {
-            let chunk = self.run_chunk(range, &simulate)?;
+            let runs_done = range.end;
+            let chunk = self.run_chunk(range, &mut simulate)?;
             Self::merge_into(&mut total, &chunk)?;
+            progress(Progress {
+                runs_done,
+                runs: self.runs,
+            });
         }
         Ok(self.finish(&total))
     }
@@ -766,21 +898,39 @@ impl MonteCarlo {
     /// chunks are merged in the same order. Chunks run in waves of 2 × threads, which bounds
     /// the memory.
     #[cfg(feature = "parallel")]
-    pub fn run_parallel<F>(&self, simulate: F) -> Result<EnsembleStats, MonteCarloError>
+    pub fn run_parallel<F>(&self, simulate: F) -> Result<EnsembleStats, MonteCarloError<E>>
     where
-        F: Fn(usize, u64, &mut Recorder) -> Result<()> + Sync,
+        F: Fn(usize, u64, &mut Recorder) -> Result<(), E> + Sync,
+        E: From<ValidationError> + Send,
+    {
+        self.run_parallel_with_progress(simulate, |_| {})
+    }
+
+    #[cfg(feature = "parallel")]
+    fn run_parallel_with_progress<F>(
+        &self,
+        simulate: F,
+        mut progress: impl FnMut(Progress),
+    ) -> Result<EnsembleStats, MonteCarloError<E>>
+    where
+        F: Fn(usize, u64, &mut Recorder) -> Result<(), E> + Sync,
+        E: From<ValidationError> + Send,
     {
         use rayon::prelude::*;
         let wave = 2 * rayon::current_num_threads().max(1);
         let ranges = self.chunk_ranges();
         let mut total = Accumulator::new(self.slots, self.pairs.len());
         for group in ranges.chunks(wave) {
-            let chunks: Vec<Result<Accumulator, MonteCarloError>> = group
+            let chunks: Vec<Result<Accumulator, MonteCarloError<E>>> = group
                 .par_iter()
-                .map(|range| self.run_chunk(range.clone(), &simulate))
+                .map(|range| self.run_chunk(range.clone(), &mut &simulate))
                 .collect();
-            for chunk in chunks {
+            for (range, chunk) in group.iter().zip(chunks) {
                 Self::merge_into(&mut total, &chunk?)?;
+                progress(Progress {
+                    runs_done: range.end,
+                    runs: self.runs,
+                });
             }
         }
         Ok(self.finish(&total))
@@ -790,17 +940,44 @@ impl MonteCarlo {
     /// the `estim` facade), else [`run_sequential`](Self::run_sequential). Both
     /// give the same bits; the `Sync` bound is required either way so that code compiles with
     /// and without the feature.
-    pub fn run<F>(&self, simulate: F) -> Result<EnsembleStats, MonteCarloError>
+    pub fn run<F>(&self, simulate: F) -> Result<EnsembleStats, MonteCarloError<E>>
     where
-        F: Fn(usize, u64, &mut Recorder) -> Result<()> + Sync,
+        F: Fn(usize, u64, &mut Recorder) -> Result<(), E> + Sync,
+        E: From<ValidationError> + Send,
+    {
+        self.run_with_progress(simulate, |_| {})
+    }
+
+    /// [`run`](Self::run), calling `progress` on this thread after each chunk of runs is
+    /// merged (64 times by default, [`with_chunks`](Self::with_chunks)), in run order: for a
+    /// progress bar or a log line in runs of minutes. It sees only counts, so it cannot change
+    /// the statistics.
+    ///
+    /// ```
+    /// use estim_filters::monte_carlo::{MonteCarlo, Progress};
+    ///
+    /// let mc = MonteCarlo::new(1000, 1)?.with_chunks(4)?;
+    /// let mut seen = Vec::new();
+    /// mc.run_with_progress(|_, _, _| Ok(()), |p: Progress| seen.push(p.runs_done))?;
+    /// assert_eq!(seen, [250, 500, 750, 1000]);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn run_with_progress<F>(
+        &self,
+        simulate: F,
+        progress: impl FnMut(Progress),
+    ) -> Result<EnsembleStats, MonteCarloError<E>>
+    where
+        F: Fn(usize, u64, &mut Recorder) -> Result<(), E> + Sync,
+        E: From<ValidationError> + Send,
     {
         #[cfg(feature = "parallel")]
         {
-            self.run_parallel(simulate)
+            self.run_parallel_with_progress(simulate, progress)
         }
         #[cfg(not(feature = "parallel"))]
         {
-            self.run_sequential(simulate)
+            self.run_sequential_with_progress(simulate, progress)
         }
     }
 

@@ -61,6 +61,14 @@ pub enum ValidationError {
         /// The value given.
         value: f64,
     },
+    /// A Monte Carlo realization recorded the same kind of statistic at one slot twice
+    /// ([`Recorder`](crate::Recorder): at most one estimate, one innovation and one residual
+    /// per slot and run).
+    #[error("slot {slot} recorded twice in one run")]
+    RecordedTwice {
+        /// The slot.
+        slot: usize,
+    },
     /// An estimation error: a filter step, a shape, a non-finite value, a covariance that is
     /// not positive definite, a statistical parameter.
     #[error(transparent)]

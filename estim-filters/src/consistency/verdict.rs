@@ -368,9 +368,11 @@ pub struct Verdict {
 }
 
 impl Verdict {
-    /// `true` when no check failed.
+    /// `true` when no check failed and at least one ran: a verdict over nothing recorded
+    /// (every check [`NotRun`](Outcome::NotRun)) is not evidence of consistency.
     pub fn consistent(&self) -> bool {
         self.checks.iter().all(CheckResult::passed)
+            && self.checks.iter().any(|c| c.outcome != Outcome::NotRun)
     }
 
     /// The result of `check`, if it was run.

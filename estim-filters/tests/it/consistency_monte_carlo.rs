@@ -510,12 +510,25 @@ fn recording_errors_are_typed() {
         rec.record_estimate(1, &x, &x, &p)?;
         rec.record_estimate(1, &x, &x, &p)
     });
-    assert_eq!(run_err(twice), slot_error(1));
+    let twice = run_err(twice);
+    assert_eq!(twice, ValidationError::RecordedTwice { slot: 1 });
+    assert_eq!(twice.to_string(), "slot 1 recorded twice in one run");
+    let report = estim_filters::UpdateReport::<f64, estim_core::nalgebra::U1>::zeros(
+        estim_core::nalgebra::U1,
+    );
+    let twice_nis = mc.run_sequential(|_, _, rec| {
+        rec.record_innovation(1, &report)?;
+        rec.record_innovation(1, &report)
+    });
+    assert_eq!(
+        run_err(twice_nis),
+        ValidationError::RecordedTwice { slot: 1 }
+    );
     let twice_r = mc.run_sequential(|_, _, rec| {
         rec.record_residual(0, &Vector1::new(1.0))?;
         rec.record_residual(0, &Vector1::new(1.0))
     });
-    assert_eq!(run_err(twice_r), slot_error(0));
+    assert_eq!(run_err(twice_r), ValidationError::RecordedTwice { slot: 0 });
     let not_pd = mc.run_sequential(|_, _, rec| rec.record_estimate(0, &x, &x, &(p * -1.0)));
     assert!(matches!(
         run_err(not_pd),
@@ -555,6 +568,10 @@ fn recording_errors_are_typed() {
     // Configuration errors.
     assert!(MonteCarlo::new(0, 1).is_err());
     assert!(MonteCarlo::new(1, 0).is_err());
+    // Slots whose accumulators could never be allocated: an error, not a panic or an abort.
+    for slots in [usize::MAX, usize::MAX / 64, 1 << 50] {
+        assert_eq!(MonteCarlo::new(1, slots).unwrap_err(), slot_error(slots));
+    }
     assert!(
         MonteCarlo::new(2, 3)
             .unwrap()
@@ -613,4 +630,85 @@ fn unrecorded_slots_and_checks_not_run() {
         v.consistent(),
         v.checks.iter().filter(|c| ran(c)).all(|c| c.passed())
     );
+    // Nothing recorded at all: every check is "not run", and that is not "consistent".
+    let empty = MonteCarlo::new(5, 3)
+        .unwrap()
+        .run(|_, _, _| Ok(()))
+        .unwrap();
+    let v = empty.verdict(0.99).unwrap();
+    assert!(v.checks.iter().all(|c| c.outcome == Outcome::NotRun));
+    assert!(!v.consistent(), "{v}");
+}
+
+/// Realizations with their own error type, state kept between sequential runs, and progress:
+/// the failure carries the user's error, a stateful closure sees every run in order, and the
+/// progress callback sees the chunk boundaries in order, ending at N, in both runners.
+#[test]
+fn user_errors_stateful_runs_and_progress() {
+    #[derive(Debug, PartialEq)]
+    enum SimError {
+        Diverged(usize),
+        Recording(ValidationError),
+    }
+    impl From<ValidationError> for SimError {
+        fn from(e: ValidationError) -> Self {
+            SimError::Recording(e)
+        }
+    }
+    let mc = MonteCarlo::new(100, 2)
+        .unwrap()
+        .with_chunks(5)
+        .unwrap()
+        .with_error::<SimError>();
+    let err = mc
+        .run_sequential(|run, _, _| {
+            if run >= 42 {
+                Err(SimError::Diverged(run))
+            } else {
+                Ok(())
+            }
+        })
+        .unwrap_err();
+    assert!(matches!(
+        err,
+        MonteCarloError::Run {
+            run: 42,
+            error: SimError::Diverged(42),
+            ..
+        }
+    ));
+    // A recorder error arrives converted into the user's type.
+    let err = mc
+        .run(|_, _, rec| Ok(rec.record_residual(7, &Vector1::new(1.0))?))
+        .unwrap_err();
+    assert!(matches!(
+        err,
+        MonteCarloError::Run {
+            run: 0,
+            error: SimError::Recording(ValidationError::InvalidSetting { .. }),
+            ..
+        }
+    ));
+
+    let mut order = Vec::new();
+    let x = Vector3::new(1.0, 2.0, 3.0);
+    mc.run_sequential(|run, _, rec| {
+        order.push(run);
+        Ok(rec.record_estimate(0, &x, &x, &Matrix3::identity())?)
+    })
+    .unwrap();
+    assert_eq!(order, (0..100).collect::<Vec<_>>());
+
+    let mut seen = Vec::new();
+    let stats = mc
+        .run_with_progress(
+            |_, _, rec| Ok(rec.record_estimate(1, &x, &x, &Matrix3::identity())?),
+            |p| seen.push((p.runs_done, p.runs)),
+        )
+        .unwrap();
+    assert_eq!(
+        seen,
+        [(20, 100), (40, 100), (60, 100), (80, 100), (100, 100)]
+    );
+    assert_eq!(stats.slots[1].estimate.as_ref().unwrap().samples, 100);
 }
