@@ -86,6 +86,8 @@ pub mod manifold;
 pub mod model;
 pub mod propagate;
 pub mod scalar;
+#[cfg(feature = "serde")]
+pub mod serialize;
 
 pub use adapter::{NoInput, Offset};
 pub use alloc::Alloc;

@@ -73,6 +73,7 @@ where
 /// assert!(<Euclidean as StateSpace<f64, Const<2>>>::VECTOR);
 /// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Euclidean;
 
 impl<T: Real, N: Dim> StateSpace<T, N> for Euclidean

@@ -226,6 +226,7 @@ where
 /// (N ↦ K), and for terms of unequal dimension when `degrees_of_freedom` is their total
 /// ([`ChiSquareBand::for_sum`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct ChiSquareBand {
     /// Degrees of freedom of the *sum*, N·d.
     pub degrees_of_freedom: usize,

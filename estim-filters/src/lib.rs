@@ -49,6 +49,8 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+#[cfg(feature = "serde")]
+pub mod checkpoint;
 pub mod consistency;
 mod correlated;
 mod gaussian_filter;
@@ -68,7 +70,7 @@ pub use correlated::Decorrelated;
 pub use gaussian_filter::{
     Ekf, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, SecondOrderEkf, Ukf,
 };
-pub use monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Progress, Recorder};
+pub use monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Progress, Recorder, Shard};
 pub use report::{UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
 pub use smoother::{Rts, Sequence, SmootherError, filter_sequence, smooth_sequence};

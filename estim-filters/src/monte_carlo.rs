@@ -76,6 +76,26 @@
 //! 2 × threads + 1 chunks alive at once — never O(runs × steps). Record trajectories yourself
 //! (in the closure) if you want them.
 //!
+//! # Shards: one experiment over many processes or machines
+//!
+//! [`MonteCarlo::run_shard`]`(s, S, …)` runs the s-th of S contiguous ranges of chunks;
+//! [`MonteCarlo::merge_shards`] merges the S [`Shard`]s chunk by chunk in chunk order, so the
+//! result equals one [`run`](MonteCarlo::run) bit for bit, whatever the order the shards
+//! finish in. To spread one experiment over the tasks of a job array (Slurm, PBS, a CI
+//! matrix, `xargs -P`): with the `serde` feature,
+//!
+//! 1. every task builds the same `MonteCarlo` (runs, slots, seed, chunks ≥ S, pairs) and runs
+//!    its shard, s = the task index (`SLURM_ARRAY_TASK_ID`), writing it out, e.g.
+//!    `serde_json::to_writer(file, &mc.run_shard(s, S, simulate)?)`;
+//! 2. one last task reads the S files back (`serde_json::from_reader`) and calls
+//!    `mc.merge_shards(shards)`, which refuses shards of another experiment or a missing or
+//!    repeated chunk.
+//!
+//! serde_json with its `float_roundtrip` feature (or a binary format) reads back every finite
+//! `f64` exactly (the accumulators hold only finite values), so the merged statistics are those
+//! of a single run; serde_json's default parser may be an ulp off. A shard holds one accumulator per chunk:
+//! O(chunks/S × slots × n²) numbers.
+//!
 //! Means and covariances are accumulated with Welford's update and merged with Chan, Golub &
 //! LeVeque's pairwise formula (a chunk of n_b samples with mean m_b and centred co-moment C_b
 //! joins one of n_a: δ = m_b − m_a, m = m_a + δ n_b/n, C = C_a + C_b + δδᵀ n_a n_b/n), so the
@@ -134,13 +154,21 @@ pub enum MonteCarloError<E = ValidationError> {
         /// The [`Error::DimensionMismatch`], wrapped.
         error: ValidationError,
     },
+    /// A shard index out of range, or shards to merge that are not exactly one experiment's
+    /// chunks ([`Setting::Shard`]).
+    Shards {
+        /// The [`ValidationError::InvalidSetting`].
+        error: ValidationError,
+    },
 }
 
 impl MonteCarloError {
     /// The underlying error.
     pub fn error(&self) -> ValidationError {
         match *self {
-            MonteCarloError::Run { error, .. } | MonteCarloError::Shape { error } => error,
+            MonteCarloError::Run { error, .. }
+            | MonteCarloError::Shape { error }
+            | MonteCarloError::Shards { error } => error,
         }
     }
 }
@@ -154,6 +182,9 @@ impl<E: fmt::Display> fmt::Display for MonteCarloError<E> {
             MonteCarloError::Shape { error } => {
                 write!(f, "Monte Carlo runs disagree in shape: {error}")
             }
+            MonteCarloError::Shards { error } => {
+                write!(f, "Monte Carlo shards: {error}")
+            }
         }
     }
 }
@@ -162,7 +193,7 @@ impl<E: std::error::Error + 'static> std::error::Error for MonteCarloError<E> {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
             MonteCarloError::Run { error, .. } => Some(error),
-            MonteCarloError::Shape { error } => Some(error),
+            MonteCarloError::Shape { error } | MonteCarloError::Shards { error } => Some(error),
         }
     }
 }
@@ -176,6 +207,7 @@ impl From<MonteCarloError> for ValidationError {
 /// How far a Monte Carlo run has got: reported to the `progress` callback of
 /// [`MonteCarlo::run_with_progress`] each time a chunk of runs is merged, in chunk order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Progress {
     /// Realizations finished and merged.
     pub runs_done: usize,
@@ -190,8 +222,31 @@ impl Progress {
     }
 }
 
+/// One shard of a Monte Carlo experiment ([`MonteCarlo::run_shard`]): the accumulators of
+/// a contiguous range of its chunks, kept apart so that [`MonteCarlo::merge_shards`] merges
+/// every chunk in the same order as one run does (bit-identical statistics). With the `serde`
+/// feature it serialises, so shards can run as separate processes (module docs).
+#[derive(Clone, Debug)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct Shard {
+    /// (runs, slots, master seed, chunks, residual pairs) of the experiment it belongs to.
+    experiment: (usize, usize, u64, usize, Vec<(usize, usize)>),
+    /// The index of its first chunk.
+    first_chunk: usize,
+    /// One accumulator per chunk, in chunk order.
+    chunks: Vec<Accumulator>,
+}
+
+impl Shard {
+    /// The runs this shard covers.
+    pub fn runs(&self) -> usize {
+        self.chunks.iter().map(|c| c.runs).sum()
+    }
+}
+
 /// Running moments of one slot's estimates, in f64, column-major n × n matrices.
 #[derive(Clone, Debug, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 struct SlotAcc {
     n: usize,
     count: usize,
@@ -301,6 +356,7 @@ impl SlotAcc {
 
 /// Σ r(a) r(b)ᵀ and the squares for normalising, for one residual pair.
 #[derive(Clone, Debug, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 struct PairAcc {
     ma: usize,
     mb: usize,
@@ -365,7 +421,10 @@ impl PairAcc {
 
 /// Everything accumulated over a set of runs.
 #[derive(Clone, Debug)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 struct Accumulator {
+    /// How many runs it holds.
+    runs: usize,
     slots: Vec<SlotAcc>,
     pairs: Vec<PairAcc>,
 }
@@ -373,12 +432,14 @@ struct Accumulator {
 impl Accumulator {
     fn new(slots: usize, pairs: usize) -> Self {
         Self {
+            runs: 0,
             slots: vec![SlotAcc::default(); slots],
             pairs: vec![PairAcc::default(); pairs],
         }
     }
 
     fn merge(&mut self, other: &Accumulator) -> Result<()> {
+        self.runs += other.runs;
         for (s, o) in self.slots.iter_mut().zip(&other.slots) {
             s.merge(o)?;
         }
@@ -848,8 +909,113 @@ impl<E> MonteCarlo<E> {
             f(run, seed, &mut recorder)
                 .and_then(|()| recorder.end_run().map_err(E::from))
                 .map_err(|error| MonteCarloError::Run { run, seed, error })?;
+            recorder.acc.runs += 1;
         }
         Ok(recorder.acc)
+    }
+
+    /// The experiment's identity, as a shard records it.
+    fn identity(&self) -> (usize, usize, u64, usize, Vec<(usize, usize)>) {
+        (
+            self.runs,
+            self.slots,
+            self.seed,
+            self.chunks.min(self.runs),
+            self.pairs.clone(),
+        )
+    }
+
+    /// Runs shard `shard` of `shards` ≥ 1 on this thread: the chunks ⌊s K/S⌋ … ⌊(s+1) K/S⌋ − 1
+    /// of the K chunks ([`with_chunks`](Self::with_chunks)), i.e. a contiguous range of run
+    /// indices and seeds. [`merge_shards`](Self::merge_shards) over all S shards equals
+    /// [`run`](Self::run) bit for bit. Shards are independent: run them in separate
+    /// processes or on separate machines (module docs: *Shards*), with the same experiment
+    /// (runs, slots, seed, chunks, pairs). With S > K some shards are empty.
+    ///
+    /// Errors: `shard` ≥ `shards` ([`MonteCarloError::Shards`]); the realizations' errors as in
+    /// [`run_sequential`](Self::run_sequential).
+    pub fn run_shard<F>(
+        &self,
+        shard: usize,
+        shards: usize,
+        mut simulate: F,
+    ) -> Result<Shard, MonteCarloError<E>>
+    where
+        F: FnMut(usize, u64, &mut Recorder) -> Result<(), E>,
+        E: From<ValidationError>,
+    {
+        if shard >= shards {
+            return Err(MonteCarloError::Shards {
+                error: ValidationError::setting(Setting::Shard, shard),
+            });
+        }
+        let ranges = self.chunk_ranges();
+        let k = ranges.len() as u128;
+        let bound = |s: usize| ((s as u128 * k) / shards as u128) as usize;
+        let (first, last) = (bound(shard), bound(shard + 1));
+        let mut chunks = Vec::with_capacity(last - first);
+        for range in &ranges[first..last] {
+            chunks.push(self.run_chunk(range.clone(), &mut simulate)?);
+        }
+        Ok(Shard {
+            experiment: self.identity(),
+            first_chunk: first,
+            chunks,
+        })
+    }
+
+    /// The ensemble statistics of all the shards of this experiment, in any order: every
+    /// chunk merged in chunk order, as [`run`](Self::run) does, so the result is bit-identical
+    /// to one run.
+    ///
+    /// ```
+    /// use estim_filters::monte_carlo::MonteCarlo;
+    /// use estim_core::nalgebra::{Matrix1, Vector1};
+    ///
+    /// let mc = MonteCarlo::new(100, 1)?.with_seed(3);
+    /// let realization = |_run: usize, seed: u64, rec: &mut estim_filters::Recorder| {
+    ///     let x = Vector1::new((seed % 1000) as f64 / 1000.0 - 0.5);
+    ///     rec.record_estimate(0, &x, &Vector1::zeros(), &Matrix1::new(1.0 / 12.0))
+    /// };
+    /// // Three shards, e.g. three processes of a job array, merged afterwards.
+    /// let shards = (0..3)
+    ///     .map(|s| mc.run_shard(s, 3, realization))
+    ///     .collect::<Result<Vec<_>, _>>()?;
+    /// assert_eq!(mc.merge_shards(shards)?, mc.run(realization)?);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// Errors: a shard of another experiment, a chunk missing or given twice, accumulators of
+    /// the wrong size ([`MonteCarloError::Shards`]); shapes that differ between shards
+    /// ([`MonteCarloError::Shape`]).
+    pub fn merge_shards(
+        &self,
+        shards: impl IntoIterator<Item = Shard>,
+    ) -> Result<EnsembleStats, MonteCarloError<E>> {
+        let invalid = |value: usize| MonteCarloError::Shards {
+            error: ValidationError::setting(Setting::Shard, value),
+        };
+        let identity = self.identity();
+        let mut shards: Vec<Shard> = shards.into_iter().collect();
+        shards.sort_by_key(|s| s.first_chunk);
+        let mut total = Accumulator::new(self.slots, self.pairs.len());
+        let mut next = 0;
+        for shard in &shards {
+            if shard.experiment != identity || shard.first_chunk != next {
+                return Err(invalid(shard.first_chunk));
+            }
+            for chunk in &shard.chunks {
+                if chunk.slots.len() != self.slots || chunk.pairs.len() != self.pairs.len() {
+                    return Err(invalid(next));
+                }
+                Self::merge_into(&mut total, chunk)?;
+                next += 1;
+            }
+        }
+        if next != identity.3 {
+            return Err(invalid(next));
+        }
+        Ok(self.finish(&total))
     }
 
     fn merge_into(total: &mut Accumulator, chunk: &Accumulator) -> Result<(), MonteCarloError<E>> {
@@ -1014,6 +1180,7 @@ impl<E> MonteCarlo<E> {
 /// The ensemble statistics of the estimates recorded at one slot, over the N runs that
 /// recorded one. e = x − x̂ is the error, P the filter's covariance.
 #[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct EstimateStats {
     /// N.
     pub samples: usize,
@@ -1116,6 +1283,7 @@ impl EstimateStats {
 
 /// The NIS statistics recorded at one slot.
 #[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct InnovationStats {
     /// Number of innovations recorded N.
     pub samples: usize,
@@ -1136,6 +1304,7 @@ impl InnovationStats {
 
 /// The statistics of one slot.
 #[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct SlotStats {
     /// The slot index.
     pub slot: usize,
@@ -1148,6 +1317,7 @@ pub struct SlotStats {
 /// Lu's residual check between slots a and b: (1/N) Σ r(a) r(b)ᵀ ≈ 0 for a consistent filter,
 /// whose innovations are white.
 #[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct ResidualPairStats {
     /// The first slot a.
     pub first: usize,
@@ -1188,6 +1358,7 @@ impl ResidualPairStats {
 
 /// What [`MonteCarlo::run`] returns: per-slot ensemble statistics and the residual pairs.
 #[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct EnsembleStats {
     /// The number of runs N.
     pub runs: usize,

@@ -5,6 +5,7 @@ use estim_core::{Real, nalgebra::allocator::Allocator};
 
 /// Whether an update changed the estimate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum UpdateOutcome {
     /// The measurement was used.
     Applied,
@@ -15,6 +16,14 @@ pub enum UpdateOutcome {
 
 /// The statistics of one measurement update.
 #[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(bound(
+        serialize = "OVector<T, M>: serde::Serialize, OMatrix<T, M, M>: serde::Serialize, T: serde::Serialize",
+        deserialize = "OVector<T, M>: serde::Deserialize<'de>, OMatrix<T, M, M>: serde::Deserialize<'de>, T: serde::Deserialize<'de>"
+    ))
+)]
 pub struct UpdateReport<T: Real, M: Dim>
 where
     DefaultAllocator: Allocator<M> + Allocator<M, M>,

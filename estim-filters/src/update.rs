@@ -34,6 +34,7 @@ use estim_core::PropagatorWorkspace;
 
 /// How the covariance is updated after a measurement.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum CovarianceUpdate {
     /// P⁺ = P − K Pₓᵤᵀ − Pₓᵤ Kᵀ + K S Kᵀ, symmetrised: the Joseph form, robust to round-off
     /// in K (see the [module docs](self)).
@@ -67,6 +68,7 @@ pub enum CovarianceUpdate {
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum Gate<T> {
     /// Rejects a measurement whose NIS exceeds this threshold (finite, > 0), whatever its
     /// dimension.

@@ -28,6 +28,9 @@ pub enum Setting {
     Lag,
     /// A number of work chunks (at least 1).
     ChunkCount,
+    /// A Monte Carlo shard: its index (below the shard count, which is at least 1), or a set of
+    /// shards to merge that is not exactly one experiment's, each chunk once.
+    Shard,
     /// A number of Monte Carlo runs or of averaged terms (at least 1).
     RunCount,
     /// A confidence level (strictly between 0 and 1).
@@ -42,6 +45,7 @@ impl fmt::Display for Setting {
             Setting::Slot => "slot",
             Setting::Lag => "lag",
             Setting::ChunkCount => "chunk count",
+            Setting::Shard => "shard",
             Setting::RunCount => "run count",
             Setting::Confidence => "confidence",
             Setting::DegreesOfFreedom => "degrees of freedom",

@@ -15,6 +15,7 @@ use crate::scalar::Real;
 /// a nonlinear model at compile time. The Jacobian is meant in the ⊞ sense, as for
 /// [`Linearized`](super::Linearized).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Affine;
 
 impl<T: Real> PropagatorWorkspace<T> for Affine {

@@ -17,6 +17,7 @@ use crate::scalar::Real;
 /// ([`StateSpace`](crate::StateSpace)) g(μ) needs none, and J is meant in the ⊞ sense,
 /// J = ∂(g(μ ⊞ δ) ⊟ g(μ))/∂δ at δ = 0 (for + and −, the ordinary Jacobian).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Linearized;
 
 /// [`Linearized`]'s buffers: the Jacobian J and, without a cross-covariance, J C.

@@ -28,6 +28,7 @@ use crate::scalar::{Real, real};
 /// under any density; the covariance is first order. Requirements on g: [`TwiceDifferentiable`]
 /// (components declared affine cost nothing).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct SecondOrder;
 
 /// The Gaussian second-order approximation: [`SecondOrder`]'s mean, and the covariance
@@ -44,6 +45,7 @@ pub struct SecondOrder;
 /// Requirements on g:
 /// [`TwiceDifferentiable`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct SecondOrderGaussian;
 
 /// Writes Hₖ into `h` (shape-checked): `Ok(true)`, or `Ok(false)` if gₖ is affine.

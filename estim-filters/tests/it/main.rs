@@ -30,5 +30,7 @@ mod no_alloc;
 mod no_alloc_dynamic;
 mod rls;
 mod second_order;
+#[cfg(feature = "serde")]
+mod serde_checkpoint;
 mod smoother;
 mod state_space;

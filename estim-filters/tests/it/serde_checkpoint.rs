@@ -1,0 +1,235 @@
+//! serde (feature `serde`): a checkpointed filter resumes bit-identically, bad checkpoints are
+//! refused, reports round-trip, and Monte Carlo shards written as JSON merge into exactly the
+//! statistics of one run.
+
+use crate::consistency_common::{DT, Lu, input, simulate};
+use estim_core::nalgebra::{DMatrix, DVector, Dyn, U2, U3, Vector2};
+use estim_core::propagate::Unscented;
+use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+use estim_filters::monte_carlo::{MonteCarlo, MonteCarloError, Shard};
+use estim_filters::{
+    CovarianceUpdate, Ekf, Estimator, Gate, GaussianFilter, KalmanFilter, Predict, SecondOrderEkf,
+    Ukf, Update, UpdateReport,
+};
+
+/// Runs `filter` over Lu's recorded inputs and measurements for steps `range`.
+fn run<F>(filter: &mut F, lu: &Lu, zs: &[Vector2<f64>], range: std::ops::Range<usize>)
+where
+    F: Predict<f64, U3, LinearProcess<f64, U3, estim_core::nalgebra::U1>>
+        + Update<f64, U3, U2, LinearMeasurement<f64, U3, U2>>,
+{
+    for k in range {
+        filter.predict(&lu.process, &input(k), DT).unwrap();
+        filter.update(&lu.sensor, &zs[k]).unwrap();
+    }
+}
+
+fn measurements(n: usize) -> Vec<Vector2<f64>> {
+    (0..n)
+        .map(|k| Vector2::new((k as f64 * 0.3).sin() * 5.0, (k as f64 * 0.1).cos()))
+        .collect()
+}
+
+/// Checkpoint after 30 steps through JSON, resume, and run 30 more beside the original: the
+/// two agree to the bit (`==` compares state, covariance, propagator, state space and
+/// settings; the assert on bits is explicit for the estimate).
+#[test]
+fn resumed_filters_are_bit_identical() {
+    let lu = Lu::new();
+    let zs = measurements(60);
+    macro_rules! check {
+        ($filter:expr, $ty:ty) => {{
+            let mut original: $ty = $filter;
+            run(&mut original, &lu, &zs, 0..30);
+            let json = serde_json::to_string(&original).unwrap();
+            let mut resumed: $ty = serde_json::from_str(&json).unwrap();
+            assert!(resumed == original, "{}", stringify!($ty));
+            run(&mut original, &lu, &zs, 30..60);
+            run(&mut resumed, &lu, &zs, 30..60);
+            assert!(resumed == original, "{}", stringify!($ty));
+            let bits = |f: &$ty| {
+                f.state()
+                    .iter()
+                    .chain(f.covariance().iter())
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(bits(&resumed), bits(&original), "{}", stringify!($ty));
+        }};
+    }
+    check!(KalmanFilter::new(lu.prior.clone()), KalmanFilter<f64, U3>);
+    check!(
+        Ekf::new(lu.prior.clone())
+            .with_covariance_update(CovarianceUpdate::Standard)
+            .with_gate(Gate::Probability(0.999))
+            .unwrap(),
+        Ekf<f64, U3>
+    );
+    check!(SecondOrderEkf::new(lu.prior.clone()), SecondOrderEkf<f64, U3>);
+    check!(
+        Ukf::with_propagator(lu.prior.clone(), Unscented::new(0.5, 2.0, 1.0).unwrap())
+            .with_gate(50.0)
+            .unwrap(),
+        Ukf<f64, U3>
+    );
+}
+
+/// Runtime sizes resume too (faer's kernels behind them are deterministic).
+#[test]
+fn resumed_runtime_size_filters_are_bit_identical() {
+    let n = 4;
+    let process = LinearProcess::without_input(
+        DMatrix::from_fn(n, n, |i, j| {
+            if i == j {
+                0.95
+            } else if j == i + 1 {
+                0.1
+            } else {
+                0.0
+            }
+        }),
+        DMatrix::identity(n, n) * 1e-2,
+    );
+    let sensor = LinearMeasurement {
+        observation: DMatrix::from_fn(2, n, |i, j| (i + j) as f64 * 0.5 + 1.0),
+        noise: DMatrix::identity(2, 2) * 0.3,
+    };
+    let prior = Gaussian::new(DVector::zeros(n), DMatrix::identity(n, n)).unwrap();
+    let mut original = Ukf::new(prior);
+    let step = |f: &mut Ukf<f64, Dyn>, k: usize| {
+        f.predict(&process, &(), 0.1).unwrap();
+        f.update(&sensor, &DVector::from_column_slice(&[k as f64 * 0.1, 1.0]))
+            .unwrap();
+    };
+    (0..20).for_each(|k| step(&mut original, k));
+    let mut resumed: Ukf<f64, Dyn> =
+        serde_json::from_str(&serde_json::to_string(&original).unwrap()).unwrap();
+    (20..40).for_each(|k| {
+        step(&mut original, k);
+        step(&mut resumed, k);
+    });
+    assert!(resumed == original);
+}
+
+/// A checkpoint whose shapes disagree, with a non-finite entry or an invalid setting is an
+/// error, never a filter.
+#[test]
+fn bad_checkpoints_are_refused() {
+    let lu = Lu::new();
+    let good = serde_json::to_value(Ukf::new(lu.prior.clone())).unwrap();
+    let with = |path: &[&str], value: serde_json::Value| {
+        let mut v = good.clone();
+        let mut at = &mut v;
+        for key in path {
+            at = &mut at[*key];
+        }
+        *at = value;
+        serde_json::from_value::<Ukf<f64, U3>>(v)
+    };
+    assert!(with(&[], good.clone()).is_ok());
+    // (Non-finite entries have no JSON form: JSON writes NaN as null, which is refused as a
+    // type error; the finiteness check is for formats that carry them.)
+    assert!(with(&["state"], serde_json::json!([0.0, null, 0.0])).is_err());
+    assert!(with(&["state"], serde_json::json!([0.0, 0.0])).is_err());
+    assert!(with(&["propagator", "alpha"], serde_json::json!(-1.0)).is_err());
+    assert!(with(&["gate"], serde_json::json!({"Nis": -1.0})).is_err());
+    assert!(with(&["gate"], serde_json::json!({"Probability": 1.5})).is_err());
+    // Runtime sizes: a covariance of the wrong size.
+    let prior = Gaussian::new(DVector::<f64>::zeros(2), DMatrix::identity(2, 2)).unwrap();
+    let mut v = serde_json::to_value(KalmanFilter::new(prior)).unwrap();
+    v["covariance"] = serde_json::to_value(DMatrix::<f64>::identity(3, 3)).unwrap();
+    let e = serde_json::from_value::<GaussianFilter<f64, Dyn, estim_core::Affine>>(v).unwrap_err();
+    assert!(e.to_string().contains("covariance"), "{e}");
+}
+
+#[test]
+fn update_reports_round_trip() {
+    let lu = Lu::new();
+    let mut kf = KalmanFilter::new(lu.prior.clone());
+    let report = kf.update(&lu.sensor, &Vector2::new(1.0, -0.5)).unwrap();
+    let back: UpdateReport<f64, U2> =
+        serde_json::from_str(&serde_json::to_string(&report).unwrap()).unwrap();
+    assert_eq!(back, report);
+}
+
+/// Shards over seed ranges, each written to JSON and read back (as separate processes would),
+/// merge into exactly the statistics of one run, in any order; wrong sets of shards are
+/// refused.
+#[test]
+fn json_shards_merge_into_one_run_bit_for_bit() {
+    let lu = Lu::new();
+    let mc = MonteCarlo::new(120, 4)
+        .unwrap()
+        .with_seed(5)
+        .with_chunks(12)
+        .unwrap()
+        .with_residual_pair(1, 3)
+        .unwrap();
+    let realization = |_: usize, seed: u64, rec: &mut estim_filters::Recorder| {
+        simulate(
+            &lu,
+            &lu.process,
+            &lu.sensor,
+            KalmanFilter::new,
+            40,
+            10,
+            seed,
+            |slot, x, kf, report| {
+                rec.record_filter(slot, x, kf)?;
+                rec.record_innovation(slot, report)?;
+                rec.record_residual(slot, &report.innovation)
+            },
+        )
+    };
+    let whole = mc.run_sequential(realization).unwrap();
+    let files: Vec<String> = (0..5)
+        .map(|s| serde_json::to_string(&mc.run_shard(s, 5, realization).unwrap()).unwrap())
+        .collect();
+    let read = |order: &[usize]| -> Vec<Shard> {
+        order
+            .iter()
+            .map(|&i| serde_json::from_str(&files[i]).unwrap())
+            .collect()
+    };
+    let merged = mc.merge_shards(read(&[3, 0, 4, 1, 2])).unwrap();
+    assert_eq!(merged, whole);
+    let bits = |s: &estim_filters::EnsembleStats| {
+        s.slots
+            .iter()
+            .filter_map(|s| s.estimate.as_ref())
+            .flat_map(|e| {
+                e.mean_error
+                    .iter()
+                    .chain(e.error_covariance.iter())
+                    .map(|v| v.to_bits())
+            })
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(bits(&merged), bits(&whole));
+    assert_eq!(
+        read(&[0, 1, 2, 3, 4])
+            .iter()
+            .map(Shard::runs)
+            .sum::<usize>(),
+        120
+    );
+
+    let shards_error =
+        |r: Result<_, MonteCarloError>| matches!(r, Err(MonteCarloError::Shards { .. }));
+    assert!(
+        shards_error(mc.merge_shards(read(&[0, 1, 3, 4]))),
+        "a shard missing"
+    );
+    assert!(
+        shards_error(mc.merge_shards(read(&[0, 1, 1, 2, 3, 4]))),
+        "a shard twice"
+    );
+    let other = mc.clone().with_seed(6);
+    assert!(
+        shards_error(other.merge_shards(read(&[0, 1, 2, 3, 4]))),
+        "another experiment"
+    );
+    assert!(shards_error(
+        mc.run_shard(5, 5, realization).map(|_| whole.clone())
+    ));
+}
