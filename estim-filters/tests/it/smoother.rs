@@ -10,7 +10,10 @@ use estim_core::nalgebra::{
 };
 use estim_core::propagate::Unscented;
 use estim_core::{Error, Gaussian, LinearMeasurement, LinearProcess, Quantity, Stage};
-use estim_filters::smoother::{Rts, SmootherError, filter_sequence, smooth_sequence};
+use estim_filters::smoother::{
+    Rts, Smoothed, SmootherError, filter_sequence, smooth_sequence,
+    smooth_sequence_with_cross_covariances,
+};
 use estim_filters::{Ekf, GaussianFilter, KalmanFilter, Update};
 
 /// A time-varying 2-state system: Δt changes each step (so does F), Q scales with Δt, an input
@@ -57,8 +60,9 @@ impl Scenario {
         }
     }
 
-    /// The forward pass through `Rts::predict`, then the backward pass.
-    fn smooth<Pr>(&self, mut filter: GaussianFilter<f64, U2, Pr>) -> Vec<Gaussian<f64, U2>>
+    /// The forward pass through `Rts::predict`, then the backward pass with the lag-one
+    /// cross-covariances (whose estimates must be `Rts::smooth`'s, bit for bit).
+    fn smooth<Pr>(&self, mut filter: GaussianFilter<f64, U2, Pr>) -> Smoothed<f64, U2>
     where
         Pr: estim_core::propagate::PropagatorWorkspace<f64>
             + for<'a> estim_core::propagate::MomentPropagator<
@@ -92,7 +96,9 @@ impl Scenario {
                 filter.update(&sensor, &Vector1::new(z)).unwrap();
             }
         }
-        rts.smooth(&filter).unwrap()
+        let pass = rts.smooth_with_cross_covariances(&filter).unwrap();
+        assert_eq!(pass.estimates, rts.smooth(&filter).unwrap());
+        pass
     }
 
     /// The joint posterior of (x₀, …, x_K) from the information form: Λ X = η with
@@ -169,8 +175,20 @@ fn rts_equals_the_batch_posterior_of_a_linear_gaussian_system() {
             )),
         ),
     ];
-    for (name, smoothed) in runs {
+    for (name, pass) in runs {
+        let smoothed = &pass.estimates;
         assert_eq!(smoothed.len(), s.dts.len() + 1);
+        assert_eq!(pass.cross_covariances.len(), s.dts.len());
+        // Lag-one cross-covariances: the off-diagonal blocks cov(x_{k+1}, x_k) of Λ⁻¹.
+        for (k, c) in pass.cross_covariances.iter().enumerate() {
+            let block = covariance.view((2 * k + 2, 2 * k), (2, 2)).clone_owned();
+            assert_close(
+                c.as_slice(),
+                block.as_slice(),
+                tol,
+                &format!("{name} cross {k}"),
+            );
+        }
         for (k, g) in smoothed.iter().enumerate() {
             let batch_mean = mean.rows(2 * k, 2);
             let batch_cov = covariance.view((2 * k, 2 * k), (2, 2)).clone_owned();
@@ -194,9 +212,11 @@ fn rts_equals_the_batch_posterior_of_a_linear_gaussian_system() {
 #[test]
 fn rts_on_runtime_sizes_matches_static_sizes() {
     let s = Scenario::new();
-    let smoothed = s.smooth(KalmanFilter::new(
-        Gaussian::new(s.prior.0, s.prior.1).unwrap(),
-    ));
+    let smoothed = s
+        .smooth(KalmanFilter::new(
+            Gaussian::new(s.prior.0, s.prior.1).unwrap(),
+        ))
+        .estimates;
     let to_dyn = |m: &Matrix2<f64>| DMatrix::from_column_slice(2, 2, m.as_slice());
     let mut kf = KalmanFilter::<f64, Dyn>::new(
         Gaussian::new(
@@ -325,6 +345,16 @@ fn sequences_match_the_batch_posterior_and_the_marginal_likelihood() {
     let tol = 100.0 * s.dts.len() as f64 * condition * f64::EPSILON;
     let mut kf = KalmanFilter::new(prior.clone());
     let smoothed = smooth_sequence(&mut kf, &process, &inputs, 0.5, &s.sensor(), &zs).unwrap();
+    let mut kf = KalmanFilter::new(prior.clone());
+    let (with_cross, cross) =
+        smooth_sequence_with_cross_covariances(&mut kf, &process, &inputs, 0.5, &s.sensor(), &zs)
+            .unwrap();
+    assert_eq!(with_cross, smoothed);
+    assert_eq!(cross.len(), s.dts.len());
+    for (k, c) in cross.iter().enumerate() {
+        let block = covariance.view((2 * k + 2, 2 * k), (2, 2)).clone_owned();
+        assert_close(c.as_slice(), block.as_slice(), tol, "cross");
+    }
     for (k, g) in smoothed.estimates.iter().enumerate() {
         assert_close(
             g.mean().as_slice(),
@@ -433,9 +463,11 @@ fn smoothed_nees_is_in_its_chi_square_band_and_smoothing_only_shrinks_covariance
                 *z = Some(truth[k][0] + s.r.sqrt() * v);
             }
         }
-        let smoothed = run.smooth(KalmanFilter::new(
-            Gaussian::new(s.prior.0, s.prior.1).unwrap(),
-        ));
+        let smoothed = run
+            .smooth(KalmanFilter::new(
+                Gaussian::new(s.prior.0, s.prior.1).unwrap(),
+            ))
+            .estimates;
         for (k, g) in smoothed.iter().enumerate() {
             let e = truth[k] - g.mean();
             nees[k] += (e.transpose() * g.covariance().try_inverse().unwrap() * e)[0] / runs as f64;
