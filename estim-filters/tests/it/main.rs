@@ -29,4 +29,5 @@ mod no_alloc_dynamic;
 mod rls;
 mod second_order;
 mod smoother;
+mod smoother_proptest;
 mod state_space;
