@@ -29,5 +29,6 @@ mod no_alloc_dynamic;
 mod rls;
 mod second_order;
 mod smoother;
+mod smoother_nonlinear;
 mod smoother_proptest;
 mod state_space;
