@@ -16,7 +16,25 @@
 //! Pˢₖ  = Pₖ + Gₖ (Pˢₖ₊₁ − P⁻ₖ₊₁) Gₖᵀ          (symmetrised)
 //! ```
 //!
-//! with ⊞/⊟ the filter's [`StateSpace`] (+/− by default).
+//! with ⊞/⊟ the filter's [`StateSpace`] (+/− by default). The lag-one smoothed
+//! cross-covariances Pₖ₊₁,ₖ|K = Pˢₖ₊₁ Gₖᵀ that the E-step of EM needs come from the same pass
+//! ([`Rts::smooth_with_cross_covariances`], [`smooth_sequence_with_cross_covariances`]).
+//!
+//! # What it allocates
+//!
+//! - [`Rts::predict`]: one record per prediction (two n-vectors and three n × n matrices; on
+//!   the heap for runtime sizes), in a `VecDeque` that grows with the pass; with
+//!   [`Rts::with_lag`] its capacity is `lag`, reserved at construction, and the oldest record
+//!   is dropped, so memory stays fixed.
+//! - [`Rts::smooth`]: the `len() + 1` returned Gaussians; for runtime sizes also the factor,
+//!   gain and two vectors once per call, and two n × n temporaries per step (the covariance
+//!   expression). [`Rts::smooth_with_cross_covariances`] adds the `len()` returned matrices.
+//! - [`filter_sequence`] / [`smooth_sequence`]: the [`Sequence`]'s vectors (reserved once),
+//!   one copy of the starting estimate (to put it back on an error), and what the filter's own
+//!   steps allocate; the smoothing forms add an [`Rts`] record of the whole sequence.
+//!
+//! Nothing the caller passes is modified on an error: the record, the filter (its estimate is
+//! restored by the sequence functions) and the data are as before the call.
 //!
 //! ```
 //! use estim_filters::{KalmanFilter, Update};
@@ -57,7 +75,7 @@ use estim_core::{
     Transition, error::Result,
 };
 
-use crate::gaussian_filter::GaussianFilter;
+use crate::gaussian_filter::{GaussianFilter, ensure_time_step};
 use crate::report::{UpdateOutcome, UpdateReport};
 use crate::traits::{Estimator, Predict, Update};
 
@@ -367,8 +385,11 @@ where
 /// The filter run over a recorded sequence: at each time k = 0 … K the measurement
 /// `measurements[k]` if present (missing ones are skipped, not replaced), then, for k < K, a
 /// prediction with `inputs[k]` over `dt`. `measurements` has one entry more than `inputs`.
-/// The filter ends at time K; on an error it is left where the failing step found it, and the
-/// error names that time.
+/// The filter ends at time K. Errors name the time k of the failing step and leave the filter
+/// as it was before the call: lengths that disagree ([`Error::DimensionMismatch`], before
+/// anything runs), a Δt, when there is a prediction, that is not finite ([`Error::NonFinite`]) or
+/// negative ([`Error::InvalidParameter`]) (time 0, before anything runs), a failed update at time k (e.g. a non-finite measurement) or a
+/// failed prediction from time k (e.g. a non-finite input, whose prediction is not finite).
 ///
 /// ```
 /// use estim_filters::KalmanFilter;
@@ -409,7 +430,9 @@ where
     GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
     DefaultAllocator: Alloc<N, M>,
 {
-    run(filter, process, inputs, dt, measurement, measurements, None)
+    restoring_on_error(filter, |filter| {
+        run(filter, process, inputs, dt, measurement, measurements, None)
+    })
 }
 
 /// [`filter_sequence`], then the Rauch–Tung–Striebel backward pass ([`Rts`]): the estimates
@@ -455,18 +478,20 @@ where
     GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
     DefaultAllocator: Alloc<N, M>,
 {
-    let mut rts = Rts::new();
-    let mut sequence = run(
-        filter,
-        process,
-        inputs,
-        dt,
-        measurement,
-        measurements,
-        Some(&mut rts),
-    )?;
-    sequence.estimates = rts.smooth(filter)?;
-    Ok(sequence)
+    restoring_on_error(filter, |filter| {
+        let mut rts = Rts::new();
+        let mut sequence = run(
+            filter,
+            process,
+            inputs,
+            dt,
+            measurement,
+            measurements,
+            Some(&mut rts),
+        )?;
+        sequence.estimates = rts.smooth(filter)?;
+        Ok(sequence)
+    })
 }
 
 /// [`smooth_sequence`], and the lag-one smoothed cross-covariances Pₖ₊₁,ₖ|K = Pˢₖ₊₁ Gₖᵀ
@@ -514,19 +539,42 @@ where
     GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
     DefaultAllocator: Alloc<N, M>,
 {
-    let mut rts = Rts::new();
-    let mut sequence = run(
-        filter,
-        process,
-        inputs,
-        dt,
-        measurement,
-        measurements,
-        Some(&mut rts),
-    )?;
-    let smoothed = rts.smooth_with_cross_covariances(filter)?;
-    sequence.estimates = smoothed.estimates;
-    Ok((sequence, smoothed.cross_covariances))
+    restoring_on_error(filter, |filter| {
+        let mut rts = Rts::new();
+        let mut sequence = run(
+            filter,
+            process,
+            inputs,
+            dt,
+            measurement,
+            measurements,
+            Some(&mut rts),
+        )?;
+        let smoothed = rts.smooth_with_cross_covariances(filter)?;
+        sequence.estimates = smoothed.estimates;
+        Ok((sequence, smoothed.cross_covariances))
+    })
+}
+
+/// Runs `body` on `filter`; on an error puts back the estimate it started from (the filter's
+/// configuration is never changed by a step), so a failed sequence leaves the filter as it was.
+fn restoring_on_error<T, N, Pr, S, R>(
+    filter: &mut GaussianFilter<T, N, Pr, S>,
+    body: impl FnOnce(&mut GaussianFilter<T, N, Pr, S>) -> core::result::Result<R, SmootherError>,
+) -> core::result::Result<R, SmootherError>
+where
+    T: Real,
+    N: Dim,
+    Pr: PropagatorWorkspace<T>,
+    S: StateSpace<T, N>,
+    DefaultAllocator: Alloc<N>,
+{
+    let before = filter.estimate();
+    let result = body(filter);
+    if result.is_err() {
+        filter.reset(before);
+    }
+    result
 }
 
 /// The forward pass of [`filter_sequence`], recording into `rts` if given.
@@ -563,6 +611,9 @@ where
                 found_cols: 1,
             },
         });
+    }
+    if !inputs.is_empty() {
+        ensure_time_step(dt).map_err(|error| SmootherError { step: 0, error })?;
     }
     let mut sequence = Sequence {
         estimates: Vec::with_capacity(measurements.len()),

@@ -29,6 +29,7 @@ mod no_alloc_dynamic;
 mod rls;
 mod second_order;
 mod smoother;
+mod smoother_bad_input;
 mod smoother_nonlinear;
 mod smoother_proptest;
 mod state_space;

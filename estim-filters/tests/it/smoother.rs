@@ -468,34 +468,6 @@ fn sequences_match_the_batch_posterior_and_the_marginal_likelihood() {
     assert_eq!(run.estimates.last(), smoothed.estimates.last());
 }
 
-/// Sequences whose lengths disagree are a typed error, and nothing runs.
-#[test]
-fn sequence_lengths_must_agree() {
-    let s = Scenario::new();
-    let mut kf = KalmanFilter::new(Gaussian::new(s.prior.0, s.prior.1).unwrap());
-    let before = kf.clone();
-    let zs = vec![Some(Vector1::new(1.0)); 3];
-    let inputs = vec![Vector1::new(0.0); 3];
-    let error = filter_sequence(
-        &mut kf,
-        &Scenario::process(0.5),
-        &inputs,
-        0.5,
-        &s.sensor(),
-        &zs,
-    )
-    .unwrap_err();
-    assert!(matches!(
-        error.error,
-        Error::DimensionMismatch {
-            expected_rows: 4,
-            found_rows: 3,
-            ..
-        }
-    ));
-    assert_eq!(kf, before);
-}
-
 /// Consistency over a Monte Carlo run of the time-varying scenario (truth simulated with the
 /// model's own noise, seeded): at every time the average smoothed NEES over 300 runs lies in
 /// its two-sided χ² band (99.9 % each, so the family of 13 times fails by chance with
