@@ -478,20 +478,7 @@ where
     GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
     DefaultAllocator: Alloc<N, M>,
 {
-    restoring_on_error(filter, |filter| {
-        let mut rts = Rts::new();
-        let mut sequence = run(
-            filter,
-            process,
-            inputs,
-            dt,
-            measurement,
-            measurements,
-            Some(&mut rts),
-        )?;
-        sequence.estimates = rts.smooth(filter)?;
-        Ok(sequence)
-    })
+    smoothed(filter, process, inputs, dt, measurement, measurements, None)
 }
 
 /// [`smooth_sequence`], and the lag-one smoothed cross-covariances Pₖ₊₁,ₖ|K = Pˢₖ₊₁ Gₖᵀ
@@ -539,6 +526,42 @@ where
     GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
     DefaultAllocator: Alloc<N, M>,
 {
+    let mut cross = Vec::with_capacity(inputs.len());
+    let sequence = smoothed(
+        filter,
+        process,
+        inputs,
+        dt,
+        measurement,
+        measurements,
+        Some(&mut cross),
+    )?;
+    Ok((sequence, cross))
+}
+
+/// The forward pass of [`filter_sequence`] recorded, then the backward pass (pushing the
+/// lag-one cross-covariances into `cross` if given); the filter restored on any error.
+fn smoothed<T, N, M, Pr, S, P, H>(
+    filter: &mut GaussianFilter<T, N, Pr, S>,
+    process: &P,
+    inputs: &[P::Input],
+    dt: T,
+    measurement: &H,
+    measurements: &[Option<OVector<T, M>>],
+    cross: Option<&mut Vec<OMatrix<T, N, N>>>,
+) -> core::result::Result<Sequence<T, N, M>, SmootherError>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    P: ProcessModel<T, N>,
+    H: MeasurementModel<T, N, M>,
+    Pr: PropagatorWorkspace<T>
+        + for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
+    S: StateSpace<T, N>,
+    GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
+    DefaultAllocator: Alloc<N, M>,
+{
     restoring_on_error(filter, |filter| {
         let mut rts = Rts::new();
         let mut sequence = run(
@@ -550,9 +573,8 @@ where
             measurements,
             Some(&mut rts),
         )?;
-        let smoothed = rts.smooth_with_cross_covariances(filter)?;
-        sequence.estimates = smoothed.estimates;
-        Ok((sequence, smoothed.cross_covariances))
+        sequence.estimates = rts.backward(filter, cross)?;
+        Ok(sequence)
     })
 }
 
