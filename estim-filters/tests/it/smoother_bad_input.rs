@@ -132,9 +132,10 @@ fn non_finite_data_fails_at_its_step() {
     assert_all_fail(&process, &sensor, &kf, &inputs, 0.5, &zs, e);
 }
 
-/// F = 0 and Q = 0 make every predicted covariance 0: filtering runs (the updates see S = R),
-/// the backward pass fails at the last recorded step (K − 1, the first it computes) and the
-/// filter is restored; `filter_sequence` on the same data succeeds.
+/// F = 0 and Q = 0 make every predicted covariance 0, and F = 0 with an indefinite Q makes it
+/// indefinite: filtering runs (the updates see S > 0), the backward pass fails at the last
+/// recorded step (K − 1, the first it computes) and the filter is restored;
+/// `filter_sequence` on the same data succeeds.
 #[test]
 fn an_indefinite_predicted_covariance_fails_the_backward_pass() {
     let (mut process, sensor, kf) = system(0.0);
@@ -168,5 +169,14 @@ fn an_indefinite_predicted_covariance_fails_the_backward_pass() {
         smooth_sequence(&mut g, &process, &inputs, 0.5, &sensor, &zs).unwrap_err(),
         expected
     );
+    assert_eq!(g, kf);
+
+    // An indefinite Q (eigenvalues 0.11 and −0.09; its diagonal is non-negative, all that a
+    // prediction checks per step, see `Predict::predict`) makes P⁻ = Q indefinite.
+    process.noise = Matrix2::new(0.01, 0.1, 0.1, 0.01);
+    assert!(filter_sequence(&mut g, &process, &inputs, 0.5, &sensor, &zs).is_ok());
+    let mut g = kf.clone();
+    let error = smooth_sequence(&mut g, &process, &inputs, 0.5, &sensor, &zs).unwrap_err();
+    assert_eq!(error, expected);
     assert_eq!(g, kf);
 }
