@@ -6,7 +6,9 @@
 //! the four checks of the paper (ensemble mean error, ensemble covariance vs P, orthogonality,
 //! residual correlation between 20 s and 30 s) with the runner's verdict table; then the same
 //! Monte Carlo for each of the paper's printed variants (W = 0.0016, M₀ = diag(1, 100, 0.01),
-//! Φ₁₃ = +Δt²/2, closed-form truth) and their verdicts; the gains; headlines. Writes figures to
+//! Φ₁₃ = +Δt²/2, closed-form truth) and their verdicts; one realization filtered and smoothed
+//! (Rauch–Tung–Striebel over all its steps: the bias and its σ from the whole run); the gains;
+//! headlines. Writes figures to
 //! `target/figures/`, and with `--json` prints one JSON line last. `--sequential` runs the
 //! realizations on one thread (the default uses rayon; `RAYON_NUM_THREADS` sets the threads).
 //!
