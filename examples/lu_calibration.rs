@@ -7,7 +7,8 @@
 //! each of the paper's printed variants, prints the four checks of the paper with the runner's
 //! verdict tables, the gains and the headlines, writes figures to `target/figures/`, and with
 //! `--json` prints one JSON line last (keys `t`, `filter_p_diag`, `ensemble_var_diag`,
-//! `ensemble_mean_error`, `residual_corr_20_30`, `wall_s`). `--sequential` runs the
+//! `ensemble_mean_error`, `residual_corr_20_30`, `wall_s`, and `smoothed`: one realization
+//! smoothed over the whole run, the bias estimate and σ of filter and smoother). `--sequential` runs the
 //! realizations on the calling thread; by default they run on rayon's pool
 //! (`RAYON_NUM_THREADS` sets its size), with bit-identical results.
 //!

@@ -1,7 +1,9 @@
 //! The Rauch–Tung–Striebel backward pass against the forward filter it smooths: one
 //! predict + update per step (`forward`) and the backward pass over the same 64 steps
-//! (`backward`, `Rts::smooth` on the recorded pass), a linear Kalman filter on a stable
-//! n-state system with m = n/2 measured components: static n = 6, runtime n = 50 and 200.
+//! (`backward`, `Rts::smooth` on the recorded pass; `backward_cross`,
+//! `Rts::smooth_with_cross_covariances`, which adds the lag-one cross-covariances Pˢₖ₊₁ Gₖᵀ),
+//! a linear Kalman filter on a stable n-state system with m = n/2 measured components: static
+//! n = 6, runtime n = 50 and 200.
 //!
 //! Run: `cargo bench -p estim-filters --bench smoother`; the figure is the ratio of the two
 //! medians of each size (BENCHMARKS.md, "Smoother").
@@ -93,6 +95,12 @@ where
     });
     group.bench_function("backward", |b| {
         b.iter(|| rts.smooth(black_box(&recorded)).expect("smooths"))
+    });
+    group.bench_function("backward_cross", |b| {
+        b.iter(|| {
+            rts.smooth_with_cross_covariances(black_box(&recorded))
+                .expect("smooths")
+        })
     });
     group.finish();
 }

@@ -6,7 +6,9 @@
 //! the four checks of the paper (ensemble mean error, ensemble covariance vs P, orthogonality,
 //! residual correlation between 20 s and 30 s) with the runner's verdict table; then the same
 //! Monte Carlo for each of the paper's printed variants (W = 0.0016, M₀ = diag(1, 100, 0.01),
-//! Φ₁₃ = +Δt²/2, closed-form truth) and their verdicts; the gains; headlines. Writes figures to
+//! Φ₁₃ = +Δt²/2, closed-form truth) and their verdicts; one realization filtered and smoothed
+//! (Rauch–Tung–Striebel over all its steps: the bias and its σ from the whole run); the gains;
+//! headlines. Writes figures to
 //! `target/figures/`, and with `--json` prints one JSON line last. `--sequential` runs the
 //! realizations on one thread (the default uses rayon; `RAYON_NUM_THREADS` sets the threads).
 //!
@@ -15,16 +17,19 @@
 
 use std::time::Instant;
 
-use crate::common::{Headline, Output, Series, line_plot};
+use crate::common::{Band, Headline, Output, Series, band_plot, line_plot};
+use estim::core::Gaussian;
 use estim::filters::ValidationError;
 use estim::filters::consistency::{Check, Verdict};
 use estim::filters::monte_carlo::{EnsembleStats, MonteCarlo, Recorder};
+use estim::filters::smoother::Rts;
+use estim::filters::{Estimator, KalmanFilter, Update};
 use estim::models::lu::{
-    CovarianceAnalysis, CovarianceHistory, FilterSettings, LuFilter, PAPER_RESIDUAL_CORRELATION,
-    Realization, Scenario, Simulator, TruthIntegration, covariance_analysis, covariance_history,
-    run_realization,
+    CovarianceAnalysis, CovarianceHistory, FilterSettings, LuFilter, Mechanisation,
+    PAPER_RESIDUAL_CORRELATION, Realization, Scenario, Simulator, TruthIntegration,
+    covariance_analysis, covariance_history, run_realization,
 };
-use estim::nalgebra::{Matrix2, Matrix3, Matrix3x2, Vector3};
+use estim::nalgebra::{Matrix2, Matrix3, Matrix3x2, Vector2, Vector3};
 
 /// The labels of the Monte Carlo configurations.
 pub mod labels {
@@ -448,11 +453,13 @@ pub struct LuResult {
     pub long_horizon_gain: Matrix3x2<f64>,
     /// One realization with the consistent filter (figures 8–10 of the paper).
     pub realization: Realization,
+    /// The same realization filtered and smoothed (RTS over the whole run).
+    pub smoothed: SmoothedRealization,
 }
 
 /// Runs the experiment: the consistent Monte Carlo, the variants, the covariance history and
 /// the long-horizon gains, and one realization.
-pub fn run_experiment(config: &LuConfig) -> Result<LuResult, ValidationError> {
+pub fn run_experiment(config: &LuConfig) -> Result<LuResult, Box<dyn std::error::Error>> {
     let monte_carlo = run_monte_carlo(&config.monte_carlo)?;
     let variants = config
         .variants
@@ -465,6 +472,7 @@ pub fn run_experiment(config: &LuConfig) -> Result<LuResult, ValidationError> {
     let long_history = covariance_history(&long, &mc.filter, long.steps)?;
     let last = long_history.posterior.len() - 1;
     let realization = run_realization(&mc.scenario, &mc.filter, config.realization_seed)?;
+    let smoothed = run_smoothed_realization(&mc.scenario, &mc.filter, config.realization_seed)?;
     Ok(LuResult {
         config: config.clone(),
         monte_carlo,
@@ -473,7 +481,306 @@ pub fn run_experiment(config: &LuConfig) -> Result<LuResult, ValidationError> {
         long_horizon_gain: long_history.gain[last],
         covariance,
         realization,
+        smoothed,
     })
+}
+
+/// One realization filtered forward and smoothed backward (Rauch–Tung–Striebel over the whole
+/// run, every accelerometer step): the offline calibration. Entry j is time j Δt.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SmoothedRealization {
+    /// Times \[s\], 0 … duration, every accelerometer step.
+    pub time: Vec<f64>,
+    /// The true error state δx = (δp, δv, b).
+    pub truth: Vec<Vector3<f64>>,
+    /// The forward filter's δx̂ given the data up to tⱼ (a posteriori at a fix, predicted
+    /// between fixes).
+    pub filtered: Vec<Vector3<f64>>,
+    /// Its √diag P.
+    pub filtered_sigma: Vec<Vector3<f64>>,
+    /// The smoothed δx̂ˢ given every fix of the run.
+    pub smoothed: Vec<Vector3<f64>>,
+    /// Its √diag Pˢ.
+    pub smoothed_sigma: Vec<Vector3<f64>>,
+    /// Wall time of the backward pass alone \[s\].
+    pub backward_wall_s: f64,
+}
+
+/// Summary numbers of a [`SmoothedRealization`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SmoothingSummary {
+    /// RMS over the run of b − b̂, forward filter \[m/s²\].
+    pub bias_rms_filtered: f64,
+    /// The same for the smoother.
+    pub bias_rms_smoothed: f64,
+    /// RMS over the run of δp − δp̂: filter, smoother \[m\].
+    pub position_rms: (f64, f64),
+    /// RMS over the run of δv − δv̂: filter, smoother \[m/s\].
+    pub velocity_rms: (f64, f64),
+    /// max over the run of |b̂ˢⱼ − b̂ˢ_K|: 0 up to rounding, b being a random constant.
+    pub smoothed_bias_spread: f64,
+}
+
+impl SmoothedRealization {
+    /// The index of the time nearest to `t`.
+    pub fn index_at(&self, t: f64) -> usize {
+        nearest(&self.time, t)
+    }
+
+    /// RMS errors over the run and the spread of the smoothed bias.
+    pub fn summary(&self) -> SmoothingSummary {
+        let n = self.time.len() as f64;
+        let rms = |estimate: &[Vector3<f64>], i: usize| {
+            (self
+                .truth
+                .iter()
+                .zip(estimate)
+                .map(|(x, e)| (x[i] - e[i]).powi(2))
+                .sum::<f64>()
+                / n)
+                .sqrt()
+        };
+        let last = self.smoothed[self.smoothed.len() - 1][2];
+        SmoothingSummary {
+            bias_rms_filtered: rms(&self.filtered, 2),
+            bias_rms_smoothed: rms(&self.smoothed, 2),
+            position_rms: (rms(&self.filtered, 0), rms(&self.smoothed, 0)),
+            velocity_rms: (rms(&self.filtered, 1), rms(&self.smoothed, 1)),
+            smoothed_bias_spread: self
+                .smoothed
+                .iter()
+                .map(|x| (x[2] - last).abs())
+                .fold(0.0, f64::max),
+        }
+    }
+}
+
+/// Runs the filter of [`LuFilter`] (the same steps: prediction at every accelerometer sample,
+/// update at every fix) on realization `seed`, recording the predictions through [`Rts`], then
+/// smooths the whole run.
+///
+/// Errors: an invalid scenario or prior, a failed filter step, a failed backward step.
+pub fn run_smoothed_realization(
+    scenario: &Scenario,
+    settings: &FilterSettings,
+    seed: u64,
+) -> Result<SmoothedRealization, Box<dyn std::error::Error>> {
+    scenario.validate()?;
+    settings.validate()?;
+    let mut sim = Simulator::new(scenario, seed);
+    let mut kf = KalmanFilter::new(Gaussian::new(
+        Vector3::zeros(),
+        settings.initial_covariance,
+    )?);
+    let mut mechanisation = Mechanisation::new(scenario.position_mean, scenario.velocity_mean);
+    let (process, gps) = (settings.process(), scenario.gps());
+    let mut rts = Rts::new();
+    let steps = scenario.steps + 1;
+    let mut out = SmoothedRealization {
+        time: Vec::with_capacity(steps),
+        truth: Vec::with_capacity(steps),
+        filtered: Vec::with_capacity(steps),
+        filtered_sigma: Vec::with_capacity(steps),
+        smoothed: Vec::new(),
+        smoothed_sigma: Vec::new(),
+        backward_wall_s: 0.0,
+    };
+    fn record(
+        out: &mut SmoothedRealization,
+        t: f64,
+        sim: &Simulator,
+        kf: &KalmanFilter<f64, estim::nalgebra::U3>,
+        m: &Mechanisation,
+    ) {
+        out.time.push(t);
+        out.truth.push(sim.truth().error_state(m));
+        out.filtered.push(*kf.state());
+        out.filtered_sigma
+            .push(kf.covariance().diagonal().map(f64::sqrt));
+    }
+    record(&mut out, 0.0, &sim, &kf, &mechanisation);
+    for _ in 0..scenario.steps {
+        let acceleration = sim.accelerometer();
+        rts.predict(&mut kf, &process, &(), scenario.dt)?;
+        mechanisation.step(acceleration, scenario.dt);
+        if sim.gps_due() {
+            let z = sim.gps();
+            let dz = Vector2::new(z[0] - mechanisation.position, z[1] - mechanisation.velocity);
+            kf.update(&gps, &dz)?;
+        }
+        record(&mut out, sim.time(), &sim, &kf, &mechanisation);
+    }
+    let start = Instant::now();
+    let smoothed = rts.smooth(&kf)?;
+    out.backward_wall_s = start.elapsed().as_secs_f64();
+    out.smoothed = smoothed.iter().map(|g| *g.mean()).collect();
+    out.smoothed_sigma = smoothed
+        .iter()
+        .map(|g| g.covariance().diagonal().map(f64::sqrt))
+        .collect();
+    Ok(out)
+}
+
+/// The smoothing table: bias estimate ± σ, filter vs smoother, and the truth.
+fn smoothing_table(z: &SmoothedRealization) {
+    println!(
+        "Smoothed calibration (one realization, RTS over all {} steps, backward pass {:.1} ms):",
+        z.time.len() - 1,
+        1e3 * z.backward_wall_s
+    );
+    println!(
+        "  {:>5} | {:>24} | {:>24} | {:>10}",
+        "t [s]", "filter b_hat +- sigma", "smoother b_hat +- sigma", "true b"
+    );
+    for t in [0.0, 1.0, 5.0, 10.0, 20.0, 30.0] {
+        let k = z.index_at(t);
+        println!(
+            "  {:>5.1} | {:>10.5} +- {:>10.3e} | {:>10.5} +- {:>10.3e} | {:>10.5}",
+            z.time[k],
+            z.filtered[k][2],
+            z.filtered_sigma[k][2],
+            z.smoothed[k][2],
+            z.smoothed_sigma[k][2],
+            z.truth[k][2]
+        );
+    }
+    let s = z.summary();
+    println!(
+        "  RMS over the run, filter vs smoother: b {:.3e} vs {:.3e} m/s^2, dp {:.3} vs {:.3} m, dv {:.4} vs {:.4} m/s; smoothed b spread {:.1e}\n",
+        s.bias_rms_filtered,
+        s.bias_rms_smoothed,
+        s.position_rms.0,
+        s.position_rms.1,
+        s.velocity_rms.0,
+        s.velocity_rms.1,
+        s.smoothed_bias_spread
+    );
+}
+
+/// The smoothing headline.
+fn smoothing_headline(z: &SmoothedRealization) -> Headline {
+    let s = z.summary();
+    let (k1, k5, end) = (z.index_at(1.0), z.index_at(5.0), z.time.len() - 1);
+    Headline {
+        quantity: "bias from the whole run (smoothed)".into(),
+        paper: "forward filter only".into(),
+        estim: format!(
+            "smoothed σ_b = {:.2e} m/s² at every time (filter: {:.2e} at 1 s, {:.2e} at 5 s, {:.2e} at 30 s); RMS b error over the run {:.2e} (filter {:.2e})",
+            z.smoothed_sigma[0][2],
+            z.filtered_sigma[k1][2],
+            z.filtered_sigma[k5][2],
+            z.filtered_sigma[end][2],
+            s.bias_rms_smoothed,
+            s.bias_rms_filtered
+        ),
+        note: "b is a random constant (no process noise on it), so the smoother carries the \
+               end-of-run estimate back to t = 0 unchanged: calibration is an offline problem \
+               (RTS, Särkkä 2013 §8.2)"
+            .into(),
+    }
+}
+
+/// The smoothing entry of the JSON: b̂ and σ_b at 0, 5 and 30 s for both passes, the RMS
+/// errors over the run.
+fn smoothing_json(z: &SmoothedRealization) -> serde_json::Value {
+    let s = z.summary();
+    let at = [0.0, 5.0, 30.0];
+    let col =
+        |v: &[Vector3<f64>]| -> Vec<f64> { at.iter().map(|&t| v[z.index_at(t)][2]).collect() };
+    serde_json::json!({
+        "t": at,
+        "bias_filtered": col(&z.filtered),
+        "bias_sigma_filtered": col(&z.filtered_sigma),
+        "bias_smoothed": col(&z.smoothed),
+        "bias_sigma_smoothed": col(&z.smoothed_sigma),
+        "bias_rms_filtered": s.bias_rms_filtered,
+        "bias_rms_smoothed": s.bias_rms_smoothed,
+        "position_rms_filtered_smoothed": [s.position_rms.0, s.position_rms.1],
+        "velocity_rms_filtered_smoothed": [s.velocity_rms.0, s.velocity_rms.1],
+        "backward_wall_s": z.backward_wall_s,
+    })
+}
+
+/// The smoothing figures: b̂ ± σ, forward filter vs smoother, and the truth, over the whole
+/// run; and the bias error b − b̂ ± σ of both from 5 s on (where the filter's σ no longer hides
+/// the smoother's).
+fn smoothing_figures(
+    z: &SmoothedRealization,
+) -> Vec<Result<std::path::PathBuf, Box<dyn std::error::Error>>> {
+    let every = (z.time.len() / 600).max(1);
+    let kept = |from: f64| {
+        (0..z.time.len())
+            .step_by(every)
+            .filter(move |&k| z.time[k] >= from)
+    };
+    let line = |from: f64, f: &dyn Fn(usize) -> f64| -> Vec<(f64, f64)> {
+        kept(from).map(|k| (z.time[k], f(k))).collect()
+    };
+    let band = |from: f64, centre: &dyn Fn(usize) -> f64, s: &[Vector3<f64>]| {
+        kept(from)
+            .map(|k| (z.time[k], centre(k) - s[k][2], centre(k) + s[k][2]))
+            .collect::<Vec<_>>()
+    };
+    let (filtered, smoothed) = (&z.filtered, &z.smoothed);
+    let error = |x: &[Vector3<f64>], k: usize| z.truth[k][2] - x[k][2];
+    vec![
+        band_plot(
+            "lu_smoothed_bias.svg",
+            "Lu: bias estimate, forward filter vs RTS smoother, one realization",
+            "t [s]",
+            "b [m/s^2]",
+            &[
+                Series {
+                    label: "filter b_hat",
+                    points: line(0.0, &|k| filtered[k][2]),
+                },
+                Series {
+                    label: "smoother b_hat",
+                    points: line(0.0, &|k| smoothed[k][2]),
+                },
+                Series {
+                    label: "true b",
+                    points: line(0.0, &|k| z.truth[k][2]),
+                },
+            ],
+            &[
+                Band {
+                    label: "filter +-sigma",
+                    points: band(0.0, &|k| filtered[k][2], &z.filtered_sigma),
+                },
+                Band {
+                    label: "smoother +-sigma",
+                    points: band(0.0, &|k| smoothed[k][2], &z.smoothed_sigma),
+                },
+            ],
+        ),
+        band_plot(
+            "lu_smoothed_bias_error.svg",
+            "Lu: bias error b - b_hat from 5 s, forward filter vs RTS smoother (+-sigma about 0)",
+            "t [s]",
+            "b - b_hat [m/s^2]",
+            &[
+                Series {
+                    label: "filter error",
+                    points: line(5.0, &|k| error(filtered, k)),
+                },
+                Series {
+                    label: "smoother error",
+                    points: line(5.0, &|k| error(smoothed, k)),
+                },
+            ],
+            &[
+                Band {
+                    label: "filter +-sigma",
+                    points: band(5.0, &|_| 0.0, &z.filtered_sigma),
+                },
+                Band {
+                    label: "smoother +-sigma",
+                    points: band(5.0, &|_| 0.0, &z.smoothed_sigma),
+                },
+            ],
+        ),
+    ]
 }
 
 fn vec3(v: &Vector3<f64>, precision: usize) -> String {
@@ -739,6 +1046,7 @@ pub fn headlines(r: &LuResult) -> Vec<Headline> {
                 .into(),
         ));
     }
+    out.push(smoothing_headline(&r.smoothed));
     out
 }
 
@@ -871,29 +1179,37 @@ fn figures(r: &LuResult) -> Vec<String> {
         &orth,
     );
     let z = &r.realization;
+    let mut banded = Vec::new();
     let one = |f: &dyn Fn(usize) -> f64| -> Vec<(f64, f64)> {
         (1..z.time.len()).map(|k| (z.time[k], f(k))).collect()
     };
     for (i, (name, unit)) in names.iter().enumerate() {
-        plot(
-            &format!("lu_realization_{name}.svg"),
-            format!("Lu: one realization, {name} error with the filter's +-sigma"),
+        let file = format!("lu_realization_{name}.svg");
+        match band_plot(
+            &file,
+            &format!("Lu: one realization, {name} error with the filter's +-sigma"),
+            "t [s]",
             unit,
-            &[
-                Series {
-                    label: "error",
-                    points: one(&|k| z.error[k][i]),
-                },
-                Series {
-                    label: "+sigma",
-                    points: one(&|k| z.sigma[k][i]),
-                },
-                Series {
-                    label: "-sigma",
-                    points: one(&|k| -z.sigma[k][i]),
-                },
-            ],
-        );
+            &[Series {
+                label: "error",
+                points: one(&|k| z.error[k][i]),
+            }],
+            &[Band {
+                label: "filter +-sigma",
+                points: (1..z.time.len())
+                    .map(|k| (z.time[k], -z.sigma[k][i], z.sigma[k][i]))
+                    .collect(),
+            }],
+        ) {
+            Ok(path) => banded.push(path.display().to_string()),
+            Err(e) => eprintln!("figure {file} failed: {e}"),
+        }
+    }
+    for figure in smoothing_figures(&r.smoothed) {
+        match figure {
+            Ok(path) => banded.push(path.display().to_string()),
+            Err(e) => eprintln!("smoothing figure failed: {e}"),
+        }
     }
     let c = &r.covariance;
     let gain = |label: &'static str, i: usize, j: usize| Series {
@@ -915,6 +1231,7 @@ fn figures(r: &LuResult) -> Vec<String> {
             gain("K32", 2, 1),
         ],
     );
+    out.extend(banded);
     out
 }
 
@@ -976,6 +1293,8 @@ pub fn run_with(quick: bool, execution: Execution) -> Result<Output, Box<dyn std
     );
     println!("{}", m.verdict);
 
+    smoothing_table(&r.smoothed);
+
     println!("The paper's printed variants (same N, same seeds):");
     println!(
         "  {:<46} | {:>22} | {:>9} | {:>13} | verdict",
@@ -1023,6 +1342,7 @@ pub fn run_with(quick: bool, execution: Execution) -> Result<Output, Box<dyn std
         "ensemble_mean_error": rows(&|k| m.mean_error[k].into()),
         "residual_corr_20_30": [[c[(0, 0)], c[(0, 1)]], [c[(1, 0)], c[(1, 1)]]],
         "wall_s": m.wall_s,
+        "smoothed": smoothing_json(&r.smoothed),
     });
     Ok(Output { json, headlines })
 }

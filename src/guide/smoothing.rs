@@ -29,3 +29,32 @@
 //! `predict` (several sensors, varying Δt and inputs), then call
 //! [`Rts::smooth`](crate::filters::Rts::smooth); [`Rts::with_lag`](crate::filters::Rts::with_lag)
 //! keeps only the last L steps, a fixed-lag smoother for online use.
+//!
+//! For the E-step of EM, [`Rts::smooth_with_cross_covariances`](crate::filters::Rts::smooth_with_cross_covariances)
+//! (or [`smooth_sequence_with_cross_covariances`](crate::filters::smooth_sequence_with_cross_covariances))
+//! also returns the lag-one smoothed cross-covariances Pₖ₊₁,ₖ|K = cov(xₖ₊₁, xₖ | all data) from
+//! the same backward pass:
+//!
+//! ```
+//! use estim::prelude::*;
+//! use estim::filters::smoother::smooth_sequence_with_cross_covariances;
+//! use estim::nalgebra::{Matrix1, Matrix1x2, Matrix2, Matrix2x1, Vector1, Vector2};
+//!
+//! let process = LinearProcess {
+//!     transition: Matrix2::new(1.0, 1.0, 0.0, 1.0),
+//!     input: Matrix2x1::zeros(),
+//!     noise: Matrix2::identity() * 1e-2,
+//! };
+//! let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.5) };
+//! let zs = [Some(Vector1::new(0.0)), Some(Vector1::new(1.1)), None, Some(Vector1::new(2.9))];
+//! let mut kf = KalmanFilter::new(Gaussian::new(Vector2::zeros(), Matrix2::identity() * 10.0)?);
+//! let (run, cross) =
+//!     smooth_sequence_with_cross_covariances(&mut kf, &process, &[Vector1::zeros(); 3], 1.0, &sensor, &zs)?;
+//! // E[xₖ₊₁ xₖᵀ | all data] = Pₖ₊₁,ₖ|K + x̂ˢₖ₊₁ x̂ˢₖᵀ, the sufficient statistic EM needs.
+//! let second_moment = cross[0] + run.estimates[1].mean() * run.estimates[0].mean().transpose();
+//! assert!(f64::is_finite(second_moment[(0, 0)]));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! On any error the sequence functions return a [`SmootherError`](crate::filters::SmootherError)
+//! naming the time of the failing step and leave the filter as it was.

@@ -29,6 +29,7 @@ mod lu_calibration;
 mod lv2_fusion;
 
 // The tests, one module per example (or per paper for Boje's four).
+mod boje_circle_smoothing;
 mod boje_examples;
 mod consistency_example;
 mod large_state_example;

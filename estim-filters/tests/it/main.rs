@@ -33,4 +33,7 @@ mod second_order;
 #[cfg(feature = "serde")]
 mod serde_checkpoint;
 mod smoother;
+mod smoother_bad_input;
+mod smoother_nonlinear;
+mod smoother_proptest;
 mod state_space;
