@@ -53,6 +53,7 @@ pub mod consistency;
 mod correlated;
 mod gaussian_filter;
 pub mod monte_carlo;
+pub mod noise_id;
 #[cfg(feature = "proptest-support")]
 pub mod proptest_support;
 mod report;

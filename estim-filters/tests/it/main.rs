@@ -26,6 +26,9 @@ mod multirate;
 mod nees;
 mod no_alloc;
 mod no_alloc_dynamic;
+mod noise_id_adaptive;
+#[cfg(feature = "likelihood")]
+mod noise_id_likelihood;
 mod rls;
 mod second_order;
 mod smoother;
