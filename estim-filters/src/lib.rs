@@ -73,6 +73,7 @@ pub use monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Recorder};
 pub use report::{UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
 pub use smoother::{Rts, Sequence, SmootherError, filter_sequence, smooth_sequence};
+pub use smoother::{Smoothed, smooth_sequence_with_cross_covariances};
 pub use traits::{Estimator, Predict, PredictCorrelated, Update};
 pub use update::CovarianceUpdate;
 pub use validation::ValidationError;

@@ -210,12 +210,80 @@ where
         Pr: PropagatorWorkspace<T>,
         S: StateSpace<T, N>,
     {
+        self.backward(filter, None)
+    }
+
+    /// [`smooth`](Self::smooth), and the lag-one smoothed cross-covariances that the E-step of
+    /// EM needs (Shumway & Stoffer 1982; Särkkä 2013, Thm 12.4), from the same backward pass:
+    ///
+    /// ```text
+    /// Pₖ₊₁,ₖ|K = cov(xₖ₊₁, xₖ | z₀ … z_K) = Pˢₖ₊₁ Gₖᵀ      k = 0 … len() − 1
+    /// ```
+    ///
+    /// `cross_covariances[k]` pairs `estimates[k + 1]` (rows) with `estimates[k]` (columns), in
+    /// the tangent space of ⊞/⊟. One extra n × n product per step and `len()` more matrices
+    /// allocated; the errors are [`smooth`](Self::smooth)'s.
+    ///
+    /// ```
+    /// use estim_filters::{KalmanFilter, Update};
+    /// use estim_filters::smoother::Rts;
+    /// use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+    /// use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Matrix2x1, Vector1, Vector2};
+    ///
+    /// let process = LinearProcess {
+    ///     transition: Matrix2::new(1.0, 1.0, 0.0, 1.0),
+    ///     input: Matrix2x1::zeros(),
+    ///     noise: Matrix2::identity() * 1e-2,
+    /// };
+    /// let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.5) };
+    /// let mut kf = KalmanFilter::new(Gaussian::new(Vector2::zeros(), Matrix2::identity())?);
+    /// let mut rts = Rts::new();
+    /// for (k, z) in [0.1, 1.2, 1.9, 3.1].into_iter().enumerate() {
+    ///     if k > 0 {
+    ///         rts.predict(&mut kf, &process, &Vector1::zeros(), 1.0)?;
+    ///     }
+    ///     kf.update(&sensor, &Vector1::new(z))?;
+    /// }
+    /// let pass = rts.smooth_with_cross_covariances(&kf)?;
+    /// assert_eq!((pass.estimates.len(), pass.cross_covariances.len()), (4, 3));
+    /// // Consecutive positions are strongly correlated given all the data.
+    /// let (c, p0, p1) = (pass.cross_covariances[0], pass.estimates[0].covariance(), pass.estimates[1].covariance());
+    /// assert!(c[(0, 0)] / f64::sqrt(p0[(0, 0)] * p1[(0, 0)]) > 0.5);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn smooth_with_cross_covariances<Pr, S>(
+        &self,
+        filter: &GaussianFilter<T, N, Pr, S>,
+    ) -> core::result::Result<Smoothed<T, N>, SmootherError>
+    where
+        Pr: PropagatorWorkspace<T>,
+        S: StateSpace<T, N>,
+    {
+        let mut cross_covariances = Vec::with_capacity(self.records.len());
+        let estimates = self.backward(filter, Some(&mut cross_covariances))?;
+        Ok(Smoothed {
+            estimates,
+            cross_covariances,
+        })
+    }
+
+    /// The backward pass; pushes Pₖ₊₁,ₖ|K into `cross` (in time order) if given.
+    fn backward<Pr, S>(
+        &self,
+        filter: &GaussianFilter<T, N, Pr, S>,
+        mut cross: Option<&mut Vec<OMatrix<T, N, N>>>,
+    ) -> core::result::Result<Vec<Gaussian<T, N>>, SmootherError>
+    where
+        Pr: PropagatorWorkspace<T>,
+        S: StateSpace<T, N>,
+    {
         let space = filter.state_space();
         let n = filter.state().shape_generic().0;
-        let mut smoothed = vec![Gaussian::new_unchecked(
+        let mut smoothed = Vec::with_capacity(self.records.len() + 1);
+        smoothed.push(Gaussian::new_unchecked(
             filter.state().clone(),
             filter.covariance().clone(),
-        )];
+        ));
         let mut cholesky = CholeskyScratch::default();
         let (mut factor, mut gain) = (OMatrix::zeros_generic(n, n), OMatrix::zeros_generic(n, n));
         let (mut dx, mut correction) =
@@ -243,17 +311,41 @@ where
             let difference = next.covariance() - &record.predicted_covariance;
             let mut covariance = &record.covariance + &gain * difference * gain.transpose();
             symmetrize(&mut covariance);
-            if !(all_finite(&state) && all_finite(&covariance)) {
+            let lag_one = cross.as_ref().map(|_| next.covariance() * gain.transpose());
+            let finite = all_finite(&state)
+                && all_finite(&covariance)
+                && lag_one.as_ref().is_none_or(|c| all_finite(c));
+            if !finite {
                 return Err(fail(Error::NonFinite {
                     stage: Stage::Smoothing,
                     quantity: Quantity::Covariance,
                 }));
             }
+            if let (Some(cross), Some(lag_one)) = (cross.as_deref_mut(), lag_one) {
+                cross.push(lag_one);
+            }
             smoothed.push(Gaussian::new_unchecked(state, covariance));
         }
         smoothed.reverse();
+        if let Some(cross) = cross {
+            cross.reverse();
+        }
         Ok(smoothed)
     }
+}
+
+/// A backward pass with its lag-one cross-covariances
+/// ([`Rts::smooth_with_cross_covariances`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Smoothed<T: Real, N: Dim>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// The smoothed estimates x̂ˢₖ, Pˢₖ at the K + 1 times of the forward pass.
+    pub estimates: Vec<Gaussian<T, N>>,
+    /// The K lag-one smoothed cross-covariances: entry k is Pₖ₊₁,ₖ|K = cov(xₖ₊₁, xₖ | all
+    /// data) = Pˢₖ₊₁ Gₖᵀ.
+    pub cross_covariances: Vec<OMatrix<T, N, N>>,
 }
 
 /// A recorded sequence filtered ([`filter_sequence`]) or smoothed ([`smooth_sequence`]).
@@ -375,6 +467,66 @@ where
     )?;
     sequence.estimates = rts.smooth(filter)?;
     Ok(sequence)
+}
+
+/// [`smooth_sequence`], and the lag-one smoothed cross-covariances Pₖ₊₁,ₖ|K = Pˢₖ₊₁ Gₖᵀ
+/// ([`Rts::smooth_with_cross_covariances`]): entry k of the second vector pairs
+/// `estimates[k + 1]` with `estimates[k]`, K entries in all. What the E-step of EM needs:
+/// smoothed moments, lag-one cross-covariances and the log-likelihood, from one pass.
+///
+/// ```
+/// use estim_filters::KalmanFilter;
+/// use estim_filters::smoother::smooth_sequence_with_cross_covariances;
+/// use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+/// use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Matrix2x1, Vector1, Vector2};
+///
+/// let process = LinearProcess {
+///     transition: Matrix2::new(1.0, 1.0, 0.0, 1.0),
+///     input: Matrix2x1::zeros(),
+///     noise: Matrix2::identity() * 1e-2,
+/// };
+/// let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.5) };
+/// let mut kf = KalmanFilter::new(Gaussian::new(Vector2::zeros(), Matrix2::identity())?);
+/// let zs = [Some(Vector1::new(0.1)), None, Some(Vector1::new(2.1))];
+/// let (run, cross) =
+///     smooth_sequence_with_cross_covariances(&mut kf, &process, &[Vector1::zeros(); 2], 1.0, &sensor, &zs)?;
+/// assert_eq!((run.estimates.len(), cross.len()), (3, 2));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[allow(clippy::type_complexity)]
+pub fn smooth_sequence_with_cross_covariances<T, N, M, Pr, S, P, H>(
+    filter: &mut GaussianFilter<T, N, Pr, S>,
+    process: &P,
+    inputs: &[P::Input],
+    dt: T,
+    measurement: &H,
+    measurements: &[Option<OVector<T, M>>],
+) -> core::result::Result<(Sequence<T, N, M>, Vec<OMatrix<T, N, N>>), SmootherError>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    P: ProcessModel<T, N>,
+    H: MeasurementModel<T, N, M>,
+    Pr: PropagatorWorkspace<T>
+        + for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
+    S: StateSpace<T, N>,
+    GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    let mut rts = Rts::new();
+    let mut sequence = run(
+        filter,
+        process,
+        inputs,
+        dt,
+        measurement,
+        measurements,
+        Some(&mut rts),
+    )?;
+    let smoothed = rts.smooth_with_cross_covariances(filter)?;
+    sequence.estimates = smoothed.estimates;
+    Ok((sequence, smoothed.cross_covariances))
 }
 
 /// The forward pass of [`filter_sequence`], recording into `rts` if given.

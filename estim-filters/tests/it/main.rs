@@ -32,4 +32,6 @@ mod noise_id_likelihood;
 mod rls;
 mod second_order;
 mod smoother;
+mod smoother_nonlinear;
+mod smoother_proptest;
 mod state_space;

@@ -2,15 +2,16 @@
 //! of all states of a linear-Gaussian system, formed by stacking x₀ … x_K into one vector and
 //! solving the normal equations of its information form (batch least squares).
 
-use core::ops::AddAssign;
-
 use estim_core::nalgebra::{
     DMatrix, DVector, Dyn, Matrix1, Matrix1x2, Matrix2, Matrix2x1, SymmetricEigen, U2, Vector1,
     Vector2,
 };
 use estim_core::propagate::Unscented;
 use estim_core::{Error, Gaussian, LinearMeasurement, LinearProcess, Quantity, Stage};
-use estim_filters::smoother::{Rts, SmootherError, filter_sequence, smooth_sequence};
+use estim_filters::smoother::{
+    Rts, Smoothed, SmootherError, filter_sequence, smooth_sequence,
+    smooth_sequence_with_cross_covariances,
+};
 use estim_filters::{Ekf, GaussianFilter, KalmanFilter, Update};
 
 /// A time-varying 2-state system: Δt changes each step (so does F), Q scales with Δt, an input
@@ -57,8 +58,9 @@ impl Scenario {
         }
     }
 
-    /// The forward pass through `Rts::predict`, then the backward pass.
-    fn smooth<Pr>(&self, mut filter: GaussianFilter<f64, U2, Pr>) -> Vec<Gaussian<f64, U2>>
+    /// The forward pass through `Rts::predict`, then the backward pass with the lag-one
+    /// cross-covariances (whose estimates must be `Rts::smooth`'s, bit for bit).
+    fn smooth<Pr>(&self, mut filter: GaussianFilter<f64, U2, Pr>) -> Smoothed<f64, U2>
     where
         Pr: estim_core::propagate::PropagatorWorkspace<f64>
             + for<'a> estim_core::propagate::MomentPropagator<
@@ -92,45 +94,121 @@ impl Scenario {
                 filter.update(&sensor, &Vector1::new(z)).unwrap();
             }
         }
-        rts.smooth(&filter).unwrap()
+        let pass = rts.smooth_with_cross_covariances(&filter).unwrap();
+        assert_eq!(pass.estimates, rts.smooth(&filter).unwrap());
+        pass
     }
 
-    /// The joint posterior of (x₀, …, x_K) from the information form: Λ X = η with
-    /// Λ = Σ (prior, dynamics and measurement terms) Aᵀ W⁻¹ A. Returns the mean, the
-    /// covariance Λ⁻¹ and the condition number of Λ.
+    /// The batch problem of this scenario (`with_measurements = false`: the joint prior).
+    fn batch_problem(&self, with_measurements: bool) -> BatchProblem {
+        let to_dyn = |m: &Matrix2<f64>| DMatrix::from_column_slice(2, 2, m.as_slice());
+        let transitions = self
+            .dts
+            .iter()
+            .zip(&self.inputs)
+            .map(|(&dt, &u)| {
+                let p = Self::process(dt);
+                let bu = DVector::from_column_slice((p.input * u).as_slice());
+                (to_dyn(&p.transition), bu, to_dyn(&p.noise))
+            })
+            .collect();
+        let h = DMatrix::from_row_slice(1, 2, &[1.0, 0.0]);
+        let r = DMatrix::from_element(1, 1, self.r);
+        let measurements = self
+            .measurements
+            .iter()
+            .map(|z| {
+                z.filter(|_| with_measurements)
+                    .map(|z| (h.clone(), r.clone(), DVector::from_element(1, z)))
+            })
+            .collect();
+        BatchProblem {
+            prior: (
+                DVector::from_column_slice(self.prior.0.as_slice()),
+                to_dyn(&self.prior.1),
+            ),
+            transitions,
+            measurements,
+        }
+    }
+
+    /// The joint posterior's mean, covariance and κ(Λ) ([`batch_posterior`]).
     fn batch(&self, with_measurements: bool) -> (DVector<f64>, DMatrix<f64>, f64) {
-        let states = self.dts.len() + 1;
-        let dim = 2 * states;
-        let mut info = DMatrix::zeros(dim, dim);
-        let mut eta = DVector::zeros(dim);
-        let (m0, p0) = self.prior;
-        let p0_inv = p0.try_inverse().unwrap();
-        info.view_mut((0, 0), (2, 2)).add_assign(&p0_inv);
-        eta.rows_mut(0, 2).add_assign(&(p0_inv * m0));
-        for (k, &dt) in self.dts.iter().enumerate() {
-            // x_{k+1} − F x_k − B u = w ~ N(0, Q): A = [−F, I] on blocks k, k + 1.
-            let process = Self::process(dt);
-            let mut a = DMatrix::zeros(2, dim);
-            a.view_mut((0, 2 * k), (2, 2))
-                .copy_from(&(-process.transition));
-            a.view_mut((0, 2 * k + 2), (2, 2))
-                .copy_from(&Matrix2::identity());
-            let q_inv =
-                DMatrix::from_column_slice(2, 2, process.noise.try_inverse().unwrap().as_slice());
-            let bu = DVector::from_column_slice((process.input * self.inputs[k]).as_slice());
-            info += a.transpose() * &q_inv * &a;
-            eta += a.transpose() * &q_inv * bu;
+        let b = batch_posterior(&self.batch_problem(with_measurements));
+        (b.mean, b.covariance, b.condition)
+    }
+}
+
+/// (Hₖ, Rₖ, zₖ): one measurement of a [`BatchProblem`].
+pub(crate) type BatchMeasurement = (DMatrix<f64>, DMatrix<f64>, DVector<f64>);
+
+/// A linear-Gaussian state-space problem over times 0 … K, in dense runtime-size form: the
+/// prior N(m₀, P₀) of x₀; K transitions xₖ₊₁ = Fₖ xₖ + bₖ + wₖ, wₖ ~ N(0, Qₖ) (bₖ = Bₖ uₖ);
+/// K + 1 optional measurements zₖ = Hₖ xₖ + vₖ, vₖ ~ N(0, Rₖ).
+pub(crate) struct BatchProblem {
+    /// (m₀, P₀).
+    pub prior: (DVector<f64>, DMatrix<f64>),
+    /// (Fₖ, bₖ, Qₖ) for k = 0 … K − 1.
+    pub transitions: Vec<(DMatrix<f64>, DVector<f64>, DMatrix<f64>)>,
+    /// (Hₖ, Rₖ, zₖ) or `None` for k = 0 … K.
+    pub measurements: Vec<Option<BatchMeasurement>>,
+}
+
+/// The exact joint posterior of X = (x₀, …, x_K) of a [`BatchProblem`].
+pub(crate) struct BatchPosterior {
+    /// E[X | z] = Λ⁻¹ η.
+    pub mean: DVector<f64>,
+    /// cov(X | z) = Λ⁻¹.
+    pub covariance: DMatrix<f64>,
+    /// κ₂(Λ) = λmax / λmin.
+    pub condition: f64,
+    /// ‖η‖₂, for the error bound of the mean: ‖ΔX‖ ≲ κ ε ‖Λ⁻¹‖ ‖η‖.
+    pub rhs_norm: f64,
+}
+
+/// The joint posterior from the information form: Λ X = η with Λ = Σ Aᵀ W⁻¹ A over the prior
+/// (A = [I, 0, …]), dynamics (A = [… −Fₖ, I …] on blocks k, k + 1) and measurement
+/// (A = [… Hₖ …]) terms, η = Σ Aᵀ W⁻¹ (their right-hand sides); solved with nalgebra's dense
+/// Cholesky of Λ: no recursion in time, nothing shared with the smoother.
+pub(crate) fn batch_posterior(problem: &BatchProblem) -> BatchPosterior {
+    let (m0, p0) = &problem.prior;
+    let n = m0.len();
+    let dim = n * problem.measurements.len();
+    let mut info = DMatrix::zeros(dim, dim);
+    let mut eta = DVector::zeros(dim);
+    let mut add = |a: DMatrix<f64>, w: &DMatrix<f64>, rhs: &DVector<f64>| {
+        let w_inv = w
+            .clone()
+            .cholesky()
+            .expect("noise covariances are SPD")
+            .inverse();
+        info += a.transpose() * &w_inv * &a;
+        eta += a.transpose() * &w_inv * rhs;
+    };
+    let mut a = DMatrix::zeros(n, dim);
+    a.view_mut((0, 0), (n, n)).fill_with_identity();
+    add(a, p0, m0);
+    for (k, (f, b, q)) in problem.transitions.iter().enumerate() {
+        let mut a = DMatrix::zeros(n, dim);
+        a.view_mut((0, n * k), (n, n)).copy_from(&(-f));
+        a.view_mut((0, n * k + n), (n, n)).fill_with_identity();
+        add(a, q, b);
+    }
+    for (k, z) in problem.measurements.iter().enumerate() {
+        if let Some((h, r, z)) = z {
+            let mut a = DMatrix::zeros(h.nrows(), dim);
+            a.view_mut((0, n * k), (h.nrows(), n)).copy_from(h);
+            add(a, r, z);
         }
-        for (k, z) in self.measurements.iter().enumerate() {
-            if let (Some(z), true) = (z, with_measurements) {
-                info[(2 * k, 2 * k)] += 1.0 / self.r;
-                eta[2 * k] += z / self.r;
-            }
-        }
-        let eigen = SymmetricEigen::new(info.clone());
-        let condition = eigen.eigenvalues.max() / eigen.eigenvalues.min();
-        let covariance = info.cholesky().unwrap().inverse();
-        (&covariance * eta, covariance, condition)
+    }
+    let eigen = SymmetricEigen::new(info.clone());
+    let condition = eigen.eigenvalues.max() / eigen.eigenvalues.min();
+    let covariance = info.cholesky().expect("Λ is SPD").inverse();
+    BatchPosterior {
+        mean: &covariance * &eta,
+        covariance,
+        condition,
+        rhs_norm: eta.norm(),
     }
 }
 
@@ -169,8 +247,20 @@ fn rts_equals_the_batch_posterior_of_a_linear_gaussian_system() {
             )),
         ),
     ];
-    for (name, smoothed) in runs {
+    for (name, pass) in runs {
+        let smoothed = &pass.estimates;
         assert_eq!(smoothed.len(), s.dts.len() + 1);
+        assert_eq!(pass.cross_covariances.len(), s.dts.len());
+        // Lag-one cross-covariances: the off-diagonal blocks cov(x_{k+1}, x_k) of Λ⁻¹.
+        for (k, c) in pass.cross_covariances.iter().enumerate() {
+            let block = covariance.view((2 * k + 2, 2 * k), (2, 2)).clone_owned();
+            assert_close(
+                c.as_slice(),
+                block.as_slice(),
+                tol,
+                &format!("{name} cross {k}"),
+            );
+        }
         for (k, g) in smoothed.iter().enumerate() {
             let batch_mean = mean.rows(2 * k, 2);
             let batch_cov = covariance.view((2 * k, 2 * k), (2, 2)).clone_owned();
@@ -194,9 +284,11 @@ fn rts_equals_the_batch_posterior_of_a_linear_gaussian_system() {
 #[test]
 fn rts_on_runtime_sizes_matches_static_sizes() {
     let s = Scenario::new();
-    let smoothed = s.smooth(KalmanFilter::new(
-        Gaussian::new(s.prior.0, s.prior.1).unwrap(),
-    ));
+    let smoothed = s
+        .smooth(KalmanFilter::new(
+            Gaussian::new(s.prior.0, s.prior.1).unwrap(),
+        ))
+        .estimates;
     let to_dyn = |m: &Matrix2<f64>| DMatrix::from_column_slice(2, 2, m.as_slice());
     let mut kf = KalmanFilter::<f64, Dyn>::new(
         Gaussian::new(
@@ -325,6 +417,16 @@ fn sequences_match_the_batch_posterior_and_the_marginal_likelihood() {
     let tol = 100.0 * s.dts.len() as f64 * condition * f64::EPSILON;
     let mut kf = KalmanFilter::new(prior.clone());
     let smoothed = smooth_sequence(&mut kf, &process, &inputs, 0.5, &s.sensor(), &zs).unwrap();
+    let mut kf = KalmanFilter::new(prior.clone());
+    let (with_cross, cross) =
+        smooth_sequence_with_cross_covariances(&mut kf, &process, &inputs, 0.5, &s.sensor(), &zs)
+            .unwrap();
+    assert_eq!(with_cross, smoothed);
+    assert_eq!(cross.len(), s.dts.len());
+    for (k, c) in cross.iter().enumerate() {
+        let block = covariance.view((2 * k + 2, 2 * k), (2, 2)).clone_owned();
+        assert_close(c.as_slice(), block.as_slice(), tol, "cross");
+    }
     for (k, g) in smoothed.estimates.iter().enumerate() {
         assert_close(
             g.mean().as_slice(),
@@ -433,9 +535,11 @@ fn smoothed_nees_is_in_its_chi_square_band_and_smoothing_only_shrinks_covariance
                 *z = Some(truth[k][0] + s.r.sqrt() * v);
             }
         }
-        let smoothed = run.smooth(KalmanFilter::new(
-            Gaussian::new(s.prior.0, s.prior.1).unwrap(),
-        ));
+        let smoothed = run
+            .smooth(KalmanFilter::new(
+                Gaussian::new(s.prior.0, s.prior.1).unwrap(),
+            ))
+            .estimates;
         for (k, g) in smoothed.iter().enumerate() {
             let e = truth[k] - g.mean();
             nees[k] += (e.transpose() * g.covariance().try_inverse().unwrap() * e)[0] / runs as f64;
