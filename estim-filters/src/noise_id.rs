@@ -5,7 +5,7 @@
 //! | module | what | models | what it gives |
 //! |---|---|---|---|
 //! | [`em`] | expectation–maximisation (Shumway & Stoffer 1982) | linear-Gaussian, time invariant | Q, R, x₀, P₀, F, H under structure constraints; the log-likelihood of every iteration |
-//! | [`likelihood`] (feature `likelihood`) | maximum likelihood by L-BFGS (argmin) | any filter of the family (KF, EKF, UKF, second-order EKF) | the parameters of a user-chosen parameterisation and their Hessian-based standard errors |
+//! | `likelihood` (feature `likelihood`) | maximum likelihood by L-BFGS (argmin) | any filter of the family (KF, EKF, UKF, second-order EKF) | the parameters of a user-chosen parameterisation and their Hessian-based standard errors |
 //! | [`adaptive`] | innovation-based covariance matching (Mehra 1972; Mohamed & Schwarz 1999) | any filter, online | R̂ after every update, with a forgetting window |
 //!
 //! EM is the batch route for linear models: every iteration is one smoother pass and a
@@ -37,12 +37,14 @@ use estim_core::{Alloc, Error, Quantity, Real};
 use crate::smoother::SmootherError;
 
 pub mod adaptive;
-// EM_MOD pub mod em;
+pub mod em;
 #[cfg(feature = "likelihood")]
 pub mod likelihood;
 
 pub use adaptive::{MeasurementNoiseMatching, WithNoise};
-// EM_USE pub use em::{CovarianceStructure, EmEstimate, EmSettings, LinearGaussian, MatrixStructure};
+pub use em::{
+    CovarianceStructure, EmEstimate, EmSettings, LinearGaussian, MatrixStructure, Record,
+};
 #[cfg(feature = "likelihood")]
 pub use likelihood::{MaximumLikelihood, MlEstimate};
 
@@ -156,15 +158,23 @@ pub enum NoiseIdError {
     /// No sequence holds a single measurement: nothing to learn from.
     #[error("every measurement is missing")]
     AllMissing,
-    /// A recorded measurement or input is NaN or ±∞.
+    /// A recorded measurement is NaN or ±∞.
     #[error("{quantity} of sequence {sequence} at time {step} is not finite")]
     NonFiniteData {
         /// Which sequence (0 = the first).
         sequence: usize,
         /// Which time in it.
         step: usize,
-        /// What (a measurement or an input).
+        /// What ([`Quantity::Measurement`]).
         quantity: Quantity,
+    },
+    /// A recorded input is NaN or ±∞.
+    #[error("input of sequence {sequence} at time {step} is not finite")]
+    NonFiniteInput {
+        /// Which sequence (0 = the first).
+        sequence: usize,
+        /// Which time in it.
+        step: usize,
     },
     /// A sequence whose lengths disagree (`measurements` must have one entry more than
     /// `inputs`), or no sequence at all (`found` 0, `expected` 1).
@@ -204,7 +214,6 @@ pub enum NoiseIdError {
     Optimizer(OptimizerFailure),
 }
 
-#[cfg_attr(not(feature = "likelihood"), allow(dead_code))] // until EM uses it
 /// Checks an iteration cap (≥ 1) and a tolerance (finite, ≥ 0).
 pub(crate) fn check_iteration_settings(
     max_iterations: usize,
@@ -225,7 +234,6 @@ pub(crate) fn check_iteration_settings(
     Ok(())
 }
 
-#[cfg_attr(not(feature = "likelihood"), allow(dead_code))] // until EM uses it
 /// Checks that every recorded measurement of sequence `sequence` is finite.
 pub(crate) fn check_measurements<T: Real, M: Dim>(
     sequence: usize,

@@ -27,6 +27,7 @@ mod nees;
 mod no_alloc;
 mod no_alloc_dynamic;
 mod noise_id_adaptive;
+mod noise_id_em;
 #[cfg(feature = "likelihood")]
 mod noise_id_likelihood;
 mod rls;

@@ -268,3 +268,68 @@ fn bad_input_is_a_typed_error() {
     let failing = |_: &[f64]| Err(NoiseIdError::AllMissing);
     assert_eq!(ml.maximize(failing, &[0.0]), Err(NoiseIdError::AllMissing));
 }
+
+#[test]
+fn agrees_with_em_at_the_optimum() {
+    use estim_filters::noise_id::em::estimate;
+    use estim_filters::noise_id::{CovarianceStructure, EmSettings, LinearGaussian, Record};
+    // Two sequences, some measurements missing: both routes maximise the same ℓ.
+    let steps = 300;
+    let mut runs: Vec<_> = (0..2)
+        .map(|s| random_walk_data(40 + s, steps, 0.04, 0.25))
+        .collect();
+    for k in (3..steps).step_by(7) {
+        runs[0][k] = None;
+    }
+    let inputs = vec![Vector1::zeros(); steps];
+    let (process, measurement) = walk_model(&[0.0, 0.0]);
+    let start = LinearGaussian {
+        process,
+        measurement,
+        prior: walk_prior(),
+    };
+    let settings = EmSettings::new()
+        .with_process_noise(CovarianceStructure::Full)
+        .with_measurement_noise(CovarianceStructure::Full)
+        .with_iterations(5000, 1e-14)
+        .unwrap();
+    let records: Vec<_> = runs
+        .iter()
+        .map(|zs| Record {
+            inputs: &inputs,
+            measurements: zs,
+        })
+        .collect();
+    let em = estimate(&start, &settings, &records).unwrap();
+    assert!(em.converged);
+    let ml = MaximumLikelihood::new()
+        .maximize(
+            |theta| {
+                let (process, sensor) = walk_model(theta);
+                let kf = KalmanFilter::new(walk_prior());
+                runs.iter()
+                    .map(|zs| sequence_log_likelihood(&kf, &process, &inputs, 1.0, &sensor, zs))
+                    .sum()
+            },
+            &[0.0, 0.0],
+        )
+        .unwrap();
+    let se = ml.standard_errors().unwrap();
+    let em_theta = [
+        em.model.process.noise[(0, 0)].ln(),
+        em.model.measurement.noise[(0, 0)].ln(),
+    ];
+    for i in 0..2 {
+        // Both at the same maximum: a difference of 1 % of a standard error changes ℓ by
+        // 0.5·10⁻⁴, far above where either stops (EM: ℓ gains < 10⁻¹⁴ (1 + |ℓ|) per
+        // iteration; L-BFGS + Newton: gradient ~10⁻⁹).
+        assert!(
+            (em_theta[i] - ml.parameters[i]).abs() < 0.01 * se[i],
+            "parameter {i}: EM {} ML {} se {}",
+            em_theta[i],
+            ml.parameters[i],
+            se[i]
+        );
+    }
+    assert!((em.log_likelihood - ml.log_likelihood).abs() < 1e-6 * ml.log_likelihood.abs());
+}
