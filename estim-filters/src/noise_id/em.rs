@@ -18,6 +18,9 @@
 //!   S₀₀ = Σ Pˢₖ + x̂ˢₖ x̂ˢₖᵀ   S₁₀ = Σ Pₖ₊₁,ₖ|K + yₖ x̂ˢₖᵀ   S₁₁ = Σ Pˢₖ₊₁ + yₖ yₖᵀ   (T transitions)
 //!   Szz = Σ zₖ zₖᵀ   Szx = Σ zₖ x̂ˢₖᵀ   Sxx = Σ Pˢₖ + x̂ˢₖ x̂ˢₖᵀ                         (O observed times)
 //!   ```
+//!   (The noise covariances below are evaluated in the equivalent centred form
+//!   Σ [Pˢₖ₊₁ − F Pₖ₊₁,ₖ|Kᵀ − Pₖ₊₁,ₖ|K Fᵀ + F Pˢₖ Fᵀ + (yₖ − F x̂ˢₖ)(yₖ − F x̂ˢₖ)ᵀ], which
+//!   keeps its precision when the states are large against the noise.)
 //! - **M-step**, in closed form, one block at a time given the others (an ECM step, Meng &
 //!   Rubin 1993, which keeps the monotone likelihood):
 //!   ```text
@@ -267,19 +270,29 @@ where
     pub converged: bool,
 }
 
-/// The expected sufficient statistics of one E-step (module docs).
+/// The expected sufficient statistics of one E-step (module docs). The raw second moments
+/// (S₀₀, S₁₀, Szx, Sxx) serve the regressions for F and H; the noise covariances are formed
+/// from the covariance sums and the per-step mean residuals instead, because S₁₁ − F S₁₀ᵀ − …
+/// cancels catastrophically when the states are large against the noise (Lu: positions of
+/// tens of metres, process noise of 10⁻¹¹ m² per epoch).
 struct Statistics<T: Real, N: Dim, M: Dim>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     s00: OMatrix<T, N, N>,
     s10: OMatrix<T, N, N>,
-    s11: OMatrix<T, N, N>,
-    transitions: usize,
-    szz: OMatrix<T, M, M>,
+    /// Σ Pˢₖ, Σ Pₖ₊₁,ₖ|K, Σ Pˢₖ₊₁ over the transitions.
+    cov00: OMatrix<T, N, N>,
+    cov10: OMatrix<T, N, N>,
+    cov11: OMatrix<T, N, N>,
+    /// (x̂ˢₖ, yₖ) of every transition.
+    transition_means: Vec<(OVector<T, N>, OVector<T, N>)>,
     szx: OMatrix<T, M, N>,
     sxx: OMatrix<T, N, N>,
-    observations: usize,
+    /// Σ Pˢₖ over the observed times.
+    covxx: OMatrix<T, N, N>,
+    /// (x̂ˢₖ, zₖ) of every observed time.
+    observed_means: Vec<(OVector<T, N>, OVector<T, M>)>,
     initial_means: Vec<OVector<T, N>>,
     initial_covariance_sum: OMatrix<T, N, N>,
 }
@@ -618,12 +631,14 @@ where
     let mut stats = Statistics {
         s00: OMatrix::zeros_generic(n, n),
         s10: OMatrix::zeros_generic(n, n),
-        s11: OMatrix::zeros_generic(n, n),
-        transitions: 0,
-        szz: OMatrix::zeros_generic(m, m),
+        cov00: OMatrix::zeros_generic(n, n),
+        cov10: OMatrix::zeros_generic(n, n),
+        cov11: OMatrix::zeros_generic(n, n),
+        transition_means: Vec::new(),
         szx: OMatrix::zeros_generic(m, n),
         sxx: OMatrix::zeros_generic(n, n),
-        observations: 0,
+        covxx: OMatrix::zeros_generic(n, n),
+        observed_means: Vec::new(),
         initial_means: Vec::with_capacity(records.len()),
         initial_covariance_sum: OMatrix::zeros_generic(n, n),
     };
@@ -648,15 +663,17 @@ where
             let y = next.mean() - &model.process.input * u;
             stats.s00 += now.covariance() + now.mean() * now.mean().transpose();
             stats.s10 += c + &y * now.mean().transpose();
-            stats.s11 += next.covariance() + &y * y.transpose();
+            stats.cov00 += now.covariance();
+            stats.cov10 += c;
+            stats.cov11 += next.covariance();
+            stats.transition_means.push((now.mean().clone(), y));
         }
-        stats.transitions += record.inputs.len();
         for (z, x) in record.measurements.iter().zip(xs) {
             if let Some(z) = z {
-                stats.szz += z * z.transpose();
                 stats.szx += z * x.mean().transpose();
                 stats.sxx += x.covariance() + x.mean() * x.mean().transpose();
-                stats.observations += 1;
+                stats.covxx += x.covariance();
+                stats.observed_means.push((x.mean().clone(), z.clone()));
             }
         }
     }
@@ -675,7 +692,7 @@ where
     DefaultAllocator: Alloc<N, M> + Alloc<N, U>,
 {
     let mut next = model.clone();
-    if stats.transitions > 0 {
+    if !stats.transition_means.is_empty() {
         let f = regression(
             &settings.transition,
             &model.process.transition,
@@ -684,8 +701,13 @@ where
             &model.process.noise,
             Quantity::ProcessNoise,
         )?;
-        let count = T::from_usize(stats.transitions).unwrap_or_else(T::one);
-        let target = residual_covariance(&f, &stats.s11, &stats.s10, &stats.s00) / count;
+        let target = residual_covariance(
+            &f,
+            &stats.cov11,
+            &stats.cov10,
+            &stats.cov00,
+            &stats.transition_means,
+        );
         next.process.noise = structured(
             &settings.process_noise,
             q_shape.as_ref(),
@@ -694,7 +716,7 @@ where
         );
         next.process.transition = f;
     }
-    if stats.observations > 0 {
+    if !stats.observed_means.is_empty() {
         let h = regression(
             &settings.observation,
             &model.measurement.observation,
@@ -703,8 +725,9 @@ where
             &model.measurement.noise,
             Quantity::MeasurementNoise,
         )?;
-        let count = T::from_usize(stats.observations).unwrap_or_else(T::one);
-        let target = residual_covariance(&h, &stats.szz, &stats.szx, &stats.sxx) / count;
+        let zero = OMatrix::zeros_generic(h.shape_generic().0, h.shape_generic().0);
+        let cross = OMatrix::zeros_generic(h.shape_generic().0, h.shape_generic().1);
+        let target = residual_covariance(&h, &zero, &cross, &stats.covxx, &stats.observed_means);
         next.measurement.noise = structured(
             &settings.measurement_noise,
             r_shape.as_ref(),
@@ -739,18 +762,27 @@ where
     Ok(next)
 }
 
-/// (S_yy − A S_yxᵀ − S_yx Aᵀ + A S_xx Aᵀ), symmetrised: Σ E[(y − A x)(y − A x)ᵀ].
+/// (1/K) Σₖ E[(yₖ − A xₖ)(yₖ − A xₖ)ᵀ] from the covariance sums (Σ cov yₖ = `cyy`,
+/// Σ cov(yₖ, xₖ) = `cyx`, Σ cov xₖ = `cxx`) and the K mean pairs (x̂ₖ, ŷₖ), symmetrised:
+/// cyy − A cyxᵀ − cyx Aᵀ + A cxx Aᵀ + Σ (ŷ − A x̂)(ŷ − A x̂)ᵀ, each term of the size of the
+/// result (no cancellation of large second moments).
 fn residual_covariance<T: Real, R: Dim, C: Dim>(
     a: &OMatrix<T, R, C>,
-    syy: &OMatrix<T, R, R>,
-    syx: &OMatrix<T, R, C>,
-    sxx: &OMatrix<T, C, C>,
+    cyy: &OMatrix<T, R, R>,
+    cyx: &OMatrix<T, R, C>,
+    cxx: &OMatrix<T, C, C>,
+    means: &[(OVector<T, C>, OVector<T, R>)],
 ) -> OMatrix<T, R, R>
 where
     DefaultAllocator: Alloc<R, C>,
 {
-    let cross = a * syx.transpose();
-    let mut out = syy - &cross - cross.transpose() + a * sxx * a.transpose();
+    let cross = a * cyx.transpose();
+    let mut out = cyy - &cross - cross.transpose() + a * cxx * a.transpose();
+    for (x, y) in means {
+        let e = y - a * x;
+        out += &e * e.transpose();
+    }
+    out /= T::from_usize(means.len().max(1)).unwrap_or_else(T::one);
     symmetrize(&mut out);
     out
 }

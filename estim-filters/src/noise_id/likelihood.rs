@@ -4,7 +4,7 @@
 //! The prediction-error decomposition gives the log-likelihood of a recorded sequence as the sum
 //! of the filter's per-update log-likelihoods, ℓ(θ) = Σₖ ln N(νₖ; 0, Sₖ(θ)), exactly for a linear
 //! model and to the filter's approximation for the EKF, UKF and second-order EKF. It is what
-//! [`filter_sequence`](crate::smoother::filter_sequence) returns. [`MaximumLikelihood`] maximises
+//! [`filter_sequence`] returns. [`MaximumLikelihood`] maximises
 //! ℓ over a parameter vector θ ∈ ℝᵖ that the user maps to a model (typically log-variances, so
 //! that every θ is a valid model) and reports:
 //!
