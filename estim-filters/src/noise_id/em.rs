@@ -286,16 +286,19 @@ where
     cov10: OMatrix<T, N, N>,
     cov11: OMatrix<T, N, N>,
     /// (x̂ˢₖ, yₖ) of every transition.
-    transition_means: Vec<(OVector<T, N>, OVector<T, N>)>,
+    transition_means: Vec<MeanPair<T, N, N>>,
     szx: OMatrix<T, M, N>,
     sxx: OMatrix<T, N, N>,
     /// Σ Pˢₖ over the observed times.
     covxx: OMatrix<T, N, N>,
     /// (x̂ˢₖ, zₖ) of every observed time.
-    observed_means: Vec<(OVector<T, N>, OVector<T, M>)>,
+    observed_means: Vec<MeanPair<T, N, M>>,
     initial_means: Vec<OVector<T, N>>,
     initial_covariance_sum: OMatrix<T, N, N>,
 }
+
+/// A smoothed mean x̂ₖ and the vector it predicts (yₖ or zₖ).
+type MeanPair<T, C, R> = (OVector<T, C>, OVector<T, R>);
 
 /// A scalar-multiple shape, prepared: S, S⁺, rank S.
 struct Shape<T: Real, D: Dim>
@@ -771,7 +774,7 @@ fn residual_covariance<T: Real, R: Dim, C: Dim>(
     cyy: &OMatrix<T, R, R>,
     cyx: &OMatrix<T, R, C>,
     cxx: &OMatrix<T, C, C>,
-    means: &[(OVector<T, C>, OVector<T, R>)],
+    means: &[MeanPair<T, C, R>],
 ) -> OMatrix<T, R, R>
 where
     DefaultAllocator: Alloc<R, C>,
