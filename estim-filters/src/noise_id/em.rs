@@ -61,8 +61,8 @@
 //! // A random walk with Q = 0.04 seen through noise R = 0.25; EM starts from Q = R = 1.
 //! let (mut rng, mut x) = (StdRng::seed_from_u64(3), 0.0);
 //! let (w, v) = (Normal::new(0.0, 0.2)?, Normal::new(0.0, 0.5)?);
-//! let zs: Vec<_> = (0..1000).map(|_| { x += w.sample(&mut rng); Some(Vector1::new(x + v.sample(&mut rng))) }).collect();
-//! let inputs = vec![Vector1::<f64>::zeros(); 999];
+//! let zs: Vec<_> = (0..400).map(|_| { x += w.sample(&mut rng); Some(Vector1::new(x + v.sample(&mut rng))) }).collect();
+//! let inputs = vec![Vector1::<f64>::zeros(); 399];
 //! let model = LinearGaussian {
 //!     process: LinearProcess { transition: Matrix1::new(1.0), input: Matrix1::zeros(), noise: Matrix1::new(1.0) },
 //!     measurement: LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(1.0) },
@@ -71,7 +71,7 @@
 //! let settings = EmSettings::new()
 //!     .with_process_noise(CovarianceStructure::Full)
 //!     .with_measurement_noise(CovarianceStructure::Full)
-//!     .with_iterations(500, 1e-10)?;
+//!     .with_iterations(100, 1e-8)?;
 //! let fit = estimate(&model, &settings, &[Record { inputs: &inputs, measurements: &zs }])?;
 //! assert!(fit.history.windows(2).all(|w| w[1] >= w[0] - 1e-9 * w[0].abs()));
 //! assert!((fit.model.process.noise[(0, 0)] - 0.04).abs() < 0.02);
