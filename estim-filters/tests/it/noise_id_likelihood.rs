@@ -46,6 +46,18 @@ pub fn walk_prior() -> Gaussian<f64, U1> {
     Gaussian::new(Vector1::new(0.0), Matrix1::new(10.0)).unwrap()
 }
 
+/// ℓ(θ) of one random-walk record through the Kalman filter (θ₀ = ln Q, θ₁ = ln R; further
+/// entries are ignored).
+pub fn walk_log_likelihood(
+    theta: &[f64],
+    zs: &[Option<Vector1<f64>>],
+) -> Result<f64, NoiseIdError> {
+    let (process, sensor) = walk_model(theta);
+    let kf = KalmanFilter::new(walk_prior());
+    let inputs = vec![Vector1::zeros(); zs.len() - 1];
+    sequence_log_likelihood(&kf, &process, &inputs, 1.0, &sensor, zs)
+}
+
 #[test]
 fn standard_errors_match_the_spread_over_seeds() {
     let (q, r, steps, seeds) = (0.04f64, 0.25f64, 300, 16);
@@ -54,21 +66,7 @@ fn standard_errors_match_the_spread_over_seeds() {
     for seed in 0..seeds {
         let zs = random_walk_data(1000 + seed, steps, q, r);
         let fit = MaximumLikelihood::new()
-            .maximize(
-                |theta| {
-                    let (process, sensor) = walk_model(theta);
-                    let kf = KalmanFilter::new(walk_prior());
-                    sequence_log_likelihood(
-                        &kf,
-                        &process,
-                        &vec![Vector1::zeros(); steps],
-                        1.0,
-                        &sensor,
-                        &zs,
-                    )
-                },
-                &[0.0, 0.0],
-            )
+            .maximize(|theta| walk_log_likelihood(theta, &zs), &[0.0, 0.0])
             .unwrap();
         estimates.push(fit.parameters.clone());
         errors.push(fit.standard_errors().unwrap());
@@ -182,19 +180,8 @@ fn a_parameter_the_data_ignore_is_reported_flat() {
     let zs = random_walk_data(3, 200, 0.04, 0.25);
     let fit = MaximumLikelihood::new()
         .maximize(
-            |theta| {
-                // θ₂ does not enter the model.
-                let (process, sensor) = walk_model(theta);
-                let kf = KalmanFilter::new(walk_prior());
-                sequence_log_likelihood(
-                    &kf,
-                    &process,
-                    &vec![Vector1::zeros(); 200],
-                    1.0,
-                    &sensor,
-                    &zs,
-                )
-            },
+            // θ₂ does not enter the model.
+            |theta| walk_log_likelihood(theta, &zs),
             &[0.0, 0.0, 0.5],
         )
         .unwrap();
@@ -304,13 +291,7 @@ fn agrees_with_em_at_the_optimum() {
     assert!(em.converged);
     let ml = MaximumLikelihood::new()
         .maximize(
-            |theta| {
-                let (process, sensor) = walk_model(theta);
-                let kf = KalmanFilter::new(walk_prior());
-                runs.iter()
-                    .map(|zs| sequence_log_likelihood(&kf, &process, &inputs, 1.0, &sensor, zs))
-                    .sum()
-            },
+            |theta| runs.iter().map(|zs| walk_log_likelihood(theta, zs)).sum(),
             &[0.0, 0.0],
         )
         .unwrap();
