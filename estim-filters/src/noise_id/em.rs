@@ -38,7 +38,8 @@
 //! The log-likelihood of every iteration's model is recorded ([`EmEstimate::history`]); it never
 //! decreases beyond round-off (EM's defining property; the tests assert it). EM stops when an
 //! iteration raises ℓ by at most `tolerance · (1 + |ℓ|)`, or after `max_iterations` E-steps, and
-//! returns the model whose ℓ is the last recorded. EM does not give standard errors: use
+//! returns the model with the highest recorded ℓ (the last one, unless round-off at convergence
+//! made the last step a hair lower). EM does not give standard errors: use
 //! [`likelihood`](super) (feature `likelihood`) at its optimum for those.
 //!
 //! **Before the first E-step** every free covariance is put in its structure (off-diagonals of a
