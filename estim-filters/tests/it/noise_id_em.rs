@@ -478,3 +478,75 @@ fn bad_input_is_a_typed_error() {
         Err(NoiseIdError::Model(_))
     ));
 }
+
+#[test]
+fn single_precision_follows_double() {
+    // The same EM in f32 and f64 (one generic code path) on a random walk: 30 iterations.
+    let run = simulate(
+        &mut rng(8),
+        &walk(0.04, 0.25),
+        &Matrix1::new(0.2),
+        200,
+        |k| k % 6 == 0,
+    );
+    let settings = EmSettings::new()
+        .with_process_noise(CovarianceStructure::Full)
+        .with_measurement_noise(CovarianceStructure::Full)
+        .with_iterations(30, 0.0)
+        .unwrap();
+    let double = estimate(
+        &walk(1.0, 1.0),
+        &settings,
+        &records(std::slice::from_ref(&run)),
+    )
+    .unwrap();
+    let start = LinearGaussian::<f32, U1, U1, U1> {
+        process: LinearProcess {
+            transition: Matrix1::new(1.0),
+            input: Matrix1::zeros(),
+            noise: Matrix1::new(1.0),
+        },
+        measurement: LinearMeasurement {
+            observation: Matrix1::new(1.0),
+            noise: Matrix1::new(1.0),
+        },
+        prior: Gaussian::new(Vector1::new(0.0), Matrix1::new(10.0)).unwrap(),
+    };
+    let single_settings = EmSettings::<f32, U1, U1>::new()
+        .with_process_noise(CovarianceStructure::Full)
+        .with_measurement_noise(CovarianceStructure::Full)
+        .with_iterations(30, 0.0)
+        .unwrap();
+    let inputs: Vec<Vector1<f32>> = run.inputs.iter().map(|u| u.cast()).collect();
+    let zs: Vec<Option<Vector1<f32>>> = run
+        .measurements
+        .iter()
+        .map(|z| z.map(|z| z.cast()))
+        .collect();
+    let single = estimate(
+        &start,
+        &single_settings,
+        &[Record {
+            inputs: &inputs,
+            measurements: &zs,
+        }],
+    )
+    .unwrap();
+    // f32 round-off (ε ≈ 1.2e-7) accumulated over 200 steps and 30 iterations: 1e-3 relative
+    // is ~10⁴ ε, far above it and far below the 30-iteration change of Q (a factor ~25).
+    let q = (
+        single.model.process.noise[(0, 0)] as f64,
+        double.model.process.noise[(0, 0)],
+    );
+    let r = (
+        single.model.measurement.noise[(0, 0)] as f64,
+        double.model.measurement.noise[(0, 0)],
+    );
+    assert!((q.0 / q.1 - 1.0).abs() < 1e-3, "{q:?}");
+    assert!((r.0 / r.1 - 1.0).abs() < 1e-3, "{r:?}");
+    let (ls, ld) = (
+        *single.history.last().unwrap() as f64,
+        *double.history.last().unwrap(),
+    );
+    assert!((ls - ld).abs() < 1e-4 * ld.abs(), "{ls} vs {ld}");
+}
