@@ -29,6 +29,8 @@ mod common;
 mod lee_huang;
 #[path = "reproductions/lu_calibration.rs"]
 mod lu_calibration;
+#[path = "reproductions/lu_noise_id.rs"]
+mod lu_noise_id;
 #[path = "reproductions/lv2_fusion.rs"]
 mod lv2_fusion;
 
@@ -76,7 +78,10 @@ const PAPERS: &[Paper] = &[
         title: "Lu: calibration of an accelerometer using GPS measurements",
         citation: "J. Lu, Calibration of an accelerometer using GPS measurements (course report).",
         module: "estim_models::lu",
-        examples: &[("lu_calibration", lu_calibration::run)],
+        examples: &[
+            ("lu_calibration", lu_calibration::run),
+            ("lu_noise_id", lu_noise_id::run),
+        ],
     },
 ];
 

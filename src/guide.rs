@@ -6,6 +6,7 @@
 //! | [`runtime_sizes`] | states whose size comes from configuration (`DVector`) |
 //! | [`verifying`] | NEES/NIS, the Monte Carlo runner, checking your derivatives |
 //! | [`smoothing`] | Rauch–Tung–Striebel, fixed lag, and whole recorded sequences |
+//! | [`noise_identification`] | learning Q and R from data: EM, maximum likelihood, online matching |
 //! | [`single_precision`] | what changes in `f32`, and the settings that survive it |
 //! | [`from_filterpy`] | a table of FilterPy (and pykalman) equivalents |
 //!
@@ -14,6 +15,7 @@
 
 pub mod choosing_a_filter;
 pub mod from_filterpy;
+pub mod noise_identification;
 pub mod runtime_sizes;
 pub mod single_precision;
 pub mod smoothing;

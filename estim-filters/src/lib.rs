@@ -36,6 +36,12 @@
 //! Models are passed to each call, never stored, so one filter serves several sensors at
 //! several rates. [`Estimator`] is object safe: `Box<dyn Estimator<f64, U6>>` holds any of them.
 //!
+//! ## Learning the noise
+//!
+//! [`noise_id`]: Q and R (and x₀, P₀, F, H) from recorded data by expectation–maximisation for
+//! linear models, by maximum likelihood with standard errors for any filter (feature
+//! `likelihood`), and online by innovation-based covariance matching.
+//!
 //! ## Verifying a filter
 //!
 //! - [`consistency`]: NEES, NIS, averaged NEES/NIS with χ² bands, innovation whiteness,
@@ -55,6 +61,7 @@ pub mod consistency;
 mod correlated;
 mod gaussian_filter;
 pub mod monte_carlo;
+pub mod noise_id;
 #[cfg(feature = "proptest-support")]
 pub mod proptest_support;
 mod report;

@@ -28,6 +28,10 @@ mod multirate;
 mod nees;
 mod no_alloc;
 mod no_alloc_dynamic;
+mod noise_id_adaptive;
+mod noise_id_em;
+#[cfg(feature = "likelihood")]
+mod noise_id_likelihood;
 mod rls;
 mod second_order;
 #[cfg(feature = "serde")]

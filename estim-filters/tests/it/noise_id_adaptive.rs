@@ -1,0 +1,205 @@
+//! Covariance matching of R ([`MeasurementNoiseMatching`]): convergence on a stationary
+//! problem with the spread its docs predict (measured over seeds), tracking of a step change,
+//! the indefinite case, and bad input.
+
+use estim_core::nalgebra::{Matrix1, Matrix2, Vector1, Vector2};
+use estim_core::{Error, Gaussian, LinearMeasurement, LinearProcess, Quantity};
+use estim_filters::noise_id::{MeasurementNoiseMatching, NoiseIdError, Setting};
+use estim_filters::{KalmanFilter, Predict, Ukf, Update, UpdateOutcome, UpdateReport};
+
+use crate::common::{normal, rng};
+
+type Walk = LinearProcess<f64, estim_core::nalgebra::U1, estim_core::nalgebra::U1>;
+
+/// A scalar random walk with Q = `q`.
+fn walk(q: f64) -> Walk {
+    LinearProcess {
+        transition: Matrix1::new(1.0),
+        input: Matrix1::zeros(),
+        noise: Matrix1::new(q),
+    }
+}
+
+/// Runs a Kalman filter with adaptive R over `steps` steps of a random walk (Q = 0.01) whose
+/// measurement noise variance at step k is `r_true(k)`; returns R̂ after every step.
+fn run(seed: u64, steps: usize, window: f64, r_true: impl Fn(usize) -> f64) -> Vec<f64> {
+    let process = walk(0.01);
+    let sensor = LinearMeasurement {
+        observation: Matrix1::new(1.0),
+        noise: Matrix1::new(2.0),
+    };
+    let mut adaptive = MeasurementNoiseMatching::new(sensor.noise, window, 1e-6).unwrap();
+    let mut kf = KalmanFilter::new(Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0)).unwrap());
+    let (mut rng, mut x) = (rng(seed), 0.0);
+    let mut history = Vec::with_capacity(steps);
+    for k in 0..steps {
+        x += 0.1 * normal(&mut rng);
+        kf.predict(&process, &Vector1::zeros(), 1.0).unwrap();
+        let z = x + r_true(k).sqrt() * normal(&mut rng);
+        let report = kf
+            .update(&adaptive.model(&sensor), &Vector1::new(z))
+            .unwrap();
+        assert!(adaptive.observe(&report).unwrap());
+        history.push(adaptive.noise()[(0, 0)]);
+    }
+    history
+}
+
+/// The steady-state innovation variance S of the random walk (Q = 0.01) with noise R: the
+/// Riccati fixed point P⁻ = P⁻R/(P⁻ + R) + Q, S = P⁻ + R.
+fn steady_innovation_variance(r: f64) -> f64 {
+    let q = 0.01;
+    let p = 0.5 * (q + (q * q + 4.0 * q * r).sqrt());
+    p + r
+}
+
+#[test]
+fn converges_to_the_true_r_with_the_predicted_spread() {
+    let (window, r) = (200.0, 0.5);
+    let finals: Vec<f64> = (0..16)
+        .map(|seed| *run(100 + seed, 3000, window, |_| r).last().unwrap())
+        .collect();
+    let n = finals.len() as f64;
+    let mean = finals.iter().sum::<f64>() / n;
+    let sd = (finals.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    // The docs' spread: Var d = 2 S² for a scalar, EWMA variance Var d / (2L − 1).
+    let s = steady_innovation_variance(r);
+    let predicted = (2.0 * s * s / (2.0 * window - 1.0)).sqrt();
+    // The mean of 16 finals is within 4 standard errors of R (bias would show here).
+    assert!(
+        (mean - r).abs() < 4.0 * predicted / n.sqrt(),
+        "mean {mean}, predicted sd {predicted}"
+    );
+    // The sample sd of 16 draws is within [0.5, 1.6] of σ with probability > 0.99
+    // (χ²₁₅ quantiles 4.6 and 37.7 → √(4.6/15) = 0.55, √(37.7/15) = 1.59).
+    assert!(
+        (0.5..1.6).contains(&(sd / predicted)),
+        "sd {sd}, predicted {predicted}"
+    );
+}
+
+#[test]
+fn tracks_a_step_change() {
+    let window = 100.0;
+    let (before, after, change) = (0.5, 2.0, 2000);
+    let history = run(7, 4000, window, |k| if k < change { before } else { after });
+    // Per-time sd of R̂ (the docs' formula), 4σ bands.
+    let sigma = |r: f64| {
+        let s = steady_innovation_variance(r);
+        (2.0 * s * s / (2.0 * window - 1.0)).sqrt()
+    };
+    let at_change = history[change - 1];
+    assert!(
+        (at_change - before).abs() < 4.0 * sigma(before),
+        "{at_change}"
+    );
+    // Time constant L: after 10 L the start is forgotten to e^-10.
+    let settled = history[change + 1000 - 1];
+    assert!((settled - after).abs() < 4.0 * sigma(after), "{settled}");
+    // And after one window it has moved well off the old value (1 − e⁻¹ of the way, less noise).
+    let one_window = history[change + window as usize];
+    assert!(one_window > before + 0.3 * (after - before), "{one_window}");
+}
+
+#[test]
+fn an_indefinite_statistic_is_clipped_to_the_floor() {
+    // A filter far too pessimistic (Q = 10 assumed, 0.01 true) with a precise sensor: the
+    // predicted output covariance H P⁻ Hᵀ ≈ 10 exceeds every innovation covariance estimate,
+    // so C = mean(ν²) − H P⁻ Hᵀ < 0.
+    let process = walk(10.0);
+    let sensor = LinearMeasurement {
+        observation: Matrix1::new(1.0),
+        noise: Matrix1::new(0.1),
+    };
+    let floor = 1e-3;
+    let mut adaptive = MeasurementNoiseMatching::new(sensor.noise, 20.0, floor).unwrap();
+    let mut kf = KalmanFilter::new(Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0)).unwrap());
+    let (mut rng, mut x) = (rng(11), 0.0);
+    for _ in 0..200 {
+        x += 0.1 * normal(&mut rng);
+        kf.predict(&process, &Vector1::zeros(), 1.0).unwrap();
+        let z = x + 0.01 * normal(&mut rng);
+        let report = kf
+            .update(&adaptive.model(&sensor), &Vector1::new(z))
+            .unwrap();
+        adaptive.observe(&report).unwrap();
+    }
+    assert!(adaptive.statistic()[(0, 0)] < 0.0);
+    assert_eq!(adaptive.clipped(), 1);
+    assert_eq!(adaptive.noise()[(0, 0)], floor);
+}
+
+#[test]
+fn works_with_the_ukf_on_two_components() {
+    // A 2-D random walk seen directly; true R = diag(0.3, 1.2) with correlation 0.2.
+    let process = LinearProcess {
+        transition: Matrix2::identity(),
+        input: Matrix2::zeros(),
+        noise: Matrix2::identity() * 0.01,
+    };
+    let sensor = LinearMeasurement {
+        observation: Matrix2::identity(),
+        noise: Matrix2::identity(),
+    };
+    let r_true = Matrix2::new(0.3, 0.2, 0.2, 1.2);
+    let l = r_true.cholesky().unwrap().unpack();
+    let mut adaptive = MeasurementNoiseMatching::new(sensor.noise, 2000.0, 1e-6).unwrap();
+    let mut ukf = Ukf::new(Gaussian::new(Vector2::zeros(), Matrix2::identity()).unwrap());
+    let (mut rng, mut x) = (rng(5), Vector2::zeros());
+    for _ in 0..8000 {
+        x += Vector2::new(normal(&mut rng), normal(&mut rng)) * 0.1;
+        ukf.predict(&process, &Vector2::zeros(), 1.0).unwrap();
+        let z = x + l * Vector2::new(normal(&mut rng), normal(&mut rng));
+        let report = ukf.update(&adaptive.model(&sensor), &z).unwrap();
+        adaptive.observe(&report).unwrap();
+    }
+    // σ of an entry ≈ √((SᵢᵢSⱼⱼ + Sᵢⱼ²) / (2L − 1)) ≤ √(2 · 1.3² / 3999) ≈ 0.03: 4σ = 0.12.
+    let error = (adaptive.noise() - r_true).abs().max();
+    assert!(error < 0.12, "{}", adaptive.noise());
+}
+
+#[test]
+fn bad_settings_and_reports_are_typed_errors_that_change_nothing() {
+    let r = Matrix1::new(1.0);
+    for (window, floor, setting) in [
+        (0.5, 1e-6, Setting::Window),
+        (f64::NAN, 1e-6, Setting::Window),
+        (f64::INFINITY, 1e-6, Setting::Window),
+        (10.0, 0.0, Setting::Floor),
+        (10.0, f64::NAN, Setting::Floor),
+    ] {
+        match MeasurementNoiseMatching::new(r, window, floor) {
+            Err(NoiseIdError::InvalidSetting { setting: s, .. }) => assert_eq!(s, setting),
+            other => panic!("{other:?}"),
+        }
+    }
+    assert!(matches!(
+        MeasurementNoiseMatching::new(Matrix1::new(f64::NAN), 10.0, 1e-6),
+        Err(NoiseIdError::Model(Error::NonFinite { .. }))
+    ));
+    let mut adaptive = MeasurementNoiseMatching::new(r, 10.0, 1e-6).unwrap();
+    let before = adaptive.clone();
+    let bad = UpdateReport {
+        innovation: Vector1::new(f64::NAN),
+        innovation_covariance: Matrix1::new(2.0),
+        nis: f64::NAN,
+        log_likelihood: f64::NAN,
+        outcome: UpdateOutcome::Applied,
+    };
+    assert!(matches!(
+        adaptive.observe(&bad),
+        Err(NoiseIdError::Model(Error::NonFinite {
+            quantity: Quantity::Innovation,
+            ..
+        }))
+    ));
+    assert_eq!(adaptive, before);
+    // A gated update is not used.
+    let gated = UpdateReport {
+        outcome: UpdateOutcome::Gated,
+        innovation: Vector1::new(100.0),
+        ..bad
+    };
+    assert!(!adaptive.observe(&gated).unwrap());
+    assert_eq!(adaptive, before);
+}
