@@ -51,6 +51,7 @@
 
 pub mod consistency;
 mod correlated;
+pub mod fusion;
 mod gaussian_filter;
 pub mod monte_carlo;
 #[cfg(feature = "proptest-support")]
