@@ -22,6 +22,8 @@ mod covariance_forms;
 mod dyn_estimator;
 mod dynamic;
 mod equivalence;
+mod fusion_replay;
+mod fusion_support;
 mod multirate;
 mod nees;
 mod no_alloc;
