@@ -138,10 +138,8 @@ fn a_stuck_position_channel_is_excluded_within_the_derived_bound_and_readmitted(
         if step % 10 == 0 {
             let mut reading = read(&mut r, 0, &x);
             if (stuck_from..stuck_until).contains(&step) {
-                if step == stuck_from {
-                    if let Reading::Position(z) = reading {
-                        stuck_value = z[0];
-                    }
+                if let (true, Reading::Position(z)) = (step == stuck_from, reading) {
+                    stuck_value = z[0];
                 }
                 reading = Reading::Position(Vector1::new(stuck_value));
             }

@@ -22,6 +22,7 @@ mod covariance_forms;
 mod dyn_estimator;
 mod dynamic;
 mod equivalence;
+mod fusion_errors;
 mod fusion_gating;
 mod fusion_replay;
 mod fusion_support;
