@@ -29,6 +29,8 @@ mod common;
 mod lee_huang;
 #[path = "reproductions/lu_calibration.rs"]
 mod lu_calibration;
+#[path = "reproductions/lu_delays.rs"]
+mod lu_delays;
 #[path = "reproductions/lv2_fusion.rs"]
 mod lv2_fusion;
 
@@ -76,7 +78,10 @@ const PAPERS: &[Paper] = &[
         title: "Lu: calibration of an accelerometer using GPS measurements",
         citation: "J. Lu, Calibration of an accelerometer using GPS measurements (course report).",
         module: "estim_models::lu",
-        examples: &[("lu_calibration", lu_calibration::run)],
+        examples: &[
+            ("lu_calibration", lu_calibration::run),
+            ("lu_delays", lu_delays::run), // estim's extension (latency, faults): not in the paper
+        ],
     },
 ];
 

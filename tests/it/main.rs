@@ -25,6 +25,8 @@ mod large_state;
 mod lee_huang;
 #[path = "../../examples/reproductions/lu_calibration.rs"]
 mod lu_calibration;
+#[path = "../../examples/reproductions/lu_delays.rs"]
+mod lu_delays;
 #[path = "../../examples/reproductions/lv2_fusion.rs"]
 mod lv2_fusion;
 
@@ -34,4 +36,5 @@ mod consistency_example;
 mod large_state_example;
 mod lee_huang_example;
 mod lu_calibration_example;
+mod lu_delays_example;
 mod lv2_fusion_example;
