@@ -72,6 +72,9 @@ pub mod prelude {
         MeasurementJacobian, MeasurementModel, MomentPropagator, ProcessHessian, ProcessJacobian,
         ProcessModel, Real, StateSpace, TwiceDifferentiable, VectorFunction, wrap_angle,
     };
+    pub use estim_filters::fusion::{
+        FusionDriver, FusionSettings, Innovation, SensorSet, SensorSettings,
+    };
     pub use estim_filters::{
         CovarianceUpdate, Ekf, EnsembleStats, Estimator, FadingMemoryRls, GaussianFilter,
         GaussianSecondOrderEkf, KalmanFilter, MonteCarlo, Predict, PredictCorrelated, Recorder,
