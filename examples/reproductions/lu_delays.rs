@@ -486,6 +486,30 @@ pub fn configs(quick: bool) -> Vec<DelayConfig> {
     out
 }
 
+/// Each result's curve `f`, in log10, labelled by its method.
+fn log_curves(
+    results: &[DelayResult],
+    f: impl Fn(&DelayResult) -> Vec<(f64, f64)>,
+) -> Vec<(&'static str, Vec<(f64, f64)>)> {
+    results
+        .iter()
+        .map(|r| {
+            let points = f(r).iter().map(|&(t, v)| (t, v.log10())).collect();
+            (r.config.method.label(), points)
+        })
+        .collect()
+}
+
+fn as_series<'a>(curves: &'a [(&'static str, Vec<(f64, f64)>)]) -> Vec<Series<'a>> {
+    curves
+        .iter()
+        .map(|(label, points)| Series {
+            label,
+            points: points.clone(),
+        })
+        .collect()
+}
+
 /// The example body.
 pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
     let start = Instant::now();
@@ -544,22 +568,8 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
     );
 
     let mut figures = Vec::new();
-    let curves: Vec<(String, Vec<(f64, f64)>)> = results[..3]
-        .iter()
-        .map(|r| {
-            (
-                r.config.method.label().to_string(),
-                r.anees().iter().map(|&(t, a)| (t, a.log10())).collect(),
-            )
-        })
-        .collect();
-    let series: Vec<Series<'_>> = curves
-        .iter()
-        .map(|(l, p)| Series {
-            label: l,
-            points: p.clone(),
-        })
-        .collect();
+    let curves = log_curves(&results[..3], DelayResult::anees);
+    let series = as_series(&curves);
     let times: Vec<f64> = curves[0].1.iter().map(|p| p.0).collect();
     let bands = [Band {
         label: "99 % band (ANEES of a consistent filter)",
@@ -578,22 +588,8 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
     ) {
         figures.push(p);
     }
-    let curves: Vec<(String, Vec<(f64, f64)>)> = results[3..]
-        .iter()
-        .map(|r| {
-            (
-                r.config.method.label().to_string(),
-                r.rms(0).iter().map(|&(t, e)| (t, e.log10())).collect(),
-            )
-        })
-        .collect();
-    let series: Vec<Series<'_>> = curves
-        .iter()
-        .map(|(l, p)| Series {
-            label: l,
-            points: p.clone(),
-        })
-        .collect();
+    let curves = log_curves(&results[3..], |r| r.rms(0));
+    let series = as_series(&curves);
     if let Ok(p) = line_plot(
         "lu_delays_faults_rms.svg",
         "Lu + latency, 100-sigma outliers, stuck position: RMS position error (estim's extension)",
