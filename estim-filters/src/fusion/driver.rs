@@ -52,6 +52,33 @@ where
     ///
     /// Errors: [`FusionError::InvalidSetting`] for a setting out of range (including a
     /// non-finite `start`).
+    ///
+    /// ```
+    /// # use estim_core::nalgebra::{Matrix1, U1, Vector1};
+    /// # use estim_core::{Gaussian, LinearMeasurement, LinearProcess, error::Result};
+    /// # use estim_filters::fusion::{FusionDriver, FusionError, FusionSettings, Innovation, MonitorSettings, SensorSet, SensorSettings, SensorStatus};
+    /// # use estim_filters::{Estimator, KalmanFilter, Update};
+    /// # struct One(LinearMeasurement<f64, U1, U1>);
+    /// # impl<F: Update<f64, U1, U1, LinearMeasurement<f64, U1, U1>>> SensorSet<f64, U1, F> for One {
+    /// #     type Reading = Vector1<f64>;
+    /// #     fn count(&self) -> usize { 1 }
+    /// #     fn sensor(&self, _: &Vector1<f64>) -> usize { 0 }
+    /// #     fn dimension(&self, _: usize) -> usize { 1 }
+    /// #     fn update(&self, f: &mut F, z: &Vector1<f64>) -> Result<Innovation<f64>> { f.update(&self.0, z).map(|r| Innovation::of(&r)) }
+    /// # }
+    /// // A speed integrated from an acceleration input, observed directly.
+    /// let speed = LinearProcess { transition: Matrix1::new(1.0), input: Matrix1::new(0.01), noise: Matrix1::new(1e-6) };
+    /// let sensor = One(LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(0.01) });
+    /// let filter = KalmanFilter::new(Gaussian::new(Vector1::zeros(), Matrix1::new(1.0))?);
+    /// // Steps of 10 ms: the input matrix is per step.
+    /// let settings = FusionSettings { max_step: 0.01, ..FusionSettings::default() };
+    /// let mut driver = FusionDriver::new(filter, speed, Vector1::new(0.0), sensor, 0.0, settings, SensorSettings::default())?;
+    /// driver.set_input(0.5, Vector1::new(2.0))?; // 2 m/s² from 0.5 s on
+    /// driver.advance_to(1.5)?;                     // 100 steps of 10 ms at 2 m/s²
+    /// assert!((driver.filter().state()[0] - 2.0).abs() < 1e-9);
+    /// assert!(matches!(driver.set_input(1.0, Vector1::new(0.0)), Err(FusionError::NotMonotone { .. })));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn new(
         filter: F,
         process: P,
@@ -387,6 +414,34 @@ where
     }
 
     /// The health of `sensor` after the latest event.
+    ///
+    /// ```
+    /// # use estim_core::nalgebra::{Matrix1, U1, Vector1};
+    /// # use estim_core::{Gaussian, LinearMeasurement, LinearProcess, error::Result};
+    /// # use estim_filters::fusion::{FusionDriver, FusionError, FusionSettings, Innovation, MonitorSettings, SensorSet, SensorSettings, SensorStatus};
+    /// # use estim_filters::{Estimator, KalmanFilter, Update};
+    /// # struct One(LinearMeasurement<f64, U1, U1>);
+    /// # impl<F: Update<f64, U1, U1, LinearMeasurement<f64, U1, U1>>> SensorSet<f64, U1, F> for One {
+    /// #     type Reading = Vector1<f64>;
+    /// #     fn count(&self) -> usize { 1 }
+    /// #     fn sensor(&self, _: &Vector1<f64>) -> usize { 0 }
+    /// #     fn dimension(&self, _: usize) -> usize { 1 }
+    /// #     fn update(&self, f: &mut F, z: &Vector1<f64>) -> Result<Innovation<f64>> { f.update(&self.0, z).map(|r| Innovation::of(&r)) }
+    /// # }
+    /// let walk = LinearProcess { transition: Matrix1::new(1.0), input: Matrix1::zeros(), noise: Matrix1::new(1e-4) };
+    /// let sensor = One(LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(0.01) });
+    /// let filter = KalmanFilter::new(Gaussian::new(Vector1::zeros(), Matrix1::new(0.01))?);
+    /// let monitor = MonitorSettings { window: 5, ..MonitorSettings::default() };
+    /// let mut driver = FusionDriver::new(filter, walk, Vector1::zeros(), sensor, 0.0, FusionSettings::default(), SensorSettings::default())?
+    ///     .with_sensor_settings(0, SensorSettings::gated(0.999).with_monitor(monitor))?;
+    /// // The sensor sticks at 5 (50 σ): rejected, then excluded as faulty.
+    /// for k in 1..=6 { driver.fuse(0.1 * k as f64, Vector1::new(5.0))?; }
+    /// let health = driver.health(0);
+    /// assert_eq!(health.status, SensorStatus::Excluded);
+    /// assert_eq!(health.faults, 1);
+    /// assert!(health.rejected >= 1);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     ///
     /// # Panics
     ///
