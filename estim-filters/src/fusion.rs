@@ -113,7 +113,8 @@
 //! vectors and matrices live inside the records), the per-sensor windows. After that, with
 //! static sizes, no call allocates (tested with a counting allocator). With runtime sizes the
 //! restores through [`Estimator::reset`](crate::Estimator::reset) allocate one vector and one
-//! matrix per rejected, reset, excluded or replayed measurement.
+//! matrix per rejected, reset, excluded or replayed measurement, and a runtime-sized input is
+//! cloned into each record it is held over.
 //!
 //! # Time
 //!
