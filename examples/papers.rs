@@ -29,6 +29,8 @@ mod common;
 mod lee_huang;
 #[path = "reproductions/lu_calibration.rs"]
 mod lu_calibration;
+#[path = "reproductions/lu_delays.rs"]
+mod lu_delays;
 #[path = "reproductions/lu_noise_id.rs"]
 mod lu_noise_id;
 #[path = "reproductions/lv2_fusion.rs"]
@@ -81,6 +83,7 @@ const PAPERS: &[Paper] = &[
         examples: &[
             ("lu_calibration", lu_calibration::run),
             ("lu_noise_id", lu_noise_id::run),
+            ("lu_delays", lu_delays::run), // estim's extension (latency, faults): not in the paper
         ],
     },
 ];

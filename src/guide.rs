@@ -7,6 +7,7 @@
 //! | [`verifying`] | NEES/NIS, the Monte Carlo runner, checking your derivatives |
 //! | [`smoothing`] | Rauch–Tung–Striebel, fixed lag, and whole recorded sequences |
 //! | [`noise_identification`] | learning Q and R from data: EM, maximum likelihood, online matching |
+//! | [`sensor_fusion`] | timestamped sensors: late measurements, gating outcomes, faulty sensors |
 //! | [`single_precision`] | what changes in `f32`, and the settings that survive it |
 //! | [`from_filterpy`] | a table of FilterPy (and pykalman) equivalents |
 //!
@@ -17,6 +18,7 @@ pub mod choosing_a_filter;
 pub mod from_filterpy;
 pub mod noise_identification;
 pub mod runtime_sizes;
+pub mod sensor_fusion;
 pub mod single_precision;
 pub mod smoothing;
 pub mod verifying;

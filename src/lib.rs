@@ -73,6 +73,9 @@ pub mod prelude {
         ProcessJacobian, ProcessModel, Real, StateSpace, TwiceDifferentiable, VectorFunction,
         wrap_angle,
     };
+    pub use estim_filters::fusion::{
+        FusionDriver, FusionSettings, Innovation, SensorSet, SensorSettings,
+    };
     pub use estim_filters::{
         CovarianceUpdate, Ekf, EnsembleStats, Estimator, FadingMemoryRls, Gate, GaussianFilter,
         GaussianSecondOrderEkf, KalmanFilter, MonteCarlo, Predict, PredictCorrelated, Recorder,

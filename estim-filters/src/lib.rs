@@ -59,6 +59,7 @@
 pub mod checkpoint;
 pub mod consistency;
 mod correlated;
+pub mod fusion;
 mod gaussian_filter;
 pub mod monte_carlo;
 pub mod noise_id;

@@ -25,6 +25,8 @@ mod large_state;
 mod lee_huang;
 #[path = "../../examples/reproductions/lu_calibration.rs"]
 mod lu_calibration;
+#[path = "../../examples/reproductions/lu_delays.rs"]
+mod lu_delays;
 #[path = "../../examples/reproductions/lu_noise_id.rs"]
 mod lu_noise_id;
 #[path = "../../examples/reproductions/lv2_fusion.rs"]
@@ -37,5 +39,6 @@ mod consistency_example;
 mod large_state_example;
 mod lee_huang_example;
 mod lu_calibration_example;
+mod lu_delays_example;
 mod lu_noise_id_example;
 mod lv2_fusion_example;

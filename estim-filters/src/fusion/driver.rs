@@ -1,0 +1,678 @@
+//! The fusion driver: time, replay of late measurements, and the decision on each one.
+
+use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, convert};
+use estim_core::{Alloc, Error, Gaussian, ProcessModel, Quantity, Real, Stage};
+
+use super::error::{FusionError, FusionSetting};
+use super::history::{Event, History, Record};
+use super::monitor::{Health, SensorHealth};
+use super::outcome::{ExclusionReason, Fused, Innovation, Outcome, ResetReason};
+use super::sensors::SensorSet;
+use super::settings::{FusionSettings, Resolved, SensorSettings};
+use crate::traits::{Estimator, Predict};
+
+/// A filter `F` of the family, its process model `P` with its input, and the sensors `S`,
+/// driven by timestamped events: see the [module docs](super) for what it does and why.
+///
+/// Requirements: `F` predicts with `P` ([`Predict`]) and `S` updates `F` ([`SensorSet`]);
+/// the input is `Clone` (it is recorded).
+pub struct FusionDriver<T, N, F, P, S>
+where
+    T: Real,
+    N: Dim,
+    P: ProcessModel<T, N>,
+    S: SensorSet<T, N, F>,
+    DefaultAllocator: Alloc<N>,
+{
+    filter: F,
+    process: P,
+    sensors: S,
+    settings: FusionSettings,
+    resolved: Vec<Resolved<T>>,
+    input: P::Input,
+    health: Health<T>,
+    history: History<T, N, P::Input, S::Reading>,
+    prior_state: OVector<T, N>,
+    prior_covariance: OMatrix<T, N, N>,
+}
+
+impl<T, N, F, P, S> FusionDriver<T, N, F, P, S>
+where
+    T: Real,
+    N: Dim,
+    F: Predict<T, N, P>,
+    P: ProcessModel<T, N>,
+    P::Input: Clone,
+    S: SensorSet<T, N, F>,
+    DefaultAllocator: Alloc<N>,
+{
+    /// A driver at time `start` (seconds) whose filter holds the estimate at that time, with
+    /// `input` held from then on and every sensor judged by `sensor_settings` (change one with
+    /// [`with_sensor_settings`](Self::with_sensor_settings)). Allocates the whole history.
+    ///
+    /// Errors: [`FusionError::InvalidSetting`] for a setting out of range (including a
+    /// non-finite `start`).
+    ///
+    /// ```
+    /// # use estim_core::nalgebra::{Matrix1, U1, Vector1};
+    /// # use estim_core::{Gaussian, LinearMeasurement, LinearProcess, error::Result};
+    /// # use estim_filters::fusion::{FusionDriver, FusionError, FusionSettings, Innovation, MonitorSettings, SensorSet, SensorSettings, SensorStatus};
+    /// # use estim_filters::{Estimator, KalmanFilter, Update};
+    /// # struct One(LinearMeasurement<f64, U1, U1>);
+    /// # impl<F: Update<f64, U1, U1, LinearMeasurement<f64, U1, U1>>> SensorSet<f64, U1, F> for One {
+    /// #     type Reading = Vector1<f64>;
+    /// #     fn count(&self) -> usize { 1 }
+    /// #     fn sensor(&self, _: &Vector1<f64>) -> usize { 0 }
+    /// #     fn dimension(&self, _: usize) -> usize { 1 }
+    /// #     fn update(&self, f: &mut F, z: &Vector1<f64>) -> Result<Innovation<f64>> { f.update(&self.0, z).map(|r| Innovation::of(&r)) }
+    /// # }
+    /// // A speed integrated from an acceleration input, observed directly.
+    /// let speed = LinearProcess { transition: Matrix1::new(1.0), input: Matrix1::new(0.01), noise: Matrix1::new(1e-6) };
+    /// let sensor = One(LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(0.01) });
+    /// let filter = KalmanFilter::new(Gaussian::new(Vector1::zeros(), Matrix1::new(1.0))?);
+    /// // Steps of 10 ms: the input matrix is per step.
+    /// let settings = FusionSettings { max_step: 0.01, ..FusionSettings::default() };
+    /// let mut driver = FusionDriver::new(filter, speed, Vector1::new(0.0), sensor, 0.0, settings, SensorSettings::default())?;
+    /// driver.set_input(0.5, Vector1::new(2.0))?; // 2 m/s² from 0.5 s on
+    /// driver.advance_to(1.5)?;                     // 100 steps of 10 ms at 2 m/s²
+    /// assert!((driver.filter().state()[0] - 2.0).abs() < 1e-9);
+    /// assert!(matches!(driver.set_input(1.0, Vector1::new(0.0)), Err(FusionError::NotMonotone { .. })));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn new(
+        filter: F,
+        process: P,
+        input: P::Input,
+        sensors: S,
+        start: f64,
+        settings: FusionSettings,
+        sensor_settings: SensorSettings,
+    ) -> Result<Self, FusionError> {
+        settings.validate()?;
+        if !start.is_finite() {
+            return Err(FusionError::setting(FusionSetting::StartTime, start));
+        }
+        let n = filter.state().nrows();
+        let resolved = (0..sensors.count())
+            .map(|s| sensor_settings.resolve(sensors.dimension(s), n))
+            .collect::<Result<Vec<_>, _>>()?;
+        let health = Health::new(resolved.iter().map(window_of));
+        let start_record = Record {
+            time: start,
+            event: Event::Start,
+            state: filter.state().clone(),
+            covariance: filter.covariance().clone(),
+            input: input.clone(),
+            health: health.clone(),
+            outcome: None,
+        };
+        Ok(Self {
+            prior_state: filter.state().clone(),
+            prior_covariance: filter.covariance().clone(),
+            history: History::new(start_record, settings.capacity),
+            filter,
+            process,
+            sensors,
+            settings,
+            resolved,
+            input,
+            health,
+        })
+    }
+
+    /// The same driver with `settings` for `sensor`. That sensor's health restarts (counters
+    /// zero, window empty, admitted), in the history too.
+    ///
+    /// Errors: [`FusionError::InvalidSetting`] for a setting out of range or a sensor index
+    /// ≥ the number of sensors.
+    pub fn with_sensor_settings(
+        mut self,
+        sensor: usize,
+        settings: SensorSettings,
+    ) -> Result<Self, FusionError> {
+        if sensor >= self.resolved.len() {
+            return Err(FusionError::setting(FusionSetting::Sensor, sensor as f64));
+        }
+        let resolved =
+            settings.resolve(self.sensors.dimension(sensor), self.filter.state().nrows())?;
+        let fresh = Health::new(core::iter::once(window_of(&resolved)));
+        self.health.sensors[sensor] = fresh.sensors[0].clone();
+        for record in self.history.all_mut() {
+            record.health.sensors[sensor] = fresh.sensors[0].clone();
+        }
+        self.resolved[sensor] = resolved;
+        Ok(self)
+    }
+
+    /// Fuses `reading`, taken at `time` seconds, at that time: predicted to from the event
+    /// before it, decided ([`Outcome`]), and, if later events were already fused, those are
+    /// re-run after it (exactly as if everything had arrived in time order).
+    ///
+    /// Errors, each leaving the driver exactly as it was: [`FusionError::NonFiniteTime`],
+    /// [`FusionError::UnknownSensor`], [`FusionError::TooOld`] (more than the horizon before
+    /// the latest event, or before the oldest record kept), [`FusionError::Duplicate`] (this
+    /// sensor already has a measurement at this time), [`FusionError::GapTooLong`], and
+    /// [`FusionError::Filter`] when a filter step fails (e.g. a non-finite reading).
+    ///
+    /// ```
+    /// # use estim_core::nalgebra::{Matrix1, U1, Vector1};
+    /// # use estim_core::{Gaussian, LinearMeasurement, LinearProcess, error::Result};
+    /// # use estim_filters::fusion::{FusionDriver, FusionError, FusionSettings, Innovation, SensorSet, SensorSettings};
+    /// # use estim_filters::{Estimator, KalmanFilter, Update};
+    /// # struct One(LinearMeasurement<f64, U1, U1>);
+    /// # impl<F: Update<f64, U1, U1, LinearMeasurement<f64, U1, U1>>> SensorSet<f64, U1, F> for One {
+    /// #     type Reading = Vector1<f64>;
+    /// #     fn count(&self) -> usize { 1 }
+    /// #     fn sensor(&self, _: &Vector1<f64>) -> usize { 0 }
+    /// #     fn dimension(&self, _: usize) -> usize { 1 }
+    /// #     fn update(&self, f: &mut F, z: &Vector1<f64>) -> Result<Innovation<f64>> { f.update(&self.0, z).map(|r| Innovation::of(&r)) }
+    /// # }
+    /// let walk = LinearProcess { transition: Matrix1::new(1.0), input: Matrix1::zeros(), noise: Matrix1::new(1e-3) };
+    /// let sensor = One(LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(0.1) });
+    /// let filter = KalmanFilter::new(Gaussian::new(Vector1::zeros(), Matrix1::new(1.0))?);
+    /// let settings = FusionSettings { horizon: 0.3, ..FusionSettings::default() };
+    /// let mut driver = FusionDriver::new(filter, walk, Vector1::zeros(), sensor, 0.0, settings, SensorSettings::default())?;
+    /// driver.fuse(1.0, Vector1::new(0.5))?;
+    /// let before = driver.filter().estimate();
+    /// // Taken 0.5 s before the latest event, beyond the 0.3 s horizon: refused, nothing changed.
+    /// assert!(matches!(driver.fuse(0.5, Vector1::new(0.4)), Err(FusionError::TooOld { .. })));
+    /// assert!(matches!(driver.fuse(f64::NAN, Vector1::new(0.4)), Err(FusionError::NonFiniteTime { .. })));
+    /// assert!(matches!(driver.fuse(1.0, Vector1::new(0.4)), Err(FusionError::Duplicate { sensor: 0, .. })));
+    /// assert_eq!(driver.filter().estimate(), before);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn fuse(&mut self, time: f64, reading: S::Reading) -> Result<Fused<T>, FusionError> {
+        if !time.is_finite() {
+            return Err(FusionError::NonFiniteTime { time });
+        }
+        let count = self.sensors.count();
+        let sensor = self.sensors.sensor(&reading);
+        if sensor >= count {
+            return Err(FusionError::UnknownSensor { sensor, count });
+        }
+        let latest = self.history.latest().time;
+        let oldest = self
+            .history
+            .oldest()
+            .time
+            .max(latest - self.settings.horizon);
+        if time < oldest {
+            return Err(FusionError::TooOld { time, oldest });
+        }
+        if self.history.iter().any(|r| r.is_measurement(time, sensor)) {
+            return Err(FusionError::Duplicate { sensor, time });
+        }
+        let at = self.history.insertion_index(time, sensor);
+        if at == 0 {
+            return Err(FusionError::TooOld { time, oldest });
+        }
+        let appended = at == self.history.len();
+        if appended {
+            substeps(time - latest, &self.settings)?;
+        }
+        self.history
+            .insert(at, time, Event::Measurement { sensor, reading });
+        if let Err(e) = self.run_from(at, !appended) {
+            self.undo(at);
+            return Err(e);
+        }
+        let outcome =
+            self.history
+                .get(at)
+                .outcome
+                .ok_or(FusionError::Filter(Error::NonFinite {
+                    stage: Stage::Update,
+                    quantity: Quantity::Measurement,
+                }))?;
+        let replayed = self.history.len() - 1 - at;
+        self.history.trim();
+        Ok(Fused {
+            sensor,
+            time,
+            outcome,
+            replayed,
+        })
+    }
+
+    /// Predicts to `time` with the input in force, then holds `input` from `time` on. Inputs
+    /// come in time order: `time` ≥ the latest event.
+    ///
+    /// Errors (driver unchanged): [`FusionError::NonFiniteTime`], [`FusionError::NotMonotone`],
+    /// [`FusionError::GapTooLong`], [`FusionError::Filter`].
+    pub fn set_input(&mut self, time: f64, input: P::Input) -> Result<(), FusionError> {
+        self.append(time, Event::Input(input))
+    }
+
+    /// Predicts to `time` (≥ the latest event) with the input in force: the filter then holds
+    /// the estimate at `time`, e.g. the real-time estimate between late measurements. Recorded
+    /// like any event (a later replay predicts in the same pieces).
+    ///
+    /// Errors as [`set_input`](Self::set_input).
+    pub fn advance_to(&mut self, time: f64) -> Result<(), FusionError> {
+        self.append(time, Event::Mark)
+    }
+
+    fn append(&mut self, time: f64, event: Event<P::Input, S::Reading>) -> Result<(), FusionError> {
+        if !time.is_finite() {
+            return Err(FusionError::NonFiniteTime { time });
+        }
+        let latest = self.history.latest().time;
+        if time < latest {
+            return Err(FusionError::NotMonotone { time, latest });
+        }
+        substeps(time - latest, &self.settings)?;
+        let at = self.history.len();
+        self.history.insert(at, time, event);
+        if let Err(e) = self.run_from(at, false) {
+            self.undo(at);
+            return Err(e);
+        }
+        self.history.trim();
+        Ok(())
+    }
+
+    /// Removes the record inserted at `at` and restores everything from the history (the
+    /// records before `at` are untouched; the ones after are re-run as they were).
+    fn undo(&mut self, at: usize) {
+        self.history.remove(at);
+        // The same events from the same checkpoint: the same (successful) steps as before.
+        let _ = self.run_from(at, true);
+    }
+
+    /// Re-runs the records from `start` on from the checkpoint `start − 1` (restored first if
+    /// `restore`; otherwise the live state must be that checkpoint's).
+    fn run_from(&mut self, start: usize, restore: bool) -> Result<(), FusionError> {
+        let Self {
+            filter,
+            process,
+            sensors,
+            settings,
+            resolved,
+            input,
+            health,
+            history,
+            prior_state,
+            prior_covariance,
+        } = self;
+        let checkpoint = history.get(start - 1);
+        if restore {
+            restore_estimate(filter, &checkpoint.state, &checkpoint.covariance);
+            input.clone_from(&checkpoint.input);
+            health.copy_from(&checkpoint.health);
+        }
+        let mut previous = checkpoint.time;
+        for j in start..history.len() {
+            let record = history.get_mut(j);
+            predict_span(filter, process, input, record.time - previous, settings)?;
+            match &record.event {
+                Event::Input(u) => input.clone_from(u),
+                Event::Start | Event::Mark => {}
+                Event::Measurement { sensor, reading } => {
+                    let work = Work {
+                        prior_state: &mut *prior_state,
+                        prior_covariance: &mut *prior_covariance,
+                    };
+                    record.outcome = Some(decide(
+                        filter,
+                        sensors,
+                        reading,
+                        *sensor,
+                        &resolved[*sensor],
+                        health,
+                        work,
+                    )?);
+                }
+            }
+            record.state.copy_from(filter.state());
+            record.covariance.copy_from(filter.covariance());
+            record.input.clone_from(input);
+            record.health.copy_from(health);
+            previous = record.time;
+        }
+        Ok(())
+    }
+}
+
+impl<T, N, F, P, S> FusionDriver<T, N, F, P, S>
+where
+    T: Real,
+    N: Dim,
+    P: ProcessModel<T, N>,
+    S: SensorSet<T, N, F>,
+    DefaultAllocator: Alloc<N>,
+{
+    /// The filter, holding the estimate at [`time`](Self::time).
+    pub fn filter(&self) -> &F {
+        &self.filter
+    }
+
+    /// The process model.
+    pub fn process(&self) -> &P {
+        &self.process
+    }
+
+    /// The sensors.
+    pub fn sensors(&self) -> &S {
+        &self.sensors
+    }
+
+    /// The input in force.
+    pub fn input(&self) -> &P::Input {
+        &self.input
+    }
+
+    /// The time of the latest event (the filter's estimate is at this time) \[s\].
+    pub fn time(&self) -> f64 {
+        self.history.latest().time
+    }
+
+    /// The oldest time a measurement may still have \[s\]: the later of the oldest record kept
+    /// and the latest event minus the horizon.
+    pub fn oldest_time(&self) -> f64 {
+        self.history
+            .oldest()
+            .time
+            .max(self.time() - self.settings.horizon)
+    }
+
+    /// The number of records in the history (≤ [`FusionSettings::capacity`]).
+    pub fn history_len(&self) -> usize {
+        self.history.len()
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &FusionSettings {
+        &self.settings
+    }
+
+    /// The number of sensors.
+    pub fn sensor_count(&self) -> usize {
+        self.resolved.len()
+    }
+
+    /// The gate threshold of `sensor` (the χ²ₘ quantile), if it has a gate.
+    ///
+    /// # Panics
+    ///
+    /// If `sensor` ≥ [`sensor_count`](Self::sensor_count).
+    #[track_caller]
+    pub fn gate(&self, sensor: usize) -> Option<T> {
+        self.resolved[sensor].gate
+    }
+
+    /// The fault monitor's threshold q and clip c of `sensor`, if it has a monitor.
+    ///
+    /// # Panics
+    ///
+    /// If `sensor` ≥ [`sensor_count`](Self::sensor_count).
+    #[track_caller]
+    pub fn monitor_thresholds(&self, sensor: usize) -> Option<(T, T)> {
+        self.resolved[sensor]
+            .monitor
+            .as_ref()
+            .map(|m| (m.threshold, m.clip))
+    }
+
+    /// The health of `sensor` after the latest event.
+    ///
+    /// ```
+    /// # use estim_core::nalgebra::{Matrix1, U1, Vector1};
+    /// # use estim_core::{Gaussian, LinearMeasurement, LinearProcess, error::Result};
+    /// # use estim_filters::fusion::{FusionDriver, FusionError, FusionSettings, Innovation, MonitorSettings, SensorSet, SensorSettings, SensorStatus};
+    /// # use estim_filters::{Estimator, KalmanFilter, Update};
+    /// # struct One(LinearMeasurement<f64, U1, U1>);
+    /// # impl<F: Update<f64, U1, U1, LinearMeasurement<f64, U1, U1>>> SensorSet<f64, U1, F> for One {
+    /// #     type Reading = Vector1<f64>;
+    /// #     fn count(&self) -> usize { 1 }
+    /// #     fn sensor(&self, _: &Vector1<f64>) -> usize { 0 }
+    /// #     fn dimension(&self, _: usize) -> usize { 1 }
+    /// #     fn update(&self, f: &mut F, z: &Vector1<f64>) -> Result<Innovation<f64>> { f.update(&self.0, z).map(|r| Innovation::of(&r)) }
+    /// # }
+    /// let walk = LinearProcess { transition: Matrix1::new(1.0), input: Matrix1::zeros(), noise: Matrix1::new(1e-4) };
+    /// let sensor = One(LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(0.01) });
+    /// let filter = KalmanFilter::new(Gaussian::new(Vector1::zeros(), Matrix1::new(0.01))?);
+    /// let monitor = MonitorSettings { window: 5, ..MonitorSettings::default() };
+    /// let mut driver = FusionDriver::new(filter, walk, Vector1::zeros(), sensor, 0.0, FusionSettings::default(), SensorSettings::default())?
+    ///     .with_sensor_settings(0, SensorSettings::gated(0.999).with_monitor(monitor))?;
+    /// // The sensor sticks at 5 (50 σ): rejected, then excluded as faulty.
+    /// for k in 1..=6 { driver.fuse(0.1 * k as f64, Vector1::new(5.0))?; }
+    /// let health = driver.health(0);
+    /// assert_eq!(health.status, SensorStatus::Excluded);
+    /// assert_eq!(health.faults, 1);
+    /// assert!(health.rejected >= 1);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Panics
+    ///
+    /// If `sensor` ≥ [`sensor_count`](Self::sensor_count).
+    #[track_caller]
+    pub fn health(&self, sensor: usize) -> SensorHealth<T> {
+        self.health.sensors[sensor].summary()
+    }
+
+    /// The decisions recorded in the history, oldest first, as `(time, sensor, outcome)`:
+    /// after a replay they are the re-made ones.
+    pub fn decisions(&self) -> impl Iterator<Item = (f64, usize, Outcome<T>)> + '_ {
+        self.history
+            .iter()
+            .filter_map(|r| match (&r.event, r.outcome) {
+                (&Event::Measurement { sensor, .. }, Some(outcome)) => {
+                    Some((r.time, sensor, outcome))
+                }
+                _ => None,
+            })
+    }
+}
+
+fn window_of<T>(resolved: &Resolved<T>) -> usize {
+    resolved.monitor.as_ref().map_or(0, |m| m.window)
+}
+
+/// The number of equal sub-steps for a gap: ⌈gap / h − 10⁻⁹⌉ (at least 1 for a gap > 0).
+fn substeps(gap: f64, settings: &FusionSettings) -> Result<usize, FusionError> {
+    if gap <= 0.0 {
+        return Ok(0);
+    }
+    let n = (gap / settings.max_step - 1e-9).ceil().max(1.0);
+    if n <= settings.max_substeps as f64 {
+        Ok(n as usize)
+    } else {
+        Err(FusionError::GapTooLong {
+            gap,
+            max_step: settings.max_step,
+        })
+    }
+}
+
+/// Predicts over `gap` seconds in equal sub-steps.
+fn predict_span<T, N, F, P>(
+    filter: &mut F,
+    process: &P,
+    input: &P::Input,
+    gap: f64,
+    settings: &FusionSettings,
+) -> Result<(), FusionError>
+where
+    T: Real,
+    N: Dim,
+    F: Predict<T, N, P>,
+    P: ProcessModel<T, N>,
+    DefaultAllocator: Alloc<N>,
+{
+    let n = substeps(gap, settings)?;
+    if n == 0 {
+        return Ok(());
+    }
+    let dt: T = convert(gap / n as f64);
+    for _ in 0..n {
+        filter.predict(process, input, dt)?;
+    }
+    Ok(())
+}
+
+/// Sets the filter's estimate to N(x, P) (a copy).
+fn restore_estimate<T: Real, N: Dim, F: Estimator<T, N>>(
+    filter: &mut F,
+    state: &OVector<T, N>,
+    covariance: &OMatrix<T, N, N>,
+) where
+    DefaultAllocator: Alloc<N>,
+{
+    filter.reset(Gaussian::new_unchecked(state.clone(), covariance.clone()));
+}
+
+/// The driver's buffers for the estimate before an update.
+struct Work<'a, T: Real, N: Dim>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    prior_state: &'a mut OVector<T, N>,
+    prior_covariance: &'a mut OMatrix<T, N, N>,
+}
+
+/// The decision on one measurement (see the module docs, "Decisions"). On error the caller
+/// restores everything from the history.
+fn decide<T, N, F, S>(
+    filter: &mut F,
+    sensors: &S,
+    reading: &S::Reading,
+    sensor: usize,
+    config: &Resolved<T>,
+    health: &mut Health<T>,
+    work: Work<'_, T, N>,
+) -> Result<Outcome<T>, FusionError>
+where
+    T: Real,
+    N: Dim,
+    F: Estimator<T, N>,
+    S: SensorSet<T, N, F>,
+    DefaultAllocator: Alloc<N>,
+{
+    let Work {
+        prior_state,
+        prior_covariance,
+    } = work;
+    prior_state.copy_from(filter.state());
+    prior_covariance.copy_from(filter.covariance());
+    let innovation: Innovation<T> = sensors.update(filter, reading)?;
+    if innovation.dimension != config.dimension {
+        return Err(FusionError::Filter(Error::DimensionMismatch {
+            stage: Stage::Update,
+            quantity: Quantity::Measurement,
+            expected_rows: config.dimension,
+            expected_cols: 1,
+            found_rows: innovation.dimension,
+            found_cols: 1,
+        }));
+    }
+    let accepted_total = health.accepted;
+    let state = &mut health.sensors[sensor];
+    let nis = innovation.nis;
+    state.health.last_nis = nis;
+    let restore =
+        |filter: &mut F, x: &OVector<T, N>, p: &OMatrix<T, N, N>| restore_estimate(filter, x, p);
+
+    if let Some(monitor) = &config.monitor {
+        // `nis <= clip` is false for NaN, which then counts as the clip (evidence of a fault).
+        state.window.push(if nis <= monitor.clip {
+            nis
+        } else {
+            monitor.clip
+        });
+        let window_sum = state.window.sum();
+        if state.excluded {
+            restore(filter, prior_state, prior_covariance);
+            state.since_exclusion += 1;
+            state.health.excluded += 1;
+            let reason = if state.window.is_full() && window_sum <= monitor.threshold {
+                state.excluded = false;
+                state.run = 0;
+                state.health.readmissions += 1;
+                ExclusionReason::Readmitted { window_sum }
+            } else {
+                ExclusionReason::SensorExcluded {
+                    window_sum,
+                    since_exclusion: state.since_exclusion,
+                }
+            };
+            return Ok(Outcome::Excluded { innovation, reason });
+        }
+        if !(window_sum <= monitor.threshold) {
+            restore(filter, prior_state, prior_covariance);
+            state.excluded = true;
+            state.since_exclusion = 0;
+            state.window.clear();
+            state.run = 0;
+            state.health.faults += 1;
+            state.health.excluded += 1;
+            let reason = ExclusionReason::FaultDetected {
+                window_sum,
+                threshold: monitor.threshold,
+            };
+            return Ok(Outcome::Excluded { innovation, reason });
+        }
+    }
+
+    let gated = !innovation.applied || config.gate.is_some_and(|g| !(nis <= g));
+    if let Some(reset) = &config.reset {
+        let blow_up = reset.blow_up.and_then(|limit| {
+            reset
+                .states
+                .iter()
+                .map(|&i| (i, prior_covariance[(i, i)]))
+                .find(|&(_, v)| !(v <= limit))
+        });
+        let run = if gated { state.run + 1 } else { 0 };
+        let run_start = if state.run == 0 {
+            accepted_total
+        } else {
+            state.run_start_accepted
+        };
+        let reason = match blow_up {
+            Some((state, variance)) => Some(ResetReason::CovarianceBlowUp { state, variance }),
+            None if gated && run >= reset.after && run_start == accepted_total => {
+                Some(ResetReason::RejectionRun { rejections: run })
+            }
+            None => None,
+        };
+        if let Some(reason) = reason {
+            // The reset states forget their correlations and take the large prior variance;
+            // then the measurement is applied to the re-initialised estimate, ungated.
+            let n = prior_covariance.nrows();
+            for &i in &reset.states {
+                for j in 0..n {
+                    prior_covariance[(i, j)] = T::zero();
+                    prior_covariance[(j, i)] = T::zero();
+                }
+            }
+            for &i in &reset.states {
+                prior_covariance[(i, i)] = reset.variance;
+            }
+            restore(filter, prior_state, prior_covariance);
+            sensors.update(filter, reading)?;
+            state.run = 0;
+            state.window.clear();
+            state.health.resets += 1;
+            health.accepted += 1;
+            return Ok(Outcome::Reset { innovation, reason });
+        }
+    }
+    if gated {
+        restore(filter, prior_state, prior_covariance);
+        if state.run == 0 {
+            state.run_start_accepted = accepted_total;
+        }
+        state.run += 1;
+        state.health.rejected += 1;
+        let test_ratio = config.gate.map_or(T::one(), |g| nis / g);
+        return Ok(Outcome::Rejected {
+            innovation,
+            test_ratio,
+        });
+    }
+    state.run = 0;
+    state.health.accepted += 1;
+    health.accepted += 1;
+    Ok(Outcome::Accepted { innovation })
+}
