@@ -438,6 +438,28 @@ impl Accumulator {
         }
     }
 
+    /// Whether every buffer has the length its dimensions say: true for what this crate
+    /// builds, checked for shards read back from a file (which could have been edited).
+    fn well_formed(&self, slots: usize, pairs: usize) -> bool {
+        let slot_ok = |a: &SlotAcc| {
+            let (n, nn) = (a.n, a.n.checked_mul(a.n));
+            let empty = a.count == 0 && a.n == 0;
+            empty
+                || (nn.is_some()
+                    && [&a.mean_e, &a.mean_x, &a.m2_x].iter().all(|v| v.len() == n)
+                    && [&a.c_ee, &a.c_ex, &a.sum_p].iter().all(|v| Some(v.len()) == nn))
+        };
+        let pair_ok = |p: &PairAcc| {
+            Some(p.sum_ab.len()) == p.ma.checked_mul(p.mb)
+                && p.sum_a2.len() == p.ma
+                && p.sum_b2.len() == p.mb
+        };
+        self.slots.len() == slots
+            && self.pairs.len() == pairs
+            && self.slots.iter().all(slot_ok)
+            && self.pairs.iter().all(pair_ok)
+    }
+
     fn merge(&mut self, other: &Accumulator) -> Result<()> {
         self.runs += other.runs;
         for (s, o) in self.slots.iter_mut().zip(&other.slots) {
@@ -975,7 +997,7 @@ impl<E> MonteCarlo<E> {
     /// let mc = MonteCarlo::new(100, 1)?.with_seed(3);
     /// let realization = |_run: usize, seed: u64, rec: &mut estim_filters::Recorder| {
     ///     let x = Vector1::new((seed % 1000) as f64 / 1000.0 - 0.5);
-    ///     rec.record_estimate(0, &x, &Vector1::zeros(), &Matrix1::new(1.0 / 12.0))
+    ///     rec.record_estimate(0, &x, &(x * 0.5), &Matrix1::new(1.0 / 48.0))
     /// };
     /// // Three shards, e.g. three processes of a job array, merged afterwards.
     /// let shards = (0..3)
@@ -1005,7 +1027,7 @@ impl<E> MonteCarlo<E> {
                 return Err(invalid(shard.first_chunk));
             }
             for chunk in &shard.chunks {
-                if chunk.slots.len() != self.slots || chunk.pairs.len() != self.pairs.len() {
+                if !chunk.well_formed(self.slots, self.pairs.len()) {
                     return Err(invalid(next));
                 }
                 Self::merge_into(&mut total, chunk)?;
@@ -1037,7 +1059,9 @@ impl<E> MonteCarlo<E> {
         self.run_sequential_with_progress(simulate, |_| {})
     }
 
-    fn run_sequential_with_progress<F>(
+    /// [`run_sequential`](Self::run_sequential), calling `progress` after each chunk of runs
+    /// (as [`run_with_progress`](Self::run_with_progress) does).
+    pub fn run_sequential_with_progress<F>(
         &self,
         mut simulate: F,
         mut progress: impl FnMut(Progress),
