@@ -72,6 +72,8 @@
 
 pub mod alloc;
 pub mod angle;
+#[cfg(feature = "autodiff")]
+pub mod autodiff;
 pub mod derivative;
 pub mod error;
 pub mod function;

@@ -12,6 +12,8 @@ mod common;
 mod counting;
 
 mod angles;
+#[cfg(feature = "autodiff")]
+mod autodiff;
 mod derivative;
 mod errors;
 mod gaussian;
