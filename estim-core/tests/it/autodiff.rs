@@ -320,3 +320,35 @@ fn process_values_are_the_function_on_t() {
     assert_eq!(model.transition(&x, &2.0, 0.5), Vector2::new(5.0, 2.0));
     assert_eq!(model.process_noise(&x, &2.0, 0.5), Matrix2::identity());
 }
+
+#[test]
+fn derivative_checker_with_an_automatic_reference() {
+    use estim_core::derivative::{Entry, compare_derivatives};
+    let p: Vec<f64> = (0..40)
+        .map(|i| ((i * 29 % 17) as f64 / 8.5) - 1.0)
+        .collect();
+    let len = TrigSum::<f64, U3, U2>::random_len(3, 2);
+    let f = TrigSum::random(U3, U2, &p[..len]);
+    let x = vector(U3, &[0.4, -0.3, 1.1]);
+    let ad = AutoDiff::new(GenericTrig(f.clone()));
+    // Correct analytic derivatives agree to rounding (see TOL).
+    let report = compare_derivatives(&f, &ad, &x).unwrap();
+    assert!(report.is_accurate(TOL), "{report}");
+    // One coefficient of one term changed by 10⁻⁶: the reference now differs from the
+    // analytic model, far above rounding, and the report names a Hessian or value entry of
+    // component 1.
+    let mut other = f.clone();
+    other.outputs[1][0].a[2] += 1e-6;
+    let report = compare_derivatives(&f, &AutoDiff::new(GenericTrig(other)), &x).unwrap();
+    assert!(!report.is_accurate(1e-9), "{report}");
+    let worst = report.worst_mixed.unwrap().entry;
+    assert!(
+        matches!(
+            worst,
+            Entry::Value { row: 1 }
+                | Entry::Jacobian { row: 1, .. }
+                | Entry::Hessian { component: 1, .. }
+        ),
+        "{worst:?}"
+    );
+}
