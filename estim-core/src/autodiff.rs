@@ -54,6 +54,7 @@
 //! ```
 
 mod cache;
+mod rotation;
 
 use core::fmt;
 
@@ -70,6 +71,7 @@ use crate::scalar::Real;
 
 pub use cache::InputKey;
 use cache::{HessianCache, Kind};
+pub use rotation::{rotation_exp, rotation_matrix};
 
 /// The dual-number crate the adapter is built on, re-exported so users name the same version.
 pub use num_dual;

@@ -97,7 +97,7 @@ pub use function::{
 pub use gaussian::{Gaussian, GaussianSampler};
 pub use linalg::psd_factor;
 pub use linear::{LinearMeasurement, LinearProcess};
-pub use manifold::{Euclidean, StateSpace};
+pub use manifold::{Euclidean, StateSpace, WrappedAngles};
 pub use model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
     MeasurementModel, Observation, ProcessHessian, ProcessJacobian, ProcessModel, Transition,

@@ -18,6 +18,7 @@ mod derivative;
 mod errors;
 mod gaussian;
 mod linear;
+mod manifold;
 mod no_alloc;
 mod nonlinear;
 mod papoulis;
