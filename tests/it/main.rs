@@ -19,6 +19,9 @@ mod common;
 #[path = "../../examples/reproductions/consistency.rs"]
 mod consistency;
 #[allow(dead_code)] // its `main` and printing helpers
+#[path = "../../examples/heading_wrap.rs"]
+mod heading_wrap;
+#[allow(dead_code)] // its `main` and printing helpers
 #[path = "../../examples/large_state.rs"]
 mod large_state;
 #[path = "../../examples/reproductions/lee_huang.rs"]
@@ -31,6 +34,7 @@ mod lv2_fusion;
 // The tests, one module per example (or per paper for Boje's four).
 mod boje_examples;
 mod consistency_example;
+mod heading_wrap_example;
 mod large_state_example;
 mod lee_huang_example;
 mod lu_calibration_example;
