@@ -6,6 +6,10 @@
 
 // The examples' shared helpers and bodies, under the names they have in the examples (the
 // bodies refer to `crate::common` and to each other by these names).
+#[cfg(feature = "autodiff")]
+#[allow(dead_code)] // its `main` and printing helpers
+#[path = "../../examples/attitude.rs"]
+mod attitude;
 #[path = "../../examples/reproductions/boje_circle.rs"]
 mod boje_circle;
 #[path = "../../examples/reproductions/boje_lambda.rs"]
@@ -32,6 +36,8 @@ mod lu_calibration;
 mod lv2_fusion;
 
 // The tests, one module per example (or per paper for Boje's four).
+#[cfg(feature = "autodiff")]
+mod attitude_example;
 mod boje_examples;
 mod consistency_example;
 mod heading_wrap_example;
