@@ -341,6 +341,19 @@ where
     m
 }
 
+/// An owned Hessian from an `_into` method: `Some` if it wrote one.
+fn owned_hessian<T: AdReal, N: Dim>(
+    x: &OVector<T, N>,
+    into: impl FnOnce(&mut OMatrix<T, N, N>) -> bool,
+) -> Option<OMatrix<T, N, N>>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    let n = x.shape_generic().0;
+    let mut out = OMatrix::zeros_generic(n, n);
+    into(&mut out).then_some(out)
+}
+
 impl<G> AutoDiff<G> {
     /// Hₖ into `out` from the cache, computing all m Hessians at `x` when the key differs.
     fn cached_hessian_into<T, N, M, F>(
@@ -449,10 +462,7 @@ where
         dt: T,
         k: usize,
     ) -> Option<OMatrix<T, N, N>> {
-        let n = x.shape_generic().0;
-        let mut out = OMatrix::zeros_generic(n, n);
-        self.transition_hessian_into(x, u, dt, k, &mut out)
-            .then_some(out)
+        owned_hessian(x, |out| self.transition_hessian_into(x, u, dt, k, out))
     }
 
     fn transition_hessian_into(
@@ -527,9 +537,7 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
-        let n = x.shape_generic().0;
-        let mut out = OMatrix::zeros_generic(n, n);
-        self.measurement_hessian_into(x, k, &mut out).then_some(out)
+        owned_hessian(x, |out| self.measurement_hessian_into(x, k, out))
     }
 
     fn measurement_hessian_into(
@@ -584,9 +592,7 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
-        let n = x.shape_generic().0;
-        let mut out = OMatrix::zeros_generic(n, n);
-        self.hessian_into(x, k, &mut out).then_some(out)
+        owned_hessian(x, |out| self.hessian_into(x, k, out))
     }
 
     fn hessian_into(&self, x: &OVector<T, N>, k: usize, out: &mut OMatrix<T, N, N>) -> bool {

@@ -5,7 +5,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use super::{AdReal, AdScalar};
 
-/// R(Exp(v)) = I + a [v]× + b [v]×², a = sin θ / θ, b = 2 sin²(θ/2) / θ², θ = |v|: the
+/// R(Exp(v)) = I + a \[v\]× + b \[v\]×², a = sin θ / θ, b = 2 sin²(θ/2) / θ², θ = |v|: the
 /// rotation matrix of the rotation vector v (Rodrigues), for any scalar.
 ///
 /// Smooth at v = 0 to every order the duals see: below θ² = 10⁻⁶ it uses the series
