@@ -43,6 +43,8 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
 
+// The root tests include this file as a module and bring their own `crate::common`.
+#[cfg(not(test))]
 #[path = "common/mod.rs"]
 mod common;
 
@@ -245,7 +247,7 @@ pub fn monte_carlo(
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let (runs, seconds) = if common::quick_requested() {
+    let (runs, seconds) = if crate::common::quick_requested() {
         (30, 10.0)
     } else {
         (100, 20.0)
@@ -278,9 +280,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         band.lower, band.upper
     );
     let period = DT * SENSOR_EVERY as f64;
-    let series: Vec<common::Series<'_>> = summaries
+    let series: Vec<crate::common::Series<'_>> = summaries
         .iter()
-        .map(|(label, s)| common::Series {
+        .map(|(label, s)| crate::common::Series {
             label,
             points: s
                 .average_nees
@@ -294,13 +296,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let band_points = (1..=updates)
         .map(|k| (k as f64 * period, band.lower, band.upper))
         .collect();
-    match common::band_plot(
+    match crate::common::band_plot(
         "attitude_nees.svg",
         "AHRS on the quaternion error state: average NEES",
         "time (s)",
         "average NEES",
         &series,
-        &[common::Band {
+        &[crate::common::Band {
             label: "99% χ²₃ band",
             points: band_points,
         }],
@@ -308,7 +310,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(path) => println!("figure: {}", path.display()),
         Err(e) => eprintln!("figure not written: {e}"),
     }
-    if common::json_requested() {
+    if crate::common::json_requested() {
         println!("{}", serde_json::Value::Object(json));
     }
     Ok(())

@@ -31,6 +31,8 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
 
+// The root tests include this file as a module and bring their own `crate::common`.
+#[cfg(not(test))]
 #[path = "common/mod.rs"]
 mod common;
 
@@ -272,7 +274,7 @@ pub fn monte_carlo(
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let (runs, steps) = if common::quick_requested() {
+    let (runs, steps) = if crate::common::quick_requested() {
         (50, 400)
     } else {
         (200, 1000)
@@ -308,7 +310,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         band.lower, band.upper
     );
     for (label, s) in &summaries {
-        series.push(common::Series {
+        series.push(crate::common::Series {
             label,
             points: s
                 .average_nees
@@ -321,13 +323,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let band_points = (1..=steps)
         .map(|k| (k as f64 * DT, band.lower, band.upper))
         .collect();
-    match common::band_plot(
+    match crate::common::band_plot(
         "heading_wrap_nees.svg",
         "Average NEES across ±π crossings (clipped at 100)",
         "time (s)",
         "average NEES",
         &series,
-        &[common::Band {
+        &[crate::common::Band {
             label: "99% χ² band",
             points: band_points,
         }],
@@ -335,7 +337,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(path) => println!("figure: {}", path.display()),
         Err(e) => eprintln!("figure not written: {e}"),
     }
-    if common::json_requested() {
+    if crate::common::json_requested() {
         println!("{}", serde_json::Value::Object(json));
     }
     Ok(())
