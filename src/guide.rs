@@ -5,6 +5,7 @@
 //! | [`choosing_a_filter`] | which filter for which model, and the one-line swap |
 //! | [`runtime_sizes`] | states whose size comes from configuration (`DVector`) |
 //! | [`verifying`] | NEES/NIS, the Monte Carlo runner, checking your derivatives |
+//! | [`writing_a_model`] | analytic derivatives, checking them, automatic derivatives (`autodiff`) |
 //! | [`smoothing`] | Rauch–Tung–Striebel, fixed lag, and whole recorded sequences |
 //! | [`single_precision`] | what changes in `f32`, and the settings that survive it |
 //! | [`from_filterpy`] | a table of FilterPy (and pykalman) equivalents |
@@ -18,3 +19,4 @@ pub mod runtime_sizes;
 pub mod single_precision;
 pub mod smoothing;
 pub mod verifying;
+pub mod writing_a_model;
