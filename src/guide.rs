@@ -5,6 +5,7 @@
 //! | [`choosing_a_filter`] | which filter for which model, and the one-line swap |
 //! | [`runtime_sizes`] | states whose size comes from configuration (`DVector`) |
 //! | [`verifying`] | NEES/NIS, the Monte Carlo runner, checking your derivatives |
+//! | [`writing_a_model`] | analytic derivatives, checking them, automatic derivatives (`autodiff`) |
 //! | [`smoothing`] | Rauch–Tung–Striebel, fixed lag, and whole recorded sequences |
 //! | [`noise_identification`] | learning Q and R from data: EM, maximum likelihood, online matching |
 //! | [`sensor_fusion`] | timestamped sensors: late measurements, gating outcomes, faulty sensors |
@@ -22,3 +23,4 @@ pub mod sensor_fusion;
 pub mod single_precision;
 pub mod smoothing;
 pub mod verifying;
+pub mod writing_a_model;

@@ -10,6 +10,15 @@
 //! functions: truncation O(h²) and round-off O(ε/h) balance at ε^⅔ ≈ 4·10⁻¹¹ relative for
 //! `f64`, ≈ 2·10⁻⁵ for `f32`).
 //!
+//! With a **reference model** instead of finite differences ([`compare_derivatives`],
+//! [`compare_process_models`], [`compare_measurement_models`]): the analytic derivatives are
+//! compared entry by entry with another implementation of the same function, typically the
+//! same equations written once over a dual-number scalar and wrapped in
+//! `estim_core::autodiff::AutoDiff` (feature `autodiff`). Automatic derivatives have no
+//! truncation error, so correct analytic derivatives agree to rounding (`is_accurate(1e-12)`
+//! for well-scaled `f64` models), a far sharper test than finite differences. The values are
+//! compared too ([`Entry::Value`]): a reference that computes another function is caught.
+//!
 //! Use it from a test, including a downstream crate's proptest:
 //!
 //! ```
@@ -44,6 +53,11 @@ use crate::scalar::{Real, real};
 /// Which derivative entry a comparison refers to (0-based indices).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Entry {
+    /// Value gᵣₒᵥᵥ (compared only against a reference model).
+    Value {
+        /// Output component.
+        row: usize,
+    },
     /// Jacobian entry ∂gᵣₒᵥᵥ/∂x_col.
     Jacobian {
         /// Output component.
@@ -69,7 +83,7 @@ pub struct Comparison<T> {
     pub entry: Entry,
     /// The analytic value.
     pub analytic: T,
-    /// The finite-difference value.
+    /// The finite-difference value, or the reference model's.
     pub numeric: T,
 }
 
@@ -467,4 +481,157 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     check_derivatives(&Observation::new(model), x)
+}
+
+/// Compares g's value, Jacobian and Hessians at `x` with those of `reference`, an independent
+/// implementation of the same function (automatic derivatives, say): every entry, with the
+/// reference's in [`Comparison::numeric`]. A component that either side declares affine
+/// (`None`) counts as a zero Hessian.
+///
+/// ```
+/// use estim_core::{derivative, Differentiable, TwiceDifferentiable, VectorFunction};
+/// use estim_core::nalgebra::{Matrix1x2, Matrix2, U1, U2, Vector1, Vector2};
+///
+/// /// g(x) = x₀ x₁, analytic; `Expanded` is ((x₀ + x₁)² − (x₀ − x₁)²)/4, the same function.
+/// struct Product;
+/// struct Expanded;
+/// impl VectorFunction<f64, U2, U1> for Product {
+///     fn eval(&self, x: &Vector2<f64>) -> Vector1<f64> { Vector1::new(x[0] * x[1]) }
+/// }
+/// impl Differentiable<f64, U2, U1> for Product {
+///     fn jacobian(&self, x: &Vector2<f64>) -> Matrix1x2<f64> { Matrix1x2::new(x[1], x[0]) }
+/// }
+/// impl TwiceDifferentiable<f64, U2, U1> for Product {
+///     fn hessian(&self, _: &Vector2<f64>, _: usize) -> Option<Matrix2<f64>> {
+///         Some(Matrix2::new(0.0, 1.0, 1.0, 0.0))
+///     }
+/// }
+/// impl VectorFunction<f64, U2, U1> for Expanded {
+///     fn eval(&self, x: &Vector2<f64>) -> Vector1<f64> {
+///         Vector1::new(((x[0] + x[1]).powi(2) - (x[0] - x[1]).powi(2)) / 4.0)
+///     }
+/// }
+/// impl Differentiable<f64, U2, U1> for Expanded {
+///     fn jacobian(&self, x: &Vector2<f64>) -> Matrix1x2<f64> { Matrix1x2::new(x[1], x[0]) }
+/// }
+/// impl TwiceDifferentiable<f64, U2, U1> for Expanded {
+///     fn hessian(&self, _: &Vector2<f64>, _: usize) -> Option<Matrix2<f64>> {
+///         Some(Matrix2::new(0.0, 1.0, 1.0, 0.0))
+///     }
+/// }
+/// let report = derivative::compare_derivatives(&Product, &Expanded, &Vector2::new(1.5, -2.0))?;
+/// assert!(report.is_accurate(1e-12), "{report}");
+/// # Ok::<(), estim_core::Error>(())
+/// ```
+///
+/// Errors: non-finite x, values or derivatives, or shapes that differ between the two.
+pub fn compare_derivatives<T, N, M, G, R>(
+    g: &G,
+    reference: &R,
+    x: &OVector<T, N>,
+) -> Result<DerivativeReport<T>>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    G: TwiceDifferentiable<T, N, M> + ?Sized,
+    R: TwiceDifferentiable<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    let stage = Stage::DerivativeCheck;
+    ensure_finite(x, stage, Quantity::Mean)?;
+    let n = x.nrows();
+    let mut report = DerivativeReport::empty();
+    let (y, y_ref) = (g.eval(x), reference.eval(x));
+    let m = y.nrows();
+    ensure_shape(&y_ref, m, 1, stage, Quantity::FunctionValue)?;
+    ensure_finite(&y, stage, Quantity::FunctionValue)?;
+    ensure_finite(&y_ref, stage, Quantity::FunctionValue)?;
+    for row in 0..m {
+        report.record(Comparison {
+            entry: Entry::Value { row },
+            analytic: y[row],
+            numeric: y_ref[row],
+        });
+    }
+    let (jac, jac_ref) = (g.jacobian(x), reference.jacobian(x));
+    for j in [&jac, &jac_ref] {
+        ensure_shape(j, m, n, stage, Quantity::Jacobian)?;
+        ensure_finite(j, stage, Quantity::Jacobian)?;
+    }
+    for col in 0..n {
+        for row in 0..m {
+            report.record(Comparison {
+                entry: Entry::Jacobian { row, col },
+                analytic: jac[(row, col)],
+                numeric: jac_ref[(row, col)],
+            });
+        }
+    }
+    for component in 0..m {
+        let (h, h_ref) = (g.hessian(x, component), reference.hessian(x, component));
+        for h in [&h, &h_ref].into_iter().flatten() {
+            ensure_shape(h, n, n, stage, Quantity::Hessian)?;
+            ensure_finite(h, stage, Quantity::Hessian)?;
+        }
+        let entry = |h: &Option<_>, i, j| {
+            h.as_ref()
+                .map_or(T::zero(), |h: &nalgebra::OMatrix<T, N, N>| h[(i, j)])
+        };
+        for col in 0..n {
+            for row in 0..n {
+                report.record(Comparison {
+                    entry: Entry::Hessian {
+                        component,
+                        row,
+                        col,
+                    },
+                    analytic: entry(&h, row, col),
+                    numeric: entry(&h_ref, row, col),
+                });
+            }
+        }
+    }
+    Ok(report)
+}
+
+/// [`compare_derivatives`] for two process models at (x, Δt), each with its own input (the
+/// two may type the input differently).
+pub fn compare_process_models<T, N, P, R>(
+    model: &P,
+    reference: &R,
+    x: &OVector<T, N>,
+    u: &P::Input,
+    u_reference: &R::Input,
+    dt: T,
+) -> Result<DerivativeReport<T>>
+where
+    T: Real,
+    N: Dim,
+    P: ProcessHessian<T, N>,
+    R: ProcessHessian<T, N>,
+    DefaultAllocator: Alloc<N>,
+{
+    compare_derivatives(
+        &Transition::new(model, u, dt),
+        &Transition::new(reference, u_reference, dt),
+        x,
+    )
+}
+
+/// [`compare_derivatives`] for two measurement models at x.
+pub fn compare_measurement_models<T, N, M, H, R>(
+    model: &H,
+    reference: &R,
+    x: &OVector<T, N>,
+) -> Result<DerivativeReport<T>>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: MeasurementHessian<T, N, M>,
+    R: MeasurementHessian<T, N, M>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    compare_derivatives(&Observation::new(model), &Observation::new(reference), x)
 }

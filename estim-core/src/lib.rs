@@ -13,9 +13,13 @@
 //!   covariance of y and the cross-covariance of x and y — linearised, second order (Papoulis),
 //!   Gaussian second order, unscented and sampled.
 //! - [`linear`]: linear-Gaussian models with constant matrices.
-//! - [`derivative`]: checks analytic Jacobians and Hessians against finite differences.
+//! - [`derivative`]: checks analytic Jacobians and Hessians against finite differences, or
+//!   against a reference model (such as its automatic derivatives).
+//! - `autodiff` (feature `autodiff`): models written once over a dual-number scalar, with
+//!   their Jacobians and Hessians derived automatically (num-dual).
 //! - [`psd_factor`]: the square root of a positive semi-definite covariance.
-//! - [`manifold`]: the state's ⊞ and ⊟ ([`StateSpace`]; [`Euclidean`] by default).
+//! - [`manifold`]: the state's ⊞ and ⊟ ([`StateSpace`]; [`Euclidean`] by default,
+//!   [`WrappedAngles`] for headings, a unit-quaternion attitude error block).
 //! - [`Error`]: the one error type.
 //!
 //! **States with angles.** A heading near ±π is not a vector: x + δ can leave (−π, π] and a
@@ -73,6 +77,8 @@
 pub mod adapter;
 pub mod alloc;
 pub mod angle;
+#[cfg(feature = "autodiff")]
+pub mod autodiff;
 pub mod derivative;
 pub mod error;
 pub mod function;
@@ -99,7 +105,7 @@ pub use function::{
 pub use gaussian::{Gaussian, GaussianSampler};
 pub use linalg::psd_factor;
 pub use linear::{LinearMeasurement, LinearProcess};
-pub use manifold::{Euclidean, StateSpace};
+pub use manifold::{Euclidean, StateSpace, WrappedAngles};
 pub use model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
     MeasurementModel, Observation, ProcessHessian, ProcessJacobian, ProcessModel, Transition,

@@ -9,6 +9,17 @@
 //!
 //! The rules a ⊞/⊟ pair must satisfy (near enough to x): x ⊞ 0 = x, (x ⊞ δ) ⊟ x = δ and
 //! x ⊞ (y ⊟ x) = y. The tangent has the state's dimension N.
+//!
+//! Ready-made spaces: [`Euclidean`] (the default), [`WrappedAngles`] (components on the
+//! circle, such as headings) and [`AttitudeError`] (a 3-dimensional attitude error about a
+//! reference unit quaternion, [`AttitudeReference`]: the multiplicative error state that
+//! gives a unit quaternion its 3-dimensional tangent, see [`attitude`]).
+
+mod angles;
+pub mod attitude;
+
+pub use angles::WrappedAngles;
+pub use attitude::{AttitudeError, AttitudeReference, so3_exp, so3_log};
 
 use nalgebra::{DefaultAllocator, Dim, OVector, allocator::Allocator};
 

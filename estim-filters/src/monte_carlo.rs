@@ -447,7 +447,9 @@ impl Accumulator {
             empty
                 || (nn.is_some()
                     && [&a.mean_e, &a.mean_x, &a.m2_x].iter().all(|v| v.len() == n)
-                    && [&a.c_ee, &a.c_ex, &a.sum_p].iter().all(|v| Some(v.len()) == nn))
+                    && [&a.c_ee, &a.c_ex, &a.sum_p]
+                        .iter()
+                        .all(|v| Some(v.len()) == nn))
         };
         let pair_ok = |p: &PairAcc| {
             Some(p.sum_ab.len()) == p.ma.checked_mul(p.mb)

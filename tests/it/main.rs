@@ -6,6 +6,10 @@
 
 // The examples' shared helpers and bodies, under the names they have in the examples (the
 // bodies refer to `crate::common` and to each other by these names).
+#[cfg(feature = "autodiff")]
+#[allow(dead_code)] // its `main` and printing helpers
+#[path = "../../examples/attitude.rs"]
+mod attitude;
 #[path = "../../examples/reproductions/boje_circle.rs"]
 mod boje_circle;
 #[path = "../../examples/reproductions/boje_lambda.rs"]
@@ -18,6 +22,9 @@ mod boje_rate;
 mod common;
 #[path = "../../examples/reproductions/consistency.rs"]
 mod consistency;
+#[allow(dead_code)] // its `main` and printing helpers
+#[path = "../../examples/heading_wrap.rs"]
+mod heading_wrap;
 #[allow(dead_code)] // its `main` and printing helpers
 #[path = "../../examples/large_state.rs"]
 mod large_state;
@@ -33,9 +40,12 @@ mod lu_noise_id;
 mod lv2_fusion;
 
 // The tests, one module per example (or per paper for Boje's four).
+#[cfg(feature = "autodiff")]
+mod attitude_example;
 mod boje_circle_smoothing;
 mod boje_examples;
 mod consistency_example;
+mod heading_wrap_example;
 mod large_state_example;
 mod lee_huang_example;
 mod lu_calibration_example;

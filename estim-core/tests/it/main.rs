@@ -12,10 +12,13 @@ mod common;
 mod counting;
 
 mod angles;
+#[cfg(feature = "autodiff")]
+mod autodiff;
 mod derivative;
 mod errors;
 mod gaussian;
 mod linear;
+mod manifold;
 mod no_alloc;
 mod nonlinear;
 mod papoulis;

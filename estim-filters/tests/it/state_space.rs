@@ -15,7 +15,9 @@ use estim_core::{
     Alloc, Gaussian, MeasurementHessian, MeasurementJacobian, MeasurementModel, ProcessHessian,
     ProcessJacobian, ProcessModel, StateSpace, Unscented, wrap_angle,
 };
-use estim_filters::{Ekf, Estimator, GaussianFilter, Predict, SecondOrderEkf, Ukf, Update};
+use estim_filters::{
+    Ekf, Estimator, GaussianFilter, GaussianSecondOrderEkf, Predict, SecondOrderEkf, Ukf, Update,
+};
 
 // ---------------------------------------------------------------------------------------------
 // Bit-identity of the generic path.
@@ -455,4 +457,45 @@ fn ekf_with_a_wrapping_state_space_keeps_a_heading_in_range() {
     // worst error 0.109 rad (3.41 σ), as with ⊞.
     let run = run_heading(Ekf::new(heading_prior()));
     assert!(run.outside > 0, "{run:?}");
+}
+
+#[test]
+fn gaussian_second_order_ekf_on_a_generic_identity_space_is_bit_identical() {
+    for (plus, minus) in [
+        assert_bit_identical(
+            GaussianSecondOrderEkf::new(static_prior()),
+            GaussianSecondOrderEkf::new(static_prior()).with_state_space(Identity::default()),
+            static_vector,
+        ),
+        assert_bit_identical(
+            GaussianSecondOrderEkf::new(dyn_prior()),
+            GaussianSecondOrderEkf::new(dyn_prior()).with_state_space(Identity::default()),
+            dyn_vector,
+        ),
+    ] {
+        // As the second-order EKF: the mean's bias correction and the update's x ⊞ K ν.
+        assert_eq!((plus, minus), (120, 0));
+    }
+}
+
+#[test]
+fn ready_made_wrapped_angles_equal_the_hand_written_heading_space() {
+    // estim-core's `WrappedAngles` is the `WrappedHeading` above for any angle index set:
+    // through the whole heading scenario, the same worst-case statistics, bit for bit.
+    let runs = |propagator: Unscented<f64>| {
+        let hand = run_heading(
+            Ukf::with_propagator(heading_prior(), propagator).with_state_space(WrappedHeading),
+        );
+        let ready = run_heading(
+            Ukf::with_propagator(heading_prior(), propagator)
+                .with_state_space(estim_core::WrappedAngles::new([0])),
+        );
+        (hand, ready)
+    };
+    for propagator in [Unscented::cubature(), Unscented::default()] {
+        let (hand, ready) = runs(propagator);
+        assert_eq!(hand.worst_sigmas.to_bits(), ready.worst_sigmas.to_bits());
+        assert_eq!(hand.worst_error.to_bits(), ready.worst_error.to_bits());
+        assert_eq!((hand.outside, ready.outside), (0, 0));
+    }
 }

@@ -1,0 +1,230 @@
+//! Attitude as a unit quaternion with a 3-dimensional tangent: the multiplicative error state.
+//!
+//! A filter's state and its tangent have one dimension N ([`StateSpace`]), and a unit
+//! quaternion has four numbers but three degrees of freedom. So, as navigation filters do
+//! (the multiplicative EKF, Markley 2003; Hertzberg et al. 2013, §IV), the filter keeps the
+//! **attitude error** δθ ∈ ℝ³ in its state, and the attitude is
+//!
+//! q = q_ref ⊗ Exp(δθ),  Exp(v) = (cos ½|v|, sin ½|v| · v/|v|),
+//!
+//! with the reference q_ref held next to the filter ([`AttitudeReference`]). The state space
+//! [`AttitudeError`] makes the filter's ⊞ compose rotations on that block,
+//! δθ ⊞ ε = Log(Exp(δθ) ⊗ Exp(ε)), and its ⊟ the body-frame rotation vector between two
+//! attitudes, a ⊟ b = Log(Exp(b)⁻¹ ⊗ Exp(a)), so sigma points, deviations and the update
+//! x ⊞ K ν are rotations, and P is the covariance of a body-frame rotation vector.
+//!
+//! After a step, [`AttitudeReference::recentre`] folds the estimate into the reference
+//! (q_ref ← q_ref ⊗ Exp(δθ̂), δθ̂ ← 0). That changes no covariance: with ⊞ the composition
+//! above, P already describes perturbations q̂ ⊗ Exp(ε) of the estimate, which are the new
+//! chart's coordinates. Recentring every step keeps δθ̂ near zero, where linearisations in
+//! δθ (the EKF's Jacobians) are those of the tangent.
+//!
+//! The quaternion stays unit: Exp and the products are renormalised, and recentring means
+//! the estimate is never accumulated in a non-unit form.
+
+use nalgebra::{DefaultAllocator, Dim, OVector, Quaternion, UnitQuaternion, Vector3};
+
+use super::{StateSpace, add_into};
+use crate::alloc::Alloc;
+use crate::model::subtract_into;
+use crate::scalar::{Real, real};
+
+/// Exp: the unit quaternion of the rotation vector v (angle |v| about v/|v|).
+///
+/// Accurate to rounding for every |v| (a series for |v|² below √ε, where sin ½|v| / |v|
+/// would lose digits).
+///
+/// ```
+/// use estim_core::manifold::{so3_exp, so3_log};
+/// use estim_core::nalgebra::Vector3;
+///
+/// let v = Vector3::new(0.3, -1.2, 2.0);
+/// assert!((so3_log(&so3_exp(&v)) - v).norm() < 1e-14);
+/// assert_eq!(so3_exp(&Vector3::<f64>::zeros()).w, 1.0);
+/// ```
+pub fn so3_exp<T: Real>(v: &Vector3<T>) -> UnitQuaternion<T> {
+    let theta2 = v.norm_squared();
+    let (w, k) = if theta2 < T::default_epsilon().sqrt() {
+        // cos ½θ = 1 − θ²/8 + …, sin ½θ / θ = ½ − θ²/48 + …: the next terms are below ε.
+        (
+            T::one() - theta2 / real(8.0),
+            real::<T>(0.5) - theta2 / real(48.0),
+        )
+    } else {
+        let theta = theta2.sqrt();
+        let (s, c) = (theta * real(0.5)).sin_cos();
+        (c, s / theta)
+    };
+    UnitQuaternion::new_normalize(Quaternion::from_parts(w, v * k))
+}
+
+/// Log: the rotation vector of q (angle in [0, π]), the inverse of [`so3_exp`]. q and −q
+/// give the same vector.
+///
+/// ```
+/// use estim_core::manifold::{so3_exp, so3_log};
+/// use estim_core::nalgebra::{UnitQuaternion, Vector3};
+///
+/// let q = UnitQuaternion::from_euler_angles(0.1, -0.2, 3.0);
+/// assert!(so3_exp(&so3_log(&q)).angle_to(&q) < 1e-14);
+/// ```
+pub fn so3_log<T: Real>(q: &UnitQuaternion<T>) -> Vector3<T> {
+    let (mut w, mut v) = (q.w, q.imag());
+    if w < T::zero() {
+        (w, v) = (-w, -v);
+    }
+    let s2 = v.norm_squared();
+    // θ = 2 atan2(s, w): atan2 keeps full precision at small angles (acos would not).
+    if s2 < T::default_epsilon() * w * w {
+        // 2 atan(s/w)/s = (2/w)(1 − s²/(3w²) + …).
+        v * (real::<T>(2.0) / w)
+    } else {
+        let s = s2.sqrt();
+        v * (real::<T>(2.0) * s.atan2(w) / s)
+    }
+}
+
+/// The state space of a state whose components `offset..offset + 3` are an attitude error
+/// δθ (see the [module docs](self)): on that block x ⊞ ε = Log(Exp(δθ) ⊗ Exp(ε)) and
+/// a ⊟ b = Log(Exp(b)⁻¹ ⊗ Exp(a)); + and − on the other components.
+///
+/// # Panics
+///
+/// If the state has fewer than `offset + 3` components (a programmer error).
+///
+/// ```
+/// use estim_core::manifold::{AttitudeError, so3_exp, so3_log};
+/// use estim_core::StateSpace;
+/// use estim_core::nalgebra::{Vector3, Vector4};
+///
+/// // (δθ, a clock bias).
+/// let space = AttitudeError::at(0);
+/// let (x, e) = (Vector4::new(3.0, 0.0, 0.0, 1.0), Vector4::new(0.5, 0.0, 0.0, 0.25));
+/// let mut y = Vector4::zeros();
+/// space.plus_into(&x, &e, &mut y);
+/// // 3 + 0.5 rad about x is 3.5 − 2π: the rotation vector stays in the ball |δθ| ≤ π.
+/// assert!((y[0] - (3.5 - 2.0 * core::f64::consts::PI)).abs() < 1e-12 && y[3] == 1.25);
+/// let mut d = Vector4::zeros();
+/// space.minus_into(&y, &x, &mut d);
+/// assert!((d - e).norm() < 1e-12);
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct AttitudeError {
+    offset: usize,
+}
+
+impl AttitudeError {
+    /// The attitude error at components `offset..offset + 3`.
+    pub const fn at(offset: usize) -> Self {
+        Self { offset }
+    }
+
+    /// The first component of the attitude block.
+    pub fn offset(&self) -> usize {
+        self.offset
+    }
+
+    #[track_caller]
+    fn block<T: Real, N: Dim>(&self, x: &OVector<T, N>) -> Vector3<T>
+    where
+        DefaultAllocator: Alloc<N>,
+    {
+        assert!(
+            x.nrows() >= self.offset + 3,
+            "AttitudeError at {} needs at least {} state components, the state has {}",
+            self.offset,
+            self.offset + 3,
+            x.nrows()
+        );
+        x.fixed_rows::<3>(self.offset).into_owned()
+    }
+}
+
+impl<T: Real, N: Dim> StateSpace<T, N> for AttitudeError
+where
+    DefaultAllocator: Alloc<N>,
+{
+    #[track_caller]
+    fn plus_into(&self, x: &OVector<T, N>, delta: &OVector<T, N>, out: &mut OVector<T, N>) {
+        let (a, e) = (self.block(x), self.block(delta));
+        add_into(x, delta, out);
+        let composed = so3_log(&(so3_exp(&a) * so3_exp(&e)));
+        out.fixed_rows_mut::<3>(self.offset).copy_from(&composed);
+    }
+
+    #[track_caller]
+    fn minus_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
+        let (qa, qb) = (so3_exp(&self.block(a)), so3_exp(&self.block(b)));
+        subtract_into(a, b, out);
+        let between = so3_log(&(qb.inverse() * qa));
+        out.fixed_rows_mut::<3>(self.offset).copy_from(&between);
+    }
+}
+
+/// The reference attitude q_ref of a multiplicative error state (see the
+/// [module docs](self)): the attitude is q = q_ref ⊗ Exp(δθ).
+///
+/// ```
+/// use estim_core::manifold::{AttitudeReference, so3_exp};
+/// use estim_core::nalgebra::{UnitQuaternion, Vector3};
+///
+/// let mut reference = AttitudeReference::new(UnitQuaternion::identity());
+/// // The filter's estimate after an update: δθ̂ = (0, 0, 0.1).
+/// let mut x = Vector3::new(0.0, 0.0, 0.1);
+/// let q = reference.attitude(&x, 0);
+/// reference.recentre(&mut x, 0);
+/// assert_eq!(x, Vector3::zeros());
+/// assert!(reference.quaternion().angle_to(&q) < 1e-15);
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AttitudeReference<T: Real> {
+    q: UnitQuaternion<T>,
+}
+
+impl<T: Real> AttitudeReference<T> {
+    /// The reference `q`.
+    pub fn new(q: UnitQuaternion<T>) -> Self {
+        Self { q }
+    }
+
+    /// q_ref.
+    pub fn quaternion(&self) -> &UnitQuaternion<T> {
+        &self.q
+    }
+
+    /// q = q_ref ⊗ Exp(δθ), δθ the components `offset..offset + 3` of `x`.
+    ///
+    /// # Panics
+    ///
+    /// If `x` has fewer than `offset + 3` components.
+    #[track_caller]
+    pub fn attitude<N: Dim>(&self, x: &OVector<T, N>, offset: usize) -> UnitQuaternion<T>
+    where
+        DefaultAllocator: Alloc<N>,
+    {
+        self.q * so3_exp(&AttitudeError::at(offset).block(x))
+    }
+
+    /// q_ref ← q_ref ⊗ Exp(δθ) and δθ ← 0 in `x` (the estimate is unchanged): call it with the
+    /// filter's state after a step, then give the filter the recentred state (with its
+    /// covariance unchanged, e.g. `Estimator::reset` in estim-filters).
+    ///
+    /// # Panics
+    ///
+    /// If `x` has fewer than `offset + 3` components.
+    #[track_caller]
+    pub fn recentre<N: Dim>(&mut self, x: &mut OVector<T, N>, offset: usize)
+    where
+        DefaultAllocator: Alloc<N>,
+    {
+        self.q = self.attitude(x, offset);
+        self.q.renormalize();
+        x.fixed_rows_mut::<3>(offset).fill(T::zero());
+    }
+
+    /// q_ref ← q_ref ⊗ Exp(ω Δt) (a body rate ω held over Δt), renormalised.
+    pub fn rotate(&mut self, omega: &Vector3<T>, dt: T) {
+        self.q *= so3_exp(&(omega * dt));
+        self.q.renormalize();
+    }
+}
