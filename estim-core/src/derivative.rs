@@ -188,10 +188,11 @@ impl<T: Real> DerivativeReport<T> {
     }
 }
 
-/// `J[row, col]` or `H_component[row, col]`.
+/// `g[row]`, `J[row, col]` or `H_component[row, col]`.
 impl fmt::Display for Entry {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
+            Entry::Value { row } => write!(f, "g[{row}]"),
             Entry::Jacobian { row, col } => write!(f, "J[{row}, {col}]"),
             Entry::Hessian {
                 component,

@@ -935,6 +935,30 @@ fn nonlinear_6x4(c: &mut Criterion) {
     });
     group.finish();
 
+    // The state-space layer on a vector state: the default (Euclidean, whose fused x + K ν
+    // and batched sigma points run) against the same + and − given as a user StateSpace that
+    // does not declare itself VECTOR (so every ⊞ and ⊟ is a call through the trait).
+    let mut group = steps(c, "state_space_6x4");
+    group.bench("Ekf", &Ekf::new(prior.clone()), |f, i| {
+        f.predict(black_box(vehicle), &(), DT).unwrap();
+        f.update(black_box(beacons), &zs[i]).unwrap()
+    });
+    let plain_ekf = Ekf::new(prior.clone()).with_state_space(PlainVector);
+    group.bench("Ekf_plain_vector_space", &plain_ekf, |f, i| {
+        f.predict(black_box(vehicle), &(), DT).unwrap();
+        f.update(black_box(beacons), &zs[i]).unwrap()
+    });
+    group.bench("Ukf", &Ukf::new(prior.clone()), |f, i| {
+        f.predict(black_box(vehicle), &(), DT).unwrap();
+        f.update(black_box(beacons), &zs[i]).unwrap()
+    });
+    let plain_ukf = Ukf::new(prior.clone()).with_state_space(PlainVector);
+    group.bench("Ukf_plain_vector_space", &plain_ukf, |f, i| {
+        f.predict(black_box(vehicle), &(), DT).unwrap();
+        f.update(black_box(beacons), &zs[i]).unwrap()
+    });
+    group.finish();
+
     // Where the time goes: each half-step alone, then pieces of the framework's step.
     let mut group = steps(c, "breakdown_6x4");
     group.bench("Ekf_predict", &Ekf::new(prior.clone()), |f, _| {
@@ -996,6 +1020,19 @@ fn nonlinear_6x4(c: &mut Criterion) {
         black_box(p6).cholesky().unwrap().unpack()
     });
     group.finish();
+}
+
+/// x ⊞ δ = x + δ and a ⊟ b = a − b, written as a user would, without `VECTOR = true`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct PlainVector;
+
+impl estim_core::StateSpace<f64, U6> for PlainVector {
+    fn plus_into(&self, x: &SVector<f64, 6>, delta: &SVector<f64, 6>, out: &mut SVector<f64, 6>) {
+        *out = x + delta;
+    }
+    fn minus_into(&self, a: &SVector<f64, 6>, b: &SVector<f64, 6>, out: &mut SVector<f64, 6>) {
+        *out = a - b;
+    }
 }
 
 fn config() -> Criterion {

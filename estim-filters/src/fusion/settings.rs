@@ -15,7 +15,8 @@ pub struct FusionSettings {
     pub horizon: f64,
     /// The number of records the history keeps (one per measurement, input change or time
     /// mark, plus the checkpoint). When it is full the oldest record is dropped, which can
-    /// shorten the usable horizon: size it as (events per second) × horizon + 2. At least 2.
+    /// shorten the usable horizon: size it as (events per second) × horizon + 2. At least 2,
+    /// at most [`FusionSettings::MAX_CAPACITY`] (every record is allocated up front).
     pub capacity: usize,
     /// The longest single prediction \[s\]; longer gaps are predicted in equal sub-steps.
     /// Finite, > 0. For a discretised model (like Lu's error state, whose Q is per sample) this
@@ -39,11 +40,15 @@ impl Default for FusionSettings {
 }
 
 impl FusionSettings {
+    /// The largest history: 2¹⁶ records (at 1 kHz of events, a horizon of over a minute), a
+    /// bound that keeps a mistyped capacity from allocating without limit.
+    pub const MAX_CAPACITY: usize = 1 << 16;
+
     pub(crate) fn validate(&self) -> Result<(), FusionError> {
         if !(self.horizon.is_finite() && self.horizon >= 0.0) {
             return Err(FusionError::setting(FusionSetting::Horizon, self.horizon));
         }
-        if self.capacity < 2 {
+        if !(2..=Self::MAX_CAPACITY).contains(&self.capacity) {
             return Err(FusionError::setting(
                 FusionSetting::Capacity,
                 self.capacity as f64,
@@ -113,14 +118,21 @@ pub struct ResetSettings {
 /// The windowed NIS χ² fault monitor of a sensor (see the [module docs](super), step 2).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MonitorSettings {
-    /// W, the number of recent NIS values summed. At least 1.
+    /// W, the number of recent NIS values summed. At least 1, at most
+    /// [`MonitorSettings::MAX_WINDOW`] (the window is copied into every history record).
     pub window: usize,
     /// α, the false-alarm probability of each test on a consistent sensor: the threshold is the
-    /// χ²_{W·m} quantile at 1 − α. In (0, 1).
+    /// χ²_{W·m} quantile at 1 − α. In (0, 1). (The sum is of clipped NIS, which is smaller
+    /// than the χ² variable, so the actual rate is at most α.)
     pub false_alarm: f64,
     /// Each NIS is clipped at the χ²ₘ quantile at this probability before it enters the
     /// window, so one outlier cannot raise a fault alone. In (0, 1).
     pub clip_probability: f64,
+}
+
+impl MonitorSettings {
+    /// The largest window: 4096 values.
+    pub const MAX_WINDOW: usize = 1 << 12;
 }
 
 impl Default for MonitorSettings {
@@ -221,8 +233,11 @@ impl SensorSettings {
         let monitor = match self.monitor {
             None => None,
             Some(m) => {
-                if m.window == 0 {
-                    return Err(FusionError::setting(FusionSetting::MonitorWindow, 0.0));
+                if m.window == 0 || m.window > MonitorSettings::MAX_WINDOW {
+                    return Err(FusionError::setting(
+                        FusionSetting::MonitorWindow,
+                        m.window as f64,
+                    ));
                 }
                 let dof = m.window.checked_mul(dimension).ok_or(FusionError::setting(
                     FusionSetting::MonitorWindow,

@@ -265,9 +265,12 @@ where
     pub model: LinearGaussian<T, N, M, U>,
     /// Its log-likelihood (summed over the sequences).
     pub log_likelihood: T,
-    /// The log-likelihood of each iteration's model, first (the starting model) to last.
+    /// The log-likelihood of each iteration's model, first (the starting model) to last. When
+    /// an iteration decreased ℓ, the model before it is returned, so the last entry is then
+    /// below [`log_likelihood`](Self::log_likelihood).
     pub history: Vec<T>,
-    /// Whether the tolerance was met (rather than the iteration cap).
+    /// Whether the tolerance was met, or ℓ decreased by no more than it (round-off at the
+    /// optimum); `false` at the iteration cap or after a larger decrease.
     pub converged: bool,
 }
 
@@ -385,13 +388,16 @@ where
         history.push(ll);
         if let (Some(last), Some(prev)) = (last, previous.take()) {
             if ll < last {
-                // A decrease can only be round-off at convergence (the tests hold EM to it):
-                // keep the better model.
+                // EM never decreases ℓ in exact arithmetic. A decrease within the tolerance is
+                // round-off at convergence; a larger one means the M-step lost accuracy (an
+                // ill-conditioned regression), which must not be reported as converged. Either
+                // way the better model is kept.
+                let roundoff = last - ll <= tolerance * (T::one() + last.abs());
                 return Ok(EmEstimate {
                     model: prev,
                     log_likelihood: last,
                     history,
-                    converged: true,
+                    converged: roundoff,
                 });
             }
             if ll - last <= tolerance * (T::one() + ll.abs()) {

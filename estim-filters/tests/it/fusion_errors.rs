@@ -167,6 +167,19 @@ fn settings_out_of_range_are_refused() {
         ),
         bad(FusionSetting::Capacity, 1.0)
     );
+    // A capacity that would allocate without bound is refused before anything is allocated.
+    for capacity in [FusionSettings::MAX_CAPACITY + 1, usize::MAX] {
+        assert_eq!(
+            make(
+                FusionSettings {
+                    capacity,
+                    ..settings()
+                },
+                ok.clone()
+            ),
+            bad(FusionSetting::Capacity, capacity as f64)
+        );
+    }
     assert_eq!(
         make(
             FusionSettings {
@@ -207,6 +220,10 @@ fn settings_out_of_range_are_refused() {
     assert_eq!(
         make(settings(), monitor(0, 0.01)),
         bad(FusionSetting::MonitorWindow, 0.0)
+    );
+    assert_eq!(
+        make(settings(), monitor(usize::MAX, 0.01)),
+        bad(FusionSetting::MonitorWindow, usize::MAX as f64)
     );
     assert_eq!(
         make(settings(), monitor(5, 0.0)),

@@ -232,4 +232,15 @@ fn json_shards_merge_into_one_run_bit_for_bit() {
     assert!(shards_error(
         mc.run_shard(5, 5, realization).map(|_| whole.clone())
     ));
+
+    // A shard edited on disk so that its buffers disagree with its dimensions: refused, not a
+    // panic on an index out of range.
+    let mut edited: serde_json::Value = serde_json::from_str(&files[2]).unwrap();
+    edited["chunks"][0]["slots"][1]["mean_e"]
+        .as_array_mut()
+        .unwrap()
+        .pop();
+    let mut shards = read(&[0, 1, 3, 4]);
+    shards.push(serde_json::from_value(edited).unwrap());
+    assert!(shards_error(mc.merge_shards(shards)), "a corrupted shard");
 }
