@@ -241,3 +241,16 @@ fn draw(
     root.present()?;
     Ok(())
 }
+
+/// A progress bar for `runs` Monte Carlo realizations on stderr, fed by
+/// `MonteCarlo::run_with_progress`; indicatif draws it only when stderr is a terminal, so logs
+/// and the main job's output stay clean.
+pub fn progress_bar(label: &str, runs: usize) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(runs as u64);
+    let style =
+        indicatif::ProgressStyle::with_template("{msg} {bar:40} {pos}/{len} runs, ETA {eta}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
+    bar.set_style(style);
+    bar.set_message(label.to_string());
+    bar
+}

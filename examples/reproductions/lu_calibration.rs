@@ -17,11 +17,11 @@
 
 use std::time::Instant;
 
-use crate::common::{Band, Headline, Output, Series, band_plot, line_plot};
+use crate::common::{Band, Headline, Output, Series, band_plot, line_plot, progress_bar};
 use estim::core::Gaussian;
 use estim::filters::ValidationError;
 use estim::filters::consistency::{Check, Verdict};
-use estim::filters::monte_carlo::{EnsembleStats, MonteCarlo, Recorder};
+use estim::filters::monte_carlo::{EnsembleStats, MonteCarlo, Progress, Recorder};
 use estim::filters::smoother::Rts;
 use estim::filters::{Estimator, KalmanFilter, Update};
 use estim::models::lu::{
@@ -324,11 +324,14 @@ pub fn run_monte_carlo(config: &MonteCarloConfig) -> Result<MonteCarloResult, Va
         Ok(())
     };
     let start = Instant::now();
+    let bar = progress_bar("Lu Monte Carlo", config.runs);
+    let progress = |p: Progress| bar.set_position(p.runs_done as u64);
     let stats = match config.execution {
-        Execution::Default => mc.run(realization),
-        Execution::Sequential => mc.run_sequential(realization),
+        Execution::Default => mc.run_with_progress(realization, progress),
+        Execution::Sequential => mc.run_sequential_with_progress(realization, progress),
     }
     .map_err(ValidationError::from)?;
+    bar.finish_and_clear();
     let wall_s = start.elapsed().as_secs_f64();
     let verdict = stats.verdict(config.confidence)?;
 
