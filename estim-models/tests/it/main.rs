@@ -5,6 +5,7 @@
 //! `cargo test -p estim-models` (or `--test it`; a single module: `cargo test -p estim-models
 //! --test it lv2_fusion::`).
 
+mod bad_settings;
 mod boje_derivatives;
 mod boje_filter;
 mod boje_moments;
