@@ -474,7 +474,8 @@ where
     };
     for (k, op) in case.ops.iter().enumerate() {
         let what = || format!("step {k}: {op:?}");
-        match op {
+        type Call<'a, F> = Box<dyn Fn(&mut F) -> Result<(), estim_core::Error> + 'a>;
+        let call: Call<'_, F> = match op {
             Op::Predict {
                 f,
                 b,
@@ -488,15 +489,8 @@ where
                     noise: matrix(n, n, q),
                 };
                 let input = matrix(u, U1, input);
-                checked_call(
-                    &mut filter,
-                    amplification,
-                    &mut scale,
-                    k + 1,
-                    symmetric,
-                    &what,
-                    |f| f.predict(&model, &input, convert(*dt)),
-                )?;
+                let dt = convert(*dt);
+                Box::new(move |f: &mut F| f.predict(&model, &input, dt))
             }
             Op::Update { h, r, z } => {
                 let model = LinearMeasurement {
@@ -504,17 +498,18 @@ where
                     noise: matrix(m, m, r),
                 };
                 let z = matrix(m, U1, z);
-                checked_call(
-                    &mut filter,
-                    amplification,
-                    &mut scale,
-                    k + 1,
-                    symmetric,
-                    &what,
-                    |f| f.update(&model, &z).map(|_| ()),
-                )?;
+                Box::new(move |f: &mut F| f.update(&model, &z).map(|_| ()))
             }
-        }
+        };
+        checked_call(
+            &mut filter,
+            amplification,
+            &mut scale,
+            k + 1,
+            symmetric,
+            &what,
+            call,
+        )?;
     }
     Ok(())
 }
