@@ -87,6 +87,16 @@ pub enum Parameter {
     /// A prediction's time step Δt (must be ≥ 0: a filter predicts forward; backward
     /// estimates come from a smoother).
     TimeStep,
+    /// A simulated or analysed duration in seconds (must be finite, ≥ 0, and short enough that
+    /// its step count stays under the documented maximum).
+    Duration,
+    /// A number of steps or iterations (at most a documented maximum, so memory and run time
+    /// stay bounded).
+    StepCount,
+    /// A sampling or fix period in seconds (must be finite and > 0).
+    Period,
+    /// A number of Monte Carlo runs (at least 1, at most a documented maximum).
+    RunCount,
 }
 
 /// Every error an estim algorithm returns.
@@ -207,6 +217,10 @@ impl fmt::Display for Parameter {
             Parameter::GateProbability => "gate probability",
             Parameter::StepSize => "step size",
             Parameter::TimeStep => "time step",
+            Parameter::Duration => "duration",
+            Parameter::StepCount => "step count",
+            Parameter::Period => "period",
+            Parameter::RunCount => "run count",
         })
     }
 }

@@ -357,7 +357,11 @@ where
                 quantity: Quantity::ProcessNoise,
             },
             e => e,
-        })
+        })?;
+    // A prior accepted as PSD within its rounding tolerance (a variance of −10⁻³⁰⁰) and a
+    // finite but huge transition (10³⁰⁰) gave P⁻ a variance of −10³⁰⁰ as `Ok` (found by the
+    // fuzz test, tests/it/fuzz.rs). The diagonal of P⁻ costs O(n) to check.
+    ensure_nonnegative_diagonal(p, stage, Quantity::Covariance)
 }
 
 /// Makes `scratch`'s estimate the filter's, swapping buffers (no copy for runtime sizes).
@@ -479,6 +483,8 @@ where
         let out = Outputs::moments(&mut moments).with_noise(&q);
         self.propagator
             .propagate_into(&self.state, &self.covariance, &map, out, &mut workspace)?;
+        // As in `predicted`: P⁻ can lose a variance's sign through a huge transition.
+        ensure_nonnegative_diagonal(&moments.covariance, stage, Quantity::Covariance)?;
         self.state = moments.mean;
         self.covariance = moments.covariance;
         Ok(moments.cross_covariance)

@@ -344,5 +344,9 @@ where
     ensure_finite(new_state, stage, Quantity::Mean)
         .and_then(|()| finite_or_error(finite, stage, Quantity::Covariance))
         .map_err(|e| bad_input(&report.innovation, noise).unwrap_or(e))?;
+    // An ill-conditioned update (P ≈ 10²⁰ nearly rank one, R = 10⁻³: cond ≫ 1/ε) returned a
+    // posterior with variances of −10¹³ as `Ok` in every full-P form (found by the fuzz test,
+    // tests/it/fuzz.rs); only a square-root form avoids it. The diagonal costs O(n) to check.
+    ensure_nonnegative_diagonal(new_covariance, stage, Quantity::Covariance)?;
     Ok(true)
 }

@@ -23,5 +23,6 @@
 
 pub mod boje;
 pub mod lee_huang;
+pub mod limits;
 pub mod lu;
 pub mod lv2;

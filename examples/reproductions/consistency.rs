@@ -429,7 +429,7 @@ pub fn lee_huang_case(runs: usize, case: LeeHuangCase) -> Result<Run, Box<dyn st
         .with_residual_pair(LEE_HUANG_RESIDUAL_SLOTS.0, LEE_HUANG_RESIDUAL_SLOTS.1)?;
     let start = Instant::now();
     let stats = mc.run(|_, seed, rec| -> Result<(), ValidationError> {
-        let sim = simulate(&config.scenario, &sensors, seed);
+        let sim = simulate(&config.scenario, &sensors, seed)?;
         let mut initial = config.scenario.initial_state;
         if unbiased {
             let mut rng = StdRng::seed_from_u64(seed ^ 0x1ee_4a46);

@@ -151,6 +151,9 @@ impl SectionIvConfig {
                 value: self.dt,
             });
         }
+        // Duration finite and ≤ MAX_STEPS steps, seeds ≤ MAX_RUNS: a run that ends.
+        estim_models::limits::steps_for_duration(self.duration, self.dt)?;
+        estim_models::limits::check_runs(self.seeds)?;
         if self.seeds == 0 || self.record_every == 0 || self.steps() == 0 {
             return Err(Error::InvalidParameter {
                 parameter: Parameter::SampleCount,
@@ -390,7 +393,7 @@ pub fn run_section_iv(config: &SectionIvConfig) -> Result<SectionIvResult, Error
     let mut ote_cov = Matrix2::zeros();
 
     for run in 0..config.seeds {
-        let sim = simulate(&config.scenario, &sensors, config.first_seed + run as u64);
+        let sim = simulate(&config.scenario, &sensors, config.first_seed + run as u64)?;
         let mut ckf = Ckf::new(config)?;
         let mut ckf_ote = Ckf::new(config)?;
         let mut ote = OwnShipTrajectoryEstimator::new(&config.ote)?;

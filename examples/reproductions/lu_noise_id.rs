@@ -117,8 +117,9 @@ pub fn epoch_transition(scenario: &Scenario) -> (Matrix3<f64>, Matrix3<f64>) {
 }
 
 /// Simulates realization `seed` and forms its epoch record with an open-loop mechanisation.
-pub fn epoch_record(scenario: &Scenario, seed: u64) -> EpochRecord {
-    let sim = simulate(scenario, seed);
+/// Errors: an invalid scenario (see `simulate`).
+pub fn epoch_record(scenario: &Scenario, seed: u64) -> Result<EpochRecord, estim::core::Error> {
+    let sim = simulate(scenario, seed)?;
     let mut mechanisation = Mechanisation::new(scenario.position_mean, scenario.velocity_mean);
     let mut fixes = sim.gps.iter().peekable();
     let mut record = vec![None];
@@ -134,7 +135,7 @@ pub fn epoch_record(scenario: &Scenario, seed: u64) -> EpochRecord {
             )));
         }
     }
-    record
+    Ok(record)
 }
 
 /// What the identification found.
@@ -174,7 +175,7 @@ pub fn run_identification(
     let s = &config.scenario;
     let records: Vec<EpochRecord> = (0..config.realizations)
         .map(|i| epoch_record(s, config.seed + i as u64))
-        .collect();
+        .collect::<Result<_, _>>()?;
     let inputs = vec![Vector1::zeros(); records[0].len() - 1];
     let (_, shape) = epoch_transition(s);
     let printed = PRINTED_FILTER_ACCEL_NOISE_VARIANCE;

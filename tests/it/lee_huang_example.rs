@@ -260,7 +260,8 @@ fn section_iv_pseudo_measurements() -> Vec<Vector2<f64>> {
             attitude_std: config.attitude_std,
         },
         config.first_seed,
-    );
+    )
+    .unwrap();
     let var = config
         .input_noise_std
         .component_mul(&config.input_noise_std);
@@ -331,4 +332,35 @@ fn rls_with_unit_forgetting_equals_batch_least_squares_on_pseudo_measurements() 
             assert!((rls.covariance() - inv(&info)).amax() < 1e-9 * inv(&info).amax());
         }
     }
+}
+
+/// Issue 18: an endless or huge section IV run is refused before anything is allocated
+/// (formerly a hang collecting `usize::MAX` record slots).
+#[test]
+fn section_iv_rejects_endless_durations_and_run_counts() {
+    use estim::core::{Error, Parameter};
+    for duration in [f64::INFINITY, f64::NAN, 1e12] {
+        let config = SectionIvConfig {
+            duration,
+            ..SectionIvConfig::paper()
+        };
+        assert!(matches!(
+            run_section_iv(&config),
+            Err(Error::InvalidParameter {
+                parameter: Parameter::Duration,
+                ..
+            })
+        ));
+    }
+    let config = SectionIvConfig {
+        seeds: usize::MAX,
+        ..SectionIvConfig::paper()
+    };
+    assert!(matches!(
+        run_section_iv(&config),
+        Err(Error::InvalidParameter {
+            parameter: Parameter::RunCount,
+            ..
+        })
+    ));
 }

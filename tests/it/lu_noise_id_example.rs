@@ -14,7 +14,7 @@ fn the_epoch_model_has_the_200_hz_filters_likelihood() {
     // log-likelihoods, against the aggregated Φ⁴⁰, W·G model on the same record.
     let scenario = Scenario::paper().with_duration(60.0);
     let seed = 12;
-    let sim = simulate(&scenario, seed);
+    let sim = simulate(&scenario, seed).unwrap();
     let mut lu = LuFilter::new(&scenario, &FilterSettings::consistent(&scenario)).unwrap();
     let mut fixes = sim.gps.iter().peekable();
     let mut direct = 0.0;
@@ -35,7 +35,7 @@ fn the_epoch_model_has_the_200_hz_filters_likelihood() {
             scenario.gps_velocity_variance,
         ),
     );
-    let zs = epoch_record(&scenario, seed);
+    let zs = epoch_record(&scenario, seed).unwrap();
     let inputs = vec![Vector1::zeros(); zs.len() - 1];
     let epoch = sequence_log_likelihood(
         &KalmanFilter::new(model.prior.clone()),

@@ -28,6 +28,7 @@ mod fusion_gating;
 mod fusion_replay;
 mod fusion_sizes;
 mod fusion_support;
+mod fuzz;
 mod gating;
 mod multirate;
 mod nees;

@@ -145,12 +145,14 @@ impl CircleConfig {
         }
     }
 
-    /// Number of accelerometer steps, t_end/h (rounded).
+    /// Number of accelerometer steps, t_end/h (rounded; saturating, so an out-of-range t_end
+    /// gives a count that [`validate`](Self::validate) rejects).
     pub fn steps(&self) -> usize {
         (self.t_end / self.dt).round() as usize
     }
 
-    /// Steps between fixes.
+    /// Steps between fixes, round(fix_period/h) ≥ 1 (saturating; a NaN or infinite period is
+    /// rejected by [`validate`](Self::validate), not read as "every step").
     pub fn fix_every(&self) -> usize {
         ((self.fix_period / self.dt).round() as usize).max(1)
     }
@@ -168,12 +170,26 @@ impl CircleConfig {
         }
     }
 
-    /// Checks the configuration: Δt, t_end > 0, an even number of steps ≥ 2 (so t_end/2 is a
-    /// sample), at least one run, R > 0.
+    /// Checks the configuration: Δt finite and > 0 ([`Parameter::StepSize`]), t_end finite
+    /// and > 0 with at most [`MAX_STEPS`](crate::limits::MAX_STEPS) steps ([`Parameter::Duration`]),
+    /// the fix period finite and > 0 ([`Parameter::Period`]), 1 ≤ runs ≤
+    /// [`MAX_RUNS`](crate::limits::MAX_RUNS) ([`Parameter::RunCount`]), an even number of
+    /// steps ≥ 2 (so t_end/2 is a sample), R > 0.
     ///
-    /// Errors: [`Error::InvalidParameter`] (sample count) otherwise.
+    /// Errors: [`Error::InvalidParameter`] (the parameters above; sample count for the rest)
+    /// otherwise.
+    ///
+    /// ```
+    /// use estim_models::boje::CircleConfig;
+    /// assert!(CircleConfig::paper().validate().is_ok());
+    /// let never = CircleConfig { fix_period: f64::NAN, ..CircleConfig::paper() };
+    /// assert!(never.validate().is_err());
+    /// ```
     pub fn validate(&self) -> Result<()> {
-        let steps = self.steps();
+        use crate::limits::{check_period, check_runs, steps_for_duration};
+        let steps = steps_for_duration(self.t_end, self.dt)?;
+        check_period(self.fix_period, Parameter::Period)?;
+        check_runs(self.runs)?;
         let ok = self.dt > 0.0
             && self.t_end > 0.0
             && steps >= 2

@@ -174,7 +174,11 @@ pub struct OteSteadyState {
 
 /// Iterates the OTE (B = I) `steps` times. P_p and K_p do not depend on the data, so zero
 /// pseudo-measurements are used.
+///
+/// Errors: invalid settings, or `steps` above [`MAX_STEPS`](crate::limits::MAX_STEPS)
+/// ([`Parameter::StepCount`](estim_core::Parameter), so the call returns in bounded time).
 pub fn ote_steady_state(settings: &OteSettings, steps: usize) -> Result<OteSteadyState, Error> {
+    crate::limits::check_steps(steps)?;
     let mut ote = OwnShipTrajectoryEstimator::new(settings)?;
     let mut gain = Matrix2::zeros();
     for _ in 0..steps {

@@ -159,7 +159,35 @@ pub struct Simulation {
 }
 
 /// Simulates `scenario` with `config`; the same seed gives the same data.
-pub fn simulate(scenario: &Scenario, config: &SensorConfig, seed: u64) -> Simulation {
+///
+/// Errors, checked before anything is allocated: Δt not finite and > 0
+/// ([`Parameter::StepSize`](estim_core::Parameter)), more than
+/// [`MAX_STEPS`](crate::limits::MAX_STEPS) steps ([`Parameter::StepCount`](estim_core::Parameter);
+/// the stored run then stays under 1.2 GB).
+///
+/// ```
+/// use estim_models::lee_huang::{FourAccelerometers, Scenario, SensorConfig, simulate};
+/// use estim_core::nalgebra::Vector3;
+/// let config = SensorConfig {
+///     dt: 0.01,
+///     steps: 100,
+///     accelerometers: FourAccelerometers::default(),
+///     input_bias: Vector3::zeros(),
+///     input_noise_std: Vector3::zeros(),
+///     attitude_std: 0.01,
+/// };
+/// assert_eq!(simulate(&Scenario::section_iv(), &config, 1)?.samples.len(), 101);
+/// let endless = SensorConfig { steps: usize::MAX, ..config };
+/// assert!(simulate(&Scenario::section_iv(), &endless, 1).is_err());
+/// # Ok::<(), estim_core::Error>(())
+/// ```
+pub fn simulate(
+    scenario: &Scenario,
+    config: &SensorConfig,
+    seed: u64,
+) -> Result<Simulation, estim_core::Error> {
+    crate::limits::check_period(config.dt, estim_core::Parameter::StepSize)?;
+    crate::limits::check_steps(config.steps)?;
     let mut rng = StdRng::seed_from_u64(seed);
     let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
     let gravity = scenario.plane.gravity();
@@ -185,5 +213,5 @@ pub fn simulate(scenario: &Scenario, config: &SensorConfig, seed: u64) -> Simula
             attitude,
         });
     }
-    Simulation { truth, samples }
+    Ok(Simulation { truth, samples })
 }

@@ -219,13 +219,15 @@ pub(crate) fn nearest(times: &[f64], t: f64) -> usize {
 /// The paper's covariance recursion (§2.6) written out, for `steps` accelerometer steps:
 /// M ← Φ P Φᵀ + Γ W Γᵀ each step and, every `gps_every` steps, the information form
 /// P = (M⁻¹ + Hᵀ V⁻¹ H)⁻¹, K = P Hᵀ V⁻¹. An independent route to the framework filter's
-/// (Joseph-form) covariance. Errors if the scenario or settings are invalid, or M or the
-/// information matrix is not invertible.
+/// (Joseph-form) covariance. Errors if the scenario or settings are invalid, `steps` exceeds
+/// [`MAX_STEPS`](crate::limits::MAX_STEPS) ([`Parameter::StepCount`](estim_core::Parameter)),
+/// or M or the information matrix is not invertible.
 pub fn covariance_history(
     scenario: &Scenario,
     settings: &FilterSettings,
     steps: usize,
 ) -> Result<CovarianceHistory, Error> {
+    crate::limits::check_steps(steps)?;
     scenario.validate()?;
     settings.validate()?;
     let phi = transition_matrix(scenario.dt, settings.coupling);
@@ -289,13 +291,16 @@ pub struct Realization {
 }
 
 /// Runs the filter on one realization of `scenario` (seed `seed`) and records it.
+///
+/// Errors: an invalid scenario or settings ([`LuFilter::new`]; at most
+/// [`MAX_STEPS`](crate::limits::MAX_STEPS) steps, so the run ends), or a filter failure.
 pub fn run_realization(
     scenario: &Scenario,
     settings: &FilterSettings,
     seed: u64,
 ) -> Result<Realization, Error> {
-    let mut sim = Simulator::new(scenario, seed);
     let mut filter = LuFilter::new(scenario, settings)?;
+    let mut sim = Simulator::new(scenario, seed);
     let mut out = Realization::default();
     let mut record =
         |t: f64, sim: &Simulator, filter: &LuFilter, r: Vector2<f64>, k: Matrix3x2<f64>| {

@@ -8,6 +8,7 @@
 //! Q = Γ W Γᵀ,   δz = (z_p − p_c, z_v − v_c) = H δx + η,   H = [[1, 0, 0], [0, 1, 0]],   R = V
 //! ```
 
+use crate::limits::{check_steps, steps_for_duration};
 use estim_core::{
     Error, LinearMeasurementModel, LinearProcessModel, MeasurementJacobian, MeasurementModel,
     Parameter, ProcessJacobian, ProcessModel, Quantity, Stage,
@@ -102,9 +103,18 @@ impl Scenario {
         }
     }
 
-    /// The same scenario over `seconds` (rounded to whole accelerometer steps).
+    /// The same scenario over `seconds` (rounded to whole accelerometer steps). A duration
+    /// that is NaN, negative, infinite or longer than [`MAX_STEPS`](crate::limits::MAX_STEPS) steps gives the step count
+    /// `usize::MAX`, which [`validate`](Self::validate) (and so every simulator and runner)
+    /// rejects with [`Parameter::StepCount`].
+    ///
+    /// ```
+    /// use estim_models::lu::Scenario;
+    /// assert_eq!(Scenario::paper().with_duration(10.0).steps, 2000);
+    /// assert!(Scenario::paper().with_duration(f64::INFINITY).validate().is_err());
+    /// ```
     pub fn with_duration(mut self, seconds: f64) -> Self {
-        self.steps = (seconds / self.dt).round().max(0.0) as usize;
+        self.steps = steps_for_duration(seconds, self.dt).unwrap_or(usize::MAX);
         self
     }
 
@@ -114,9 +124,10 @@ impl Scenario {
         self
     }
 
-    /// Checks the parameters: Δt finite and > 0, a GPS fix every ≥ 1 steps, finite
-    /// trajectory, prior and noise variances ≥ 0, GPS variances > 0.
+    /// Checks the parameters: Δt finite and > 0, a GPS fix every ≥ 1 steps, at most
+    /// [`MAX_STEPS`](crate::limits::MAX_STEPS) steps, finite trajectory, prior and noise variances ≥ 0, GPS variances > 0.
     pub fn validate(&self) -> Result<(), Error> {
+        check_steps(self.steps)?;
         if !(self.dt > 0.0 && self.dt.is_finite()) {
             return Err(Error::InvalidParameter {
                 parameter: Parameter::StepSize,
@@ -178,7 +189,8 @@ impl Scenario {
 
     /// The time of GPS update `k` ≥ 1: k · gps_every · Δt \[s\].
     pub fn update_time(&self, k: usize) -> f64 {
-        (k * self.gps_every) as f64 * self.dt
+        // In f64: the integer product k · gps_every could overflow.
+        k as f64 * self.gps_every as f64 * self.dt
     }
 
     /// The GPS update index nearest to time `t` (0 = the prior at t = 0).

@@ -12,6 +12,7 @@
 //! z(t_j) = (p(t_j) + η_p, v(t_j) + η_v),   η ~ N(0, diag(V_p, V_v))
 //! ```
 
+use estim_core::Error;
 use nalgebra::{Vector2, Vector3};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -153,7 +154,20 @@ pub struct SensorRecord {
 
 /// Simulates one realization of `scenario` from `seed` and stores it. Draws the same numbers as
 /// a [`Simulator`] driven step by step (accelerometer, then the GPS fix when due).
-pub fn simulate(scenario: &Scenario, seed: u64) -> SensorRecord {
+///
+/// Errors: an invalid scenario ([`Scenario::validate`]; at most
+/// [`MAX_STEPS`](crate::limits::MAX_STEPS) steps, so the record stays under ~330 MB),
+/// checked before anything is allocated.
+///
+/// ```
+/// use estim_models::lu::{Scenario, simulate};
+/// let record = simulate(&Scenario::paper().with_duration(1.0), 7)?;
+/// assert_eq!(record.accelerometer.len(), 200);
+/// assert!(simulate(&Scenario::paper().with_duration(f64::INFINITY), 7).is_err());
+/// # Ok::<(), estim_core::Error>(())
+/// ```
+pub fn simulate(scenario: &Scenario, seed: u64) -> Result<SensorRecord, Error> {
+    scenario.validate()?;
     let mut sim = Simulator::new(scenario, seed);
     let mut record = SensorRecord {
         accelerometer: Vec::with_capacity(scenario.steps),
@@ -169,5 +183,5 @@ pub fn simulate(scenario: &Scenario, seed: u64) -> SensorRecord {
             record.gps.push((sim.step_index(), z));
         }
     }
-    record
+    Ok(record)
 }

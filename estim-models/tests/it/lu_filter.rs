@@ -14,7 +14,7 @@ use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 /// x̄ ← Φ x̂, M ← Φ P Φᵀ + Γ W Γᵀ. Fixes at j = 40, 80, …; the mechanisation alongside.
 /// Returns (x̂, P) after every fix.
 fn hand_written_listing(scenario: &Scenario, seed: u64) -> Vec<(Vector3<f64>, Matrix3<f64>)> {
-    let record = simulate(scenario, seed);
+    let record = simulate(scenario, seed).unwrap();
     let dt = scenario.dt;
     let phi = transition_matrix(dt, Default::default());
     let g = noise_input(dt);
@@ -65,7 +65,7 @@ fn multi_rate_filter_matches_the_hand_written_listing() {
     let settings = FilterSettings::consistent(&scenario);
     for seed in [5, 6] {
         let reference = hand_written_listing(&scenario, seed);
-        let record = simulate(&scenario, seed);
+        let record = simulate(&scenario, seed).unwrap();
         let mut filter = LuFilter::new(&scenario, &settings).unwrap();
         let mut fixes = record.gps.iter();
         let mut k = 0;
@@ -159,7 +159,7 @@ fn only_the_bias_gains_vanish() {
 
     // The framework filter's P at every fix equals the information-form P.
     let mut filter = LuFilter::new(&scenario, &settings).unwrap();
-    let record = simulate(&scenario, 0);
+    let record = simulate(&scenario, 0).unwrap();
     let mut fixes = record.gps.iter();
     for j in 0..scenario.steps {
         filter.propagate(record.accelerometer[j]).unwrap();

@@ -54,7 +54,7 @@ proptest! {
 /// Replays one realization: the true error state δx_j against the mechanisation, the noise w_j
 /// (recovered as a_c − a(t_j) − b) and the one-step residual of δx_{j+1} = Φ δx_j − Γ w_j.
 fn error_dynamics_residuals(scenario: &Scenario, coupling: BiasCoupling) -> Vec<Vector3<f64>> {
-    let record = simulate(scenario, 42);
+    let record = simulate(scenario, 42).unwrap();
     let phi = transition_matrix(scenario.dt, coupling);
     let gamma = noise_input(scenario.dt);
     let mut mech = Mechanisation::new(scenario.position_mean, scenario.velocity_mean);
@@ -86,7 +86,7 @@ fn euler_truth_follows_the_derived_error_dynamics() {
 #[test]
 fn printed_phi13_sign_does_not_follow_the_error_dynamics() {
     let scenario = Scenario::paper();
-    let b = simulate(&scenario, 42).truth[0].bias;
+    let b = simulate(&scenario, 42).unwrap().truth[0].bias;
     let dt2 = scenario.dt * scenario.dt;
     for r in error_dynamics_residuals(&scenario, BiasCoupling::Printed) {
         // δx_{j+1} − (Φ_printed δx_j − Γ w) = (−Δt²/2 − Δt²/2) b in the δp row.
@@ -137,7 +137,7 @@ fn closed_form_truth_adds_a_quadrature_drive() {
 fn gps_fixes_every_0_2_s() {
     let scenario = Scenario::paper();
     assert_eq!(scenario.gps_every as f64 * scenario.dt, 0.2);
-    let record = simulate(&scenario, 1);
+    let record = simulate(&scenario, 1).unwrap();
     assert_eq!(record.gps.len(), 150);
     assert_eq!(scenario.updates(), 150);
     for (i, (step, _)) in record.gps.iter().enumerate() {
@@ -215,7 +215,7 @@ fn simulator_noise_statistics() {
 #[test]
 fn stored_simulation_matches_the_step_by_step_simulator() {
     let scenario = Scenario::paper();
-    let record = simulate(&scenario, 7);
+    let record = simulate(&scenario, 7).unwrap();
     let mut sim = Simulator::new(&scenario, 7);
     let mut fixes = record.gps.iter();
     for j in 0..scenario.steps {

@@ -6,6 +6,7 @@
 //! --test it lv2_fusion::`).
 
 mod autodiff;
+mod bad_settings;
 mod boje_derivatives;
 mod boje_filter;
 mod boje_moments;
