@@ -339,10 +339,7 @@ where
         covariance: p,
         noise: q,
     } = scratch;
-    ensure_shape(q, n, n, stage, Quantity::ProcessNoise)?;
-    // A negative variance in Q would make P⁻ indefinite without any other check failing.
-    // Checking all of Q's definiteness would cost a factorisation per step; its diagonal, O(n).
-    ensure_nonnegative_diagonal(q, stage, Quantity::ProcessNoise)?;
+    ensure_process_noise(q, n)?;
     // The propagator checks its own outputs; Q is checked through P⁻ = cov f + Q, and only on
     // failure is it examined to name the culprit.
     let out = Outputs::mean_covariance(mean, p).with_noise(q);
@@ -358,10 +355,30 @@ where
             },
             e => e,
         })?;
-    // A prior accepted as PSD within its rounding tolerance (a variance of −10⁻³⁰⁰) and a
-    // finite but huge transition (10³⁰⁰) gave P⁻ a variance of −10³⁰⁰ as `Ok` (found by the
-    // fuzz test, tests/it/fuzz.rs). The diagonal of P⁻ costs O(n) to check.
-    ensure_nonnegative_diagonal(p, stage, Quantity::Covariance)
+    ensure_predicted_covariance(p)
+}
+
+/// Q before a prediction: its shape, and a non-negative diagonal (a negative variance in Q would
+/// make P⁻ indefinite without any other check failing; checking all of Q's definiteness would
+/// cost a factorisation per step, its diagonal O(n)).
+#[inline(always)]
+fn ensure_process_noise<T: Real, N: Dim>(q: &OMatrix<T, N, N>, n: usize) -> Result<()>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    ensure_shape(q, n, n, Stage::Prediction, Quantity::ProcessNoise)?;
+    ensure_nonnegative_diagonal(q, Stage::Prediction, Quantity::ProcessNoise)
+}
+
+/// P⁻ after a prediction: a prior accepted as PSD within its rounding tolerance (a variance of
+/// −10⁻³⁰⁰) and a finite but huge transition (10³⁰⁰) gave P⁻ a variance of −10³⁰⁰ as `Ok`
+/// (found by the fuzz test, tests/it/fuzz.rs). The diagonal costs O(n) to check.
+#[inline(always)]
+fn ensure_predicted_covariance<T: Real, N: Dim>(p: &OMatrix<T, N, N>) -> Result<()>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    ensure_nonnegative_diagonal(p, Stage::Prediction, Quantity::Covariance)
 }
 
 /// Makes `scratch`'s estimate the filter's, swapping buffers (no copy for runtime sizes).
@@ -471,20 +488,17 @@ where
         Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
     {
         ensure_time_step(dt)?;
-        let stage = Stage::Prediction;
         let n = self.state.shape_generic().0;
         let mut q = OMatrix::zeros_generic(n, n);
         model.process_noise_into(&self.state, input, dt, &mut q);
-        ensure_shape(&q, n.value(), n.value(), stage, Quantity::ProcessNoise)?;
-        ensure_nonnegative_diagonal(&q, stage, Quantity::ProcessNoise)?;
+        ensure_process_noise(&q, n.value())?;
         let map = Transition::on(&self.space, model, input, dt);
         let mut moments = estim_core::Moments::zeros(n, n);
         let mut workspace = Default::default();
         let out = Outputs::moments(&mut moments).with_noise(&q);
         self.propagator
             .propagate_into(&self.state, &self.covariance, &map, out, &mut workspace)?;
-        // As in `predicted`: P⁻ can lose a variance's sign through a huge transition.
-        ensure_nonnegative_diagonal(&moments.covariance, stage, Quantity::Covariance)?;
+        ensure_predicted_covariance(&moments.covariance)?;
         self.state = moments.mean;
         self.covariance = moments.covariance;
         Ok(moments.cross_covariance)
