@@ -279,37 +279,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "band for one update's average NEES over {runs} runs: [{:.3}, {:.3}]",
         band.lower, band.upper
     );
-    let period = DT * SENSOR_EVERY as f64;
-    let series: Vec<crate::common::Series<'_>> = summaries
+    let nees: Vec<(&str, &[f64])> = summaries
         .iter()
-        .map(|(label, s)| crate::common::Series {
-            label,
-            points: s
-                .average_nees
-                .iter()
-                .enumerate()
-                .map(|(k, v)| ((k + 1) as f64 * period, *v))
-                .collect(),
-        })
+        .map(|(label, s)| (*label, s.average_nees.as_slice()))
         .collect();
-    let updates = summaries[0].1.average_nees.len();
-    let band_points = (1..=updates)
-        .map(|k| (k as f64 * period, band.lower, band.upper))
-        .collect();
-    match crate::common::band_plot(
+    crate::common::nees_band_plot(
         "attitude_nees.svg",
         "AHRS on the quaternion error state: average NEES",
-        "time (s)",
-        "average NEES",
-        &series,
-        &[crate::common::Band {
-            label: "99% χ²₃ band",
-            points: band_points,
-        }],
-    ) {
-        Ok(path) => println!("figure: {}", path.display()),
-        Err(e) => eprintln!("figure not written: {e}"),
-    }
+        DT * SENSOR_EVERY as f64,
+        &nees,
+        f64::INFINITY,
+        (band.lower, band.upper),
+        "99% χ²₃ band",
+    );
     if crate::common::json_requested() {
         println!("{}", serde_json::Value::Object(json));
     }

@@ -280,7 +280,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         (200, 1000)
     };
     let mut json = serde_json::Map::new();
-    let mut series = Vec::new();
     let mut summaries = Vec::new();
     for (variant, label) in [
         (Variant::PlainUkf, "UKF, plain vector state"),
@@ -309,34 +308,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "band for one step's average NEES over {runs} runs: [{:.3}, {:.3}] (χ²₃ mean 3)",
         band.lower, band.upper
     );
-    for (label, s) in &summaries {
-        series.push(crate::common::Series {
-            label,
-            points: s
-                .average_nees
-                .iter()
-                .enumerate()
-                .map(|(k, v)| ((k + 1) as f64 * DT, v.min(100.0)))
-                .collect(),
-        });
-    }
-    let band_points = (1..=steps)
-        .map(|k| (k as f64 * DT, band.lower, band.upper))
+    let nees: Vec<(&str, &[f64])> = summaries
+        .iter()
+        .map(|(label, s)| (*label, s.average_nees.as_slice()))
         .collect();
-    match crate::common::band_plot(
+    crate::common::nees_band_plot(
         "heading_wrap_nees.svg",
         "Average NEES across ±π crossings (clipped at 100)",
-        "time (s)",
-        "average NEES",
-        &series,
-        &[crate::common::Band {
-            label: "99% χ² band",
-            points: band_points,
-        }],
-    ) {
-        Ok(path) => println!("figure: {}", path.display()),
-        Err(e) => eprintln!("figure not written: {e}"),
-    }
+        DT,
+        &nees,
+        100.0,
+        (band.lower, band.upper),
+        "99% χ² band",
+    );
     if crate::common::json_requested() {
         println!("{}", serde_json::Value::Object(json));
     }

@@ -254,3 +254,38 @@ pub fn progress_bar(label: &str, runs: usize) -> indicatif::ProgressBar {
     bar.set_message(label.to_string());
     bar
 }
+
+/// The average NEES of each labelled run at times (k + 1)·`period`, each value capped at
+/// `cap`, over the shaded consistency band [lower, upper], written to `file`; prints where it
+/// went (a figure that fails to render is reported, not fatal).
+pub fn nees_band_plot(
+    file: &str,
+    title: &str,
+    period: f64,
+    nees: &[(&str, &[f64])],
+    cap: f64,
+    (lower, upper): (f64, f64),
+    band_label: &str,
+) {
+    let at = |k: usize| (k + 1) as f64 * period;
+    let series: Vec<Series<'_>> = nees
+        .iter()
+        .map(|&(label, values)| Series {
+            label,
+            points: values
+                .iter()
+                .enumerate()
+                .map(|(k, v)| (at(k), v.min(cap)))
+                .collect(),
+        })
+        .collect();
+    let steps = nees.iter().map(|(_, v)| v.len()).max().unwrap_or(0);
+    let band = Band {
+        label: band_label,
+        points: (0..steps).map(|k| (at(k), lower, upper)).collect(),
+    };
+    match band_plot(file, title, "time (s)", "average NEES", &series, &[band]) {
+        Ok(path) => println!("figure: {}", path.display()),
+        Err(e) => eprintln!("figure not written: {e}"),
+    }
+}
