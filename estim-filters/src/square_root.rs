@@ -371,6 +371,9 @@ where
     }
 }
 
+/// A new estimate (x̂, S), not yet committed.
+type Estimate<T, N> = (OVector<T, N>, OMatrix<T, N, N>);
+
 // ---------------------------------------------------------------------------------------
 // Linear and linearised steps (KF, EKF).
 
@@ -380,7 +383,7 @@ fn linearized_predict<T, N, G>(
     factor: &OMatrix<T, N, N>,
     f: &G,
     q: &OMatrix<T, N, N>,
-) -> Result<(OVector<T, N>, OMatrix<T, N, N>)>
+) -> Result<Estimate<T, N>>
 where
     T: Real,
     N: Dim,
@@ -422,7 +425,7 @@ fn linearized_update<T, N, M, H>(
     z: &OVector<T, M>,
     settings: &UpdateSettings<T>,
     report: &mut UpdateReport<T, M>,
-) -> Result<Option<(OVector<T, N>, OMatrix<T, N, N>)>>
+) -> Result<Option<Estimate<T, N>>>
 where
     T: Real,
     N: Dim,
@@ -654,7 +657,7 @@ fn unscented_predict<T, N, G>(
     factor: &OMatrix<T, N, N>,
     f: &G,
     q: &OMatrix<T, N, N>,
-) -> Result<(OVector<T, N>, OMatrix<T, N, N>)>
+) -> Result<Estimate<T, N>>
 where
     T: Real,
     N: Dim,
@@ -691,7 +694,7 @@ fn unscented_update<T, N, M, H>(
     z: &OVector<T, M>,
     settings: &UpdateSettings<T>,
     report: &mut UpdateReport<T, M>,
-) -> Result<Option<(OVector<T, N>, OMatrix<T, N, N>)>>
+) -> Result<Option<Estimate<T, N>>>
 where
     T: Real,
     N: Dim,

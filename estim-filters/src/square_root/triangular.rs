@@ -33,7 +33,7 @@ fn column_from<'b, T>(
     j: usize,
     row: usize,
     (p, r): (usize, usize),
-) -> (&'b mut [T], &'b mut [T]) {
+) -> Column<'b, T> {
     let top = &mut block.top[j * p..(j + 1) * p];
     let bottom = &mut block.bottom[j * r..(j + 1) * r];
     let (top_from, bottom_from) = if row < p { (row, 0) } else { (p, row - p) };
@@ -62,6 +62,9 @@ fn locate<T>(blocks: &[Block<'_, T>], mut k: usize) -> (usize, usize) {
     unreachable!("column beyond the pre-array")
 }
 
+/// One column of a pre-array from some row on: its top and bottom parts.
+type Column<'b, T> = (&'b mut [T], &'b mut [T]);
+
 /// Columns `a` < `b` of the pre-array, from row `row` on, as two disjoint mutable pairs.
 #[inline(always)]
 fn column_pair<'b, T>(
@@ -70,7 +73,7 @@ fn column_pair<'b, T>(
     b: usize,
     row: usize,
     pr: (usize, usize),
-) -> ((&'b mut [T], &'b mut [T]), (&'b mut [T], &'b mut [T])) {
+) -> (Column<'b, T>, Column<'b, T>) {
     let ((ba, ja), (bb, jb)) = (locate(blocks, a), locate(blocks, b));
     let (p, r) = pr;
     if ba == bb {

@@ -204,13 +204,16 @@ fn factor_is_triangular_and_reproduces_the_covariance() {
 // ---------------------------------------------------------------------------------------
 // Ill-conditioned: R ≪ P.
 
-/// The problem (b) on a 3-state system: P₀ = 10⁶ I, position and velocity measured
-/// with R = 10⁻¹² I, a constant-velocity-plus-bias transition, Q = 10⁻⁶ I.
-fn stiff_system<T: Real>() -> (
+/// A process, a sensor and a prior.
+type Stiff<T> = (
     LinearProcess<T, U3, U1>,
     LinearMeasurement<T, U3, estim_core::nalgebra::U2>,
     Gaussian<T, U3>,
-) {
+);
+
+/// The problem (b) on a 3-state system: P₀ = 10⁶ I, position and velocity measured
+/// with R = 10⁻¹² I, a constant-velocity-plus-bias transition, Q = 10⁻⁶ I.
+fn stiff_system<T: Real>() -> Stiff<T> {
     let c = |v: f64| estim_core::scalar::real::<T>(v);
     let process = LinearProcess {
         transition: Matrix3::new(1.0, 0.1, -0.005, 0.0, 1.0, -0.1, 0.0, 0.0, 1.0).map(c),
@@ -480,7 +483,7 @@ fn reports_and_gating_match_the_joseph_form() {
             (a.innovation - b.innovation).abs().max() <= TOL * b.innovation.abs().max().max(1.0)
         );
         assert!(
-            (&a.innovation_covariance - &b.innovation_covariance)
+            (a.innovation_covariance - b.innovation_covariance)
                 .abs()
                 .max()
                 <= TOL * b.innovation_covariance.abs().max()
