@@ -60,7 +60,7 @@
 //! KF's (the paper's downdates and this are the same posterior in exact arithmetic). When
 //! β < α² (the cubature rule, α = 1, β = 0: [`Unscented::cubature`]; Julier's set) the centre
 //! column cannot be in the array: R̃'s factor is then the triangular factor of
-//! [S_R | √(2w) B] downdated by √(α² − β) d̄ ([`rank_one_downdate`](triangular), checked). If
+//! [S_R | √(2w) B] downdated by √(α² − β) d̄ (a checked rank-one downdate: failure is reported, never NaN). If
 //! that downdate fails, R̃ is indefinite (a sigma-point rule with a negative centre weight
 //! can give a measurement covariance smaller than R; the full-P UKF then returns a posterior
 //! with a negative variance), and the update is [`Error::NotPositiveDefinite`] with quantity
