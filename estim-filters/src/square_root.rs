@@ -44,8 +44,8 @@
 //! (U = P_xz L⁻ᵀ = K S_zz^{1/2}) from S by m rank-one Cholesky downdates. Each downdate
 //! computes lₖₖ² − vₖ², which cancels catastrophically when the measurement is much better
 //! than the prior: with R = 10⁻¹² and P = 10⁶ the posterior variance is 10⁻¹⁸ of the prior,
-//! below ε even in `f64`, and that form fails on the first update (measured: every update of
-//! the problem (b) returned an error in f32 and f64). Here instead, split the
+//! below ε even in `f64`, and that form fails (measured with it: the first update with
+//! R = 10⁻¹² I failed in f32 from P = 10⁶ I and in f64 from P = I). Here instead, split the
 //! deviations into odd and even parts, Aⱼ = (d₊ⱼ − d₋ⱼ)/2 and Bⱼ = (d₊ⱼ + d₋ⱼ)/2. Then
 //! P_xz = S (√(2w) A)ᵀ exactly (χ±ⱼ − x̂ = ±γSⱼ, w γ² · 2 = 1), so H̃ S = √(2w) A with
 //! H̃ = P_xzᵀ P⁻¹ the statistical linearisation, and w Σ dᵢdᵢᵀ = H̃ P H̃ᵀ + 2w B Bᵀ. So
