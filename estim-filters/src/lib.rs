@@ -10,6 +10,7 @@
 //! | [`GaussianSecondOrderEkf`] | second order + Gaussian 4th-moment terms | Hessians | Hessians |
 //! | [`Ukf`] | unscented | [`ProcessModel`](estim_core::ProcessModel) | [`MeasurementModel`](estim_core::MeasurementModel) |
 //! | [`FadingMemoryRls`] | — (update only) | — | [`MeasurementJacobian`](estim_core::MeasurementJacobian) |
+//! | [`SrKalmanFilter`], [`SrEkf`], [`SrUkf`] | as KF, EKF, UKF, on the Cholesky factor ([`square_root`]) | as KF, EKF, UKF | as KF, EKF, UKF |
 //!
 //! The Kalman-family filters are one type, [`GaussianFilter`], parameterised by the
 //! [`MomentPropagator`](estim_core::MomentPropagator); they differ only in how the predicted
@@ -69,6 +70,7 @@ mod report;
 mod rls;
 mod scratch;
 pub mod smoother;
+pub mod square_root;
 mod traits;
 pub mod update;
 pub mod validation;
@@ -83,6 +85,7 @@ pub use report::{UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
 pub use smoother::{Rts, Sequence, SmootherError, filter_sequence, smooth_sequence};
 pub use smoother::{Smoothed, smooth_sequence_with_cross_covariances};
+pub use square_root::{SquareRootFilter, SrEkf, SrKalmanFilter, SrUkf};
 pub use traits::{Estimator, Predict, PredictCorrelated, Update};
 pub use update::{CovarianceUpdate, Gate};
 pub use validation::ValidationError;

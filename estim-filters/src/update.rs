@@ -145,7 +145,7 @@ impl<T: Real> UpdateSettings<T> {
     }
 
     /// The NIS above which an m-component measurement is rejected, if any.
-    fn threshold(&self, m: usize) -> Option<T> {
+    pub(crate) fn threshold(&self, m: usize) -> Option<T> {
         match self.gate? {
             Gate::Nis(threshold) => Some(threshold),
             Gate::Probability(_) if m == 0 => None,
@@ -167,7 +167,7 @@ fn chi2_quantile(dof: usize, p: f64) -> Option<f64> {
 /// when that product is comfortably normal (the common case), else the sum of logarithms (no
 /// overflow or underflow for large or badly scaled S).
 #[inline(always)]
-fn log_det_from_cholesky<T: Real, M: Dim>(l: &OMatrix<T, M, M>) -> T
+pub(crate) fn log_det_from_cholesky<T: Real, M: Dim>(l: &OMatrix<T, M, M>) -> T
 where
     DefaultAllocator: Alloc<M>,
 {

@@ -1,6 +1,6 @@
 //! Fuzzing every Gaussian filter with sane and adversarial numbers (issue 18): the KF, EKF,
 //! second-order EKF, Gaussian second-order EKF and UKF (several α, β, κ, extreme ones
-//! included), each covariance form, `f32` and `f64`, static (3 states, 2 measurements, 1
+//! included), each covariance form, the square-root KF, EKF and UKF, `f32` and `f64`, static (3 states, 2 measurements, 1
 //! input) and runtime (`Dyn`, same sizes) dimensions. A case is a prior and a sequence of
 //! predictions and updates on linear models whose entries are sane (uniform in ±2, noise
 //! covariances A Aᵀ + δ I scaled by 10⁻⁶…10⁶) or adversarial (NaN, ±∞, ±10³⁰⁰, 10⁻³⁰⁰,
@@ -57,7 +57,7 @@ use estim_core::propagate::Unscented;
 use estim_core::{Alloc, Gaussian, LinearMeasurement, LinearProcess, Real};
 use estim_filters::{
     CovarianceUpdate, Ekf, Estimator, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter,
-    Predict, SecondOrderEkf, Update,
+    Predict, SecondOrderEkf, SquareRootFilter, SrEkf, SrKalmanFilter, Update,
 };
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
@@ -269,7 +269,7 @@ fn case_in(f32: bool) -> impl Strategy<Value = Case> {
     (
         Just(f32),
         any::<bool>(),
-        0..5usize,
+        0..8usize,
         prop::sample::select(vec![
             CovarianceUpdate::Joseph,
             CovarianceUpdate::Standard,
@@ -456,7 +456,7 @@ where
 {
     let (n, m, u) = dims;
     let symmetric = case.form != CovarianceUpdate::Standard;
-    let amplification = if case.filter == 4 {
+    let amplification = if case.filter == 4 || case.filter == 7 {
         ukf_weight_sum(case.ukf, N as f64)
     } else {
         1.0
@@ -533,9 +533,16 @@ macro_rules! dispatch {
             3 => run_case::<$t, _, _, _, _>(case, $dims, |p| {
                 Ok(GaussianSecondOrderEkf::new(p).with_covariance_update(form))
             }),
-            _ => run_case::<$t, _, _, _, _>(case, $dims, |p| {
+            4 => run_case::<$t, _, _, _, _>(case, $dims, |p| {
                 let rule = Unscented::new(convert(a), convert(b), convert(k))?;
                 Ok(GaussianFilter::with_propagator(p, rule).with_covariance_update(form))
+            }),
+            // The square-root forms (the covariance form does not apply).
+            5 => run_case::<$t, _, _, _, _>(case, $dims, |p| Ok(SrKalmanFilter::new(p))),
+            6 => run_case::<$t, _, _, _, _>(case, $dims, |p| Ok(SrEkf::new(p))),
+            _ => run_case::<$t, _, _, _, _>(case, $dims, |p| {
+                let rule = Unscented::new(convert(a), convert(b), convert(k))?;
+                Ok(SquareRootFilter::with_propagator(p, rule))
             }),
         }
     }};

@@ -46,4 +46,5 @@ mod smoother;
 mod smoother_bad_input;
 mod smoother_nonlinear;
 mod smoother_proptest;
+mod square_root;
 mod state_space;
