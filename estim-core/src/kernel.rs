@@ -15,9 +15,9 @@
 //! runs single-threaded (`Par::Seq`) unless the `parallel` feature is on *and* the operation
 //! is at least [`PARALLEL_THRESHOLD`] on its smallest side.
 //!
-//! Without the `std` feature there is no faer: every size takes the nalgebra route (only static
-//! sizes exist then, unless nalgebra's `alloc` is on, in which case runtime sizes are served by
-//! the same generic code, correct but unoptimised).
+//! Without the `std` feature there is no faer and [`Alloc`](crate::Alloc) holds for static
+//! sizes only, so every call takes the nalgebra route; the runtime branches fall back to
+//! generic nalgebra code (correct, unoptimised) that estim then never reaches.
 //!
 //! All shapes must agree (the callers check model outputs first); a mismatch here is a
 //! programmer error and panics.
@@ -392,7 +392,8 @@ fn runtime_product<T, R, C, RA, CA, RB, CB>(
 }
 
 /// [`runtime_product`] without faer (no `std`): one dot product per entry, generic over the
-/// dimensions; reached only if nalgebra's `alloc` gives runtime sizes in a no_std build.
+/// dimensions. Unreached by estim without std (its bounds admit static sizes only); there so
+/// that the kernels keep one body for both builds.
 #[cfg(not(feature = "std"))]
 #[track_caller]
 #[allow(clippy::too_many_arguments)]
