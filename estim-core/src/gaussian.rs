@@ -1,12 +1,18 @@
 //! A Gaussian (normal) distribution N(μ, C) over an N-dimensional space.
 
-use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
+#[cfg(feature = "std")]
+use nalgebra::{DMatrix, DVector, Dyn, U1};
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+#[cfg(feature = "std")]
 use rand::Rng;
+#[cfg(feature = "std")]
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::alloc::Alloc;
 use crate::error::{Quantity, Result, Stage};
-use crate::linalg::{ensure_finite, ensure_psd, ensure_shape, ensure_symmetric, psd_factor};
+#[cfg(feature = "std")]
+use crate::linalg::psd_factor;
+use crate::linalg::{ensure_finite, ensure_psd, ensure_shape, ensure_symmetric};
 use crate::scalar::Real;
 
 /// A mean μ and covariance C, checked at construction.
@@ -80,6 +86,7 @@ where
     /// assert_eq!((g.dim(), g.covariance().ncols()), (2, 2));
     /// # Ok::<(), estim_core::Error>(())
     /// ```
+    #[cfg(feature = "std")]
     pub fn into_dyn(self) -> Gaussian<T, Dyn> {
         let n = self.dim();
         // `_generic` with the types spelled out: inside this impl's `Alloc<N>` bound rustc
@@ -111,6 +118,7 @@ where
     /// assert!((mean - g.mean()).abs().max() < 0.07);
     /// # Ok::<(), estim_core::Error>(())
     /// ```
+    #[cfg(feature = "std")]
     pub fn sampler(&self) -> Result<GaussianSampler<T, N>> {
         Ok(GaussianSampler {
             mean: self.mean.clone(),
@@ -130,6 +138,7 @@ where
     /// assert!(x.norm() < 1e-140);
     /// # Ok::<(), estim_core::Error>(())
     /// ```
+    #[cfg(feature = "std")]
     pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> Result<OVector<T, N>> {
         Ok(self.sampler()?.sample(rng))
     }
@@ -137,6 +146,7 @@ where
 
 /// Draws from a [`Gaussian`] (from [`Gaussian::sampler`]): x = μ + S z, z ~ N(0, I), with the
 /// factor S computed once. Implements [`rand_distr::Distribution`].
+#[cfg(feature = "std")]
 #[derive(Clone, Debug, PartialEq)]
 pub struct GaussianSampler<T: Real, N: Dim>
 where
@@ -146,6 +156,7 @@ where
     factor: OMatrix<T, N, N>,
 }
 
+#[cfg(feature = "std")]
 impl<T: Real, N: Dim> Distribution<OVector<T, N>> for GaussianSampler<T, N>
 where
     DefaultAllocator: Alloc<N>,

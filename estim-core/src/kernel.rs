@@ -15,15 +15,24 @@
 //! runs single-threaded (`Par::Seq`) unless the `parallel` feature is on *and* the operation
 //! is at least [`PARALLEL_THRESHOLD`] on its smallest side.
 //!
+//! Without the `std` feature there is no faer and [`Alloc`](crate::Alloc) holds for static
+//! sizes only, so every call takes the nalgebra route; the runtime branches fall back to
+//! generic nalgebra code (correct, unoptimised) that estim then never reaches.
+//!
 //! All shapes must agree (the callers check model outputs first); a mismatch here is a
 //! programmer error and panics.
 
+#[cfg(feature = "std")]
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+#[cfg(feature = "std")]
 use faer::linalg::cholesky::llt::factor::{LltRegularization, cholesky_in_place_scratch};
+#[cfg(feature = "std")]
 use faer::linalg::matmul::triangular::{self, BlockStructure};
+#[cfg(feature = "std")]
 use faer::linalg::triangular_solve::{
     solve_lower_triangular_in_place, solve_upper_triangular_in_place,
 };
+#[cfg(feature = "std")]
 use faer::{MatMut, MatRef, Par};
 use nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, OVector, allocator::Allocator};
 
@@ -61,6 +70,7 @@ pub const PARALLEL_THRESHOLD: usize = 256;
 /// Below this order a lower-triangle product ([`mul_lower`]) is faer's full product, faster
 /// there than its triangular-destination kernel (`a294f26`: KF step at n = 12 14 % faster, EKF
 /// 10 %, UKF 6 %).
+#[cfg(feature = "std")]
 const LOWER_TRIANGLE_MIN: usize = 32;
 
 /// `true` when `D` is a compile-time dimension.
@@ -70,6 +80,7 @@ pub fn is_static<D: Dim>() -> bool {
 }
 
 /// faer's parallelism for an operation whose smallest dimension is `size`.
+#[cfg(feature = "std")]
 #[inline(always)]
 fn par(size: usize) -> Par {
     #[cfg(feature = "parallel")]
@@ -81,6 +92,7 @@ fn par(size: usize) -> Par {
 }
 
 /// A faer view of the column-major storage of `m`.
+#[cfg(feature = "std")]
 #[inline(always)]
 fn view<T: Real, R: Dim, C: Dim>(m: &OMatrix<T, R, C>) -> MatRef<'_, T>
 where
@@ -90,6 +102,7 @@ where
 }
 
 /// A mutable faer view of the column-major storage of `m`.
+#[cfg(feature = "std")]
 #[inline(always)]
 fn view_mut<T: Real, R: Dim, C: Dim>(m: &mut OMatrix<T, R, C>) -> MatMut<'_, T>
 where
@@ -100,12 +113,22 @@ where
 }
 
 mod sealed {
+    #[cfg(feature = "std")]
     use super::*;
+
+    /// Without std (no faer): only the seal of [`Real`](crate::Real) to `f32` and `f64`.
+    #[cfg(not(feature = "std"))]
+    pub trait Dense: Sized {}
+    #[cfg(not(feature = "std"))]
+    impl Dense for f32 {}
+    #[cfg(not(feature = "std"))]
+    impl Dense for f64 {}
 
     /// faer's runtime-size operations for one scalar type: the supertrait that seals
     /// [`Real`] to `f32` and `f64`. Non-generic methods, so faer's generic code is compiled
     /// once, here (each integration test used to carry its own copy; `d3eba7e` halved the
     /// build of the two largest test binaries).
+    #[cfg(feature = "std")]
     pub trait Dense: Sized {
         /// dst (+)= α A B, only the lower triangle of the (square) dst if `lower`.
         fn matmul(
@@ -130,6 +153,7 @@ mod sealed {
         fn solve_lower(l: MatRef<'_, Self>, rhs: MatMut<'_, Self>, transpose: bool);
     }
 
+    #[cfg(feature = "std")]
     macro_rules! dense {
         ($($t:ty),*) => {$(
             impl Dense for $t {
@@ -189,6 +213,7 @@ mod sealed {
         )*};
     }
 
+    #[cfg(feature = "std")]
     dense!(f32, f64);
 }
 
@@ -200,6 +225,7 @@ mod sealed {
 /// pulp's `x86-v4` is off), so the last bits depend on the instruction set. Our own kernel
 /// because faer's product costs 2–3× for one column: the UKF step at n = 50 is 24 % faster
 /// with it (BENCHMARKS.md, "Runtime-size kernels of our own").
+#[cfg(feature = "std")]
 struct Matvec<'a, T> {
     y: &'a mut [T],
     accum: Accum,
@@ -208,6 +234,7 @@ struct Matvec<'a, T> {
     x: &'a [T],
 }
 
+#[cfg(feature = "std")]
 macro_rules! matvec {
     ($t:ty, $ts:ident, $splat:ident, $fma:ident, $add:ident, $as_simd:ident, $as_mut:ident) => {
         impl Matvec<'_, $t> {
@@ -301,6 +328,7 @@ macro_rules! matvec {
     };
 }
 
+#[cfg(feature = "std")]
 matvec!(
     f64,
     f64s,
@@ -310,6 +338,7 @@ matvec!(
     as_simd_f64s,
     as_mut_simd_f64s
 );
+#[cfg(feature = "std")]
 matvec!(
     f32,
     f32s,
@@ -323,6 +352,7 @@ matvec!(
 /// dst (+)= α op(a) op(b) on runtime sizes, op a transpose where asked; only the lower
 /// triangle of dst if `lower`. One-column products without transposes go to [`Matvec`], the
 /// rest to faer.
+#[cfg(feature = "std")]
 #[inline(always)]
 #[track_caller]
 #[allow(clippy::too_many_arguments)]
@@ -359,6 +389,54 @@ fn runtime_product<T, R, C, RA, CA, RB, CB>(
     let a = if transpose_a { a.transpose() } else { a };
     let b = if transpose_b { b.transpose() } else { b };
     T::matmul(view_mut(dst), accum, alpha, a, b, lower);
+}
+
+/// [`runtime_product`] without faer (no `std`): one dot product per entry, generic over the
+/// dimensions. Unreached by estim without std (its bounds admit static sizes only); there so
+/// that the kernels keep one body for both builds.
+#[cfg(not(feature = "std"))]
+#[track_caller]
+#[allow(clippy::too_many_arguments)]
+fn runtime_product<T, R, C, RA, CA, RB, CB>(
+    dst: &mut OMatrix<T, R, C>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, RA, CA>,
+    transpose_a: bool,
+    b: &OMatrix<T, RB, CB>,
+    transpose_b: bool,
+    lower: bool,
+) where
+    T: Real,
+    R: Dim,
+    C: Dim,
+    RA: Dim,
+    CA: Dim,
+    RB: Dim,
+    CB: Dim,
+    DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RB, CB>,
+{
+    let _ = lower;
+    let at = |i: usize, k: usize| if transpose_a { a[(k, i)] } else { a[(i, k)] };
+    let bt = |k: usize, j: usize| if transpose_b { b[(j, k)] } else { b[(k, j)] };
+    let inner = if transpose_a { a.nrows() } else { a.ncols() };
+    let (rows, cols) = dst.shape();
+    assert!(
+        (if transpose_a { a.ncols() } else { a.nrows() }) == rows
+            && (if transpose_b { b.nrows() } else { b.ncols() }) == cols
+            && (if transpose_b { b.ncols() } else { b.nrows() }) == inner,
+        "kernel product: shapes differ"
+    );
+    for j in 0..cols {
+        for i in 0..rows {
+            let sum = (0..inner).fold(T::zero(), |sum, k| sum + at(i, k) * bt(k, j));
+            let d = &mut dst[(i, j)];
+            *d = match accum {
+                Accum::Add => *d + alpha * sum,
+                Accum::Replace => alpha * sum,
+            };
+        }
+    }
 }
 
 /// Writes or adds α · `value` into `dst` (static sizes), skipping the scaling when α = 1.
@@ -502,6 +580,7 @@ pub(crate) fn mul_into_column<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim
         a.shape(),
         x.shape()
     );
+    #[cfg(feature = "std")]
     if !(is_static::<R>() && is_static::<RA>() && is_static::<CA>()) {
         let y = &mut dst.as_mut_slice()[column * rows..(column + 1) * rows];
         return T::matvec(y, accum, alpha, a.as_slice(), x.as_slice());
@@ -534,6 +613,7 @@ fn column_by_dot_products<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim>(
 /// dimension and reused after (static sizes never touch it).
 #[derive(Default)]
 pub struct CholeskyScratch {
+    #[cfg(feature = "std")]
     buffer: Option<MemBuffer>,
     capacity: usize,
 }
@@ -546,6 +626,7 @@ impl core::fmt::Debug for CholeskyScratch {
     }
 }
 
+#[cfg(feature = "std")]
 impl CholeskyScratch {
     /// Room for factorising `dim × dim` matrices of `T`.
     fn stack<T: Real>(&mut self, dim: usize) -> &mut MemStack {
@@ -572,6 +653,8 @@ pub fn cholesky_in_place<T: Real, D: Dim>(
 where
     DefaultAllocator: Allocator<D, D>,
 {
+    let _ = &scratch;
+    #[cfg(feature = "std")]
     if !is_static::<D>() {
         let n = a.nrows();
         let ok = T::cholesky(view_mut(a), scratch.stack::<T>(n));
@@ -594,11 +677,11 @@ pub fn solve_lower_in_place<T: Real, D: Dim, C: Dim>(l: &OMatrix<T, D, D>, b: &m
 where
     DefaultAllocator: Allocator<D, D> + Allocator<D, C>,
 {
-    if is_static::<D>() && is_static::<C>() {
-        l.solve_lower_triangular_unchecked_mut(b);
-    } else {
-        T::solve_lower(view(l), view_mut(b), false);
+    #[cfg(feature = "std")]
+    if !(is_static::<D>() && is_static::<C>()) {
+        return T::solve_lower(view(l), view_mut(b), false);
     }
+    l.solve_lower_triangular_unchecked_mut(b);
 }
 
 /// Solves X Lᵀ = B in place (`b` ← B L⁻ᵀ) with L the lower triangle of `l`: the first half of
@@ -611,6 +694,7 @@ pub fn solve_right_lower_transpose_in_place<T: Real, R: Dim, D: Dim>(
 ) where
     DefaultAllocator: Allocator<D, D> + Allocator<R, D>,
 {
+    #[cfg(feature = "std")]
     if !(is_static::<D>() && is_static::<R>()) {
         return T::solve_lower(view(l), view_mut(b).transpose_mut(), false);
     }
@@ -636,6 +720,7 @@ pub fn solve_right_lower_in_place<T: Real, R: Dim, D: Dim>(
 ) where
     DefaultAllocator: Allocator<D, D> + Allocator<R, D>,
 {
+    #[cfg(feature = "std")]
     if !(is_static::<D>() && is_static::<R>()) {
         return T::solve_lower(view(l), view_mut(b).transpose_mut(), true);
     }

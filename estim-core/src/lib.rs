@@ -71,6 +71,12 @@
 //! and `DVector<f64>` (heavy kernels on faer; allocation-free once a propagator's
 //! [workspace](PropagatorWorkspace) is sized, for models that implement the `_into` methods). The allocator bounds nalgebra needs are
 //! gathered in [`Alloc`].
+//!
+//! **Without std** (default feature `std` off) the crate is `#![no_std]` and allocates nothing:
+//! static sizes, `f32` and `f64`, every propagator but [`Sampled`], the angle and manifold
+//! helpers, and [`Error`] with its `Display`. Runtime sizes (faer), sampling (rand) and the
+//! derivative checks need `std`.
+#![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
@@ -79,6 +85,7 @@ pub mod alloc;
 pub mod angle;
 #[cfg(feature = "autodiff")]
 pub mod autodiff;
+#[cfg(feature = "std")]
 pub mod derivative;
 pub mod error;
 pub mod function;
@@ -102,7 +109,9 @@ pub use error::{Error, Parameter, Quantity, Stage};
 pub use function::{
     AffineFunction, Differentiable, SigmaScratch, TwiceDifferentiable, VectorFunction,
 };
-pub use gaussian::{Gaussian, GaussianSampler};
+pub use gaussian::Gaussian;
+#[cfg(feature = "std")]
+pub use gaussian::GaussianSampler;
 pub use linalg::psd_factor;
 pub use linear::{LinearMeasurement, LinearProcess};
 pub use manifold::{Euclidean, StateSpace, WrappedAngles};
@@ -110,9 +119,11 @@ pub use model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
     MeasurementModel, Observation, ProcessHessian, ProcessJacobian, ProcessModel, Transition,
 };
+#[cfg(feature = "std")]
+pub use propagate::Sampled;
 pub use propagate::{
-    Affine, Linearized, MomentPropagator, Moments, Outputs, PropagatorWorkspace, Sampled,
-    SecondOrder, SecondOrderGaussian, Unscented,
+    Affine, Linearized, MomentPropagator, Moments, Outputs, PropagatorWorkspace, SecondOrder,
+    SecondOrderGaussian, Unscented,
 };
 pub use scalar::Real;
 
@@ -121,5 +132,7 @@ pub use nalgebra;
 
 /// The rand and rand_distr that [`Gaussian::sampler`] and the sampled propagator use,
 /// re-exported so users seed and draw with the same versions.
+#[cfg(feature = "std")]
 pub use rand;
+#[cfg(feature = "std")]
 pub use rand_distr;

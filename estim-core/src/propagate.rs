@@ -32,6 +32,7 @@ use crate::scalar::Real;
 
 mod affine;
 mod linearized;
+#[cfg(feature = "std")]
 mod sampled;
 mod second_order;
 mod unscented;
@@ -39,6 +40,7 @@ mod workspace;
 
 pub use affine::Affine;
 pub use linearized::{Linearized, LinearizedWorkspace};
+#[cfg(feature = "std")]
 pub use sampled::Sampled;
 pub use second_order::{SecondOrder, SecondOrderGaussian, SecondOrderWorkspace};
 pub use unscented::{Unscented, UnscentedWorkspace};

@@ -53,41 +53,60 @@
 //!   with feature `parallel`, bit-identical to the sequential run.
 //! - `proptest_support` (feature `proptest-support`): strategies for SPD matrices, Gaussians
 //!   and stable linear systems, and derivative-check assertions for proptests.
+//!
+//! ## Without std
+//!
+//! With the default feature `std` off the crate is `#![no_std]` and allocates nothing: every
+//! Gaussian filter, [`FadingMemoryRls`], [`Decorrelated`] and the shared [`update`] on static
+//! sizes, in `f32` or `f64` (a microcontroller build: `docs/embedded.md`). The verification
+//! tooling, noise identification, smoothers and the fusion driver need `std`.
+#![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
 #[cfg(feature = "serde")]
 pub mod checkpoint;
+#[cfg(feature = "std")]
 pub mod consistency;
 mod correlated;
+#[cfg(feature = "std")]
 pub mod fusion;
 mod gaussian_filter;
+#[cfg(feature = "std")]
 pub mod monte_carlo;
+#[cfg(feature = "std")]
 pub mod noise_id;
 #[cfg(feature = "proptest-support")]
 pub mod proptest_support;
 mod report;
 mod rls;
 mod scratch;
+#[cfg(feature = "std")]
 pub mod smoother;
 pub mod square_root;
 mod traits;
 pub mod update;
+#[cfg(feature = "std")]
 pub mod validation;
 
+#[cfg(feature = "std")]
 pub use consistency::Verdict;
 pub use correlated::Decorrelated;
 pub use gaussian_filter::{
     Ekf, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, SecondOrderEkf, Ukf,
 };
+#[cfg(feature = "std")]
 pub use monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Progress, Recorder, Shard};
 pub use report::{UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
+#[cfg(feature = "std")]
 pub use smoother::{Rts, Sequence, SmootherError, filter_sequence, smooth_sequence};
+#[cfg(feature = "std")]
 pub use smoother::{Smoothed, smooth_sequence_with_cross_covariances};
 pub use square_root::{SquareRootFilter, SrEkf, SrKalmanFilter, SrUkf};
 pub use traits::{Estimator, Predict, PredictCorrelated, Update};
 pub use update::{CovarianceUpdate, Gate};
+#[cfg(feature = "std")]
 pub use validation::ValidationError;
 
 #[doc = include_str!("../README.md")]

@@ -7,9 +7,13 @@
 
 use core::marker::PhantomData;
 
+#[cfg(feature = "std")]
 use estim_core::alloc::{DimAlloc, SizeFamily};
+#[cfg(feature = "std")]
 use estim_core::kernel::is_static;
-use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
+#[cfg(feature = "std")]
+use estim_core::nalgebra::Dyn;
+use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::{Alloc, PropagatorWorkspace, Real};
 
 /// Buffers of one prediction over an `N`-dimensional state with propagator `Pr`.
@@ -93,14 +97,17 @@ where
         }
     }
 
+    #[cfg(feature = "std")]
     fn dimensions(&self) -> (usize, usize) {
         (self.state.nrows(), self.predicted.mean.nrows())
     }
 }
 
 /// [`PredictScratch`] as a function of the state dimension, for [`DimAlloc::runtime_sized`].
+#[cfg(feature = "std")]
 struct PredictFamily<T, Pr>(PhantomData<(T, Pr)>);
 
+#[cfg(feature = "std")]
 impl<T: Real, Pr: PropagatorWorkspace<T>> SizeFamily<Dyn> for PredictFamily<T, Pr> {
     type Of<Z: Dim>
         = PredictScratch<T, Z, Pr>
@@ -109,8 +116,10 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> SizeFamily<Dyn> for PredictFamily<T, P
 }
 
 /// [`UpdateScratch`] with a runtime-size measurement, as a function of the state dimension.
+#[cfg(feature = "std")]
 struct UpdateOfStates<T, Pr>(PhantomData<(T, Pr)>);
 
+#[cfg(feature = "std")]
 impl<T: Real, Pr: PropagatorWorkspace<T>> SizeFamily<Dyn> for UpdateOfStates<T, Pr> {
     type Of<Z: Dim>
         = UpdateScratch<T, Z, Dyn, Pr>
@@ -119,8 +128,10 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> SizeFamily<Dyn> for UpdateOfStates<T, 
 }
 
 /// [`UpdateScratch`] with N states, as a function of the measurement dimension.
+#[cfg(feature = "std")]
 struct UpdateOfMeasurements<T, N, Pr>(PhantomData<(T, N, Pr)>);
 
+#[cfg(feature = "std")]
 impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>> SizeFamily<N> for UpdateOfMeasurements<T, N, Pr> {
     type Of<Z: Dim>
         = UpdateScratch<T, N, Z, Pr>
@@ -136,11 +147,13 @@ pub(crate) type CachedUpdate<'a, T, N, M, Pr> = (&'a mut UpdateScratch<T, N, M, 
 /// `Dyn`) is kept; mixed static/dynamic shapes run the same code with a fresh scratch per step.
 /// It is scratch, not state: a cloned filter starts with an empty one, and it takes no part in
 /// equality.
+#[cfg(feature = "std")]
 pub(crate) struct ScratchCache<T: Real, Pr: PropagatorWorkspace<T>> {
     predict: Option<PredictScratch<T, Dyn, Pr>>,
     update: Vec<UpdateScratch<T, Dyn, Dyn, Pr>>,
 }
 
+#[cfg(feature = "std")]
 impl<T: Real, Pr: PropagatorWorkspace<T>> Default for ScratchCache<T, Pr> {
     fn default() -> Self {
         Self {
@@ -150,6 +163,7 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> Default for ScratchCache<T, Pr> {
     }
 }
 
+#[cfg(feature = "std")]
 impl<T: Real, Pr: PropagatorWorkspace<T>> core::fmt::Debug for ScratchCache<T, Pr> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("ScratchCache")
@@ -159,6 +173,7 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> core::fmt::Debug for ScratchCache<T, P
     }
 }
 
+#[cfg(feature = "std")]
 impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
     /// Drops every scratch (after the state dimension changed).
     pub(crate) fn clear(&mut self) {
@@ -236,4 +251,57 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
     pub(crate) fn discard_update(&mut self, slot: usize) {
         self.update.swap_remove(slot);
     }
+}
+
+/// Without std only static sizes exist, and their scratch is always a local: the cache holds
+/// nothing and hands out nothing.
+#[cfg(not(feature = "std"))]
+pub(crate) struct ScratchCache<T: Real, Pr: PropagatorWorkspace<T>>(PhantomData<(T, Pr)>);
+
+#[cfg(not(feature = "std"))]
+impl<T: Real, Pr: PropagatorWorkspace<T>> Default for ScratchCache<T, Pr> {
+    fn default() -> Self {
+        Self(PhantomData)
+    }
+}
+
+#[cfg(not(feature = "std"))]
+impl<T: Real, Pr: PropagatorWorkspace<T>> core::fmt::Debug for ScratchCache<T, Pr> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("ScratchCache")
+    }
+}
+
+#[cfg(not(feature = "std"))]
+impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
+    /// Nothing to drop.
+    pub(crate) fn clear(&mut self) {}
+
+    /// Always `None`: the caller uses a local.
+    #[inline(always)]
+    pub(crate) fn predict<N: Dim>(&mut self, _: N) -> Option<&mut PredictScratch<T, N, Pr>>
+    where
+        DefaultAllocator: Alloc<N>,
+    {
+        None
+    }
+
+    /// Nothing to drop.
+    pub(crate) fn discard_predict(&mut self) {}
+
+    /// Always `None`: the caller uses a local.
+    #[inline(always)]
+    pub(crate) fn update<N: Dim, M: Dim>(
+        &mut self,
+        _: N,
+        _: M,
+    ) -> Option<CachedUpdate<'_, T, N, M, Pr>>
+    where
+        DefaultAllocator: Alloc<N, M>,
+    {
+        None
+    }
+
+    /// Nothing to drop.
+    pub(crate) fn discard_update(&mut self, _slot: usize) {}
 }

@@ -76,7 +76,9 @@ pub enum Gate<T> {
     /// Rejects a measurement whose NIS exceeds the χ²ₘ quantile at this probability (in
     /// (0, 1)), m its dimension: a consistent filter then rejects the fraction 1 − p of correct
     /// measurements from every sensor. The quantiles for m ≤ 16 are computed once, when the
-    /// gate is set; larger m compute theirs at each update (a few microseconds).
+    /// gate is set; larger m compute theirs at each update (a few microseconds). The
+    /// quantiles come from statrs: without the `std` feature this gate is rejected as an
+    /// invalid [`GateProbability`](estim_core::Parameter::GateProbability); use [`Gate::Nis`].
     Probability(f64),
 }
 
@@ -156,11 +158,22 @@ impl<T: Real> UpdateSettings<T> {
     }
 }
 
+/// ln 2π, the f64 nearest (`(2π).ln()` needs std's or libm's logarithm; a test checks the
+/// two agree to the bit).
+const LN_TWO_PI: f64 = 1.837_877_066_409_345_3;
+
 /// χ²_dof's `p` quantile, if finite.
+#[cfg(feature = "std")]
 fn chi2_quantile(dof: usize, p: f64) -> Option<f64> {
     crate::consistency::dist::chi2_quantile(dof, p)
         .ok()
         .filter(|q| q.is_finite())
+}
+
+/// Without std (no statrs) there are no χ² quantiles: a probability gate is refused.
+#[cfg(not(feature = "std"))]
+fn chi2_quantile(_dof: usize, _p: f64) -> Option<f64> {
+    None
 }
 
 /// ln det S = 2 Σ ln Lᵢᵢ from the Cholesky factor: one logarithm of the product of the diagonal
@@ -268,8 +281,7 @@ where
     }
     let log_det = log_det_from_cholesky(factor);
     report.nis = nis;
-    report.log_likelihood = -real::<T>(0.5)
-        * (nis + log_det + real::<T>(m as f64 * (2.0 * core::f64::consts::PI).ln()));
+    report.log_likelihood = -real::<T>(0.5) * (nis + log_det + real::<T>(m as f64 * LN_TWO_PI));
     if settings.threshold(m).is_some_and(|g| !(nis <= g)) {
         report.outcome = UpdateOutcome::Gated;
         return Ok(false);
@@ -349,4 +361,17 @@ where
     // tests/it/fuzz.rs); only a square-root form avoids it. The diagonal costs O(n) to check.
     ensure_nonnegative_diagonal(new_covariance, stage, Quantity::Covariance)?;
     Ok(true)
+}
+
+#[cfg(test)]
+mod tests {
+    /// The constant is the logarithm std computes, bit for bit, so the log-likelihood of a std
+    /// build is what it was before the constant replaced the call.
+    #[test]
+    fn ln_two_pi_is_the_logarithm() {
+        assert_eq!(
+            super::LN_TWO_PI.to_bits(),
+            (2.0 * core::f64::consts::PI).ln().to_bits()
+        );
+    }
 }
