@@ -530,7 +530,7 @@ where
     report.log_likelihood = -real::<T>(0.5)
         * (nis
             + log_det_from_cholesky(l)
-            + real::<T>(m as f64 * (2.0 * core::f64::consts::PI).ln()));
+            + real::<T>(m as f64 * crate::update::LN_TWO_PI));
     if settings.threshold(m).is_some_and(|g| !(nis <= g)) {
         report.outcome = UpdateOutcome::Gated;
         return Ok(None);

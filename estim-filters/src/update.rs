@@ -160,7 +160,7 @@ impl<T: Real> UpdateSettings<T> {
 
 /// ln 2π, the f64 nearest (`(2π).ln()` needs std's or libm's logarithm; a test checks the
 /// two agree to the bit).
-const LN_TWO_PI: f64 = 1.837_877_066_409_345_3;
+pub(crate) const LN_TWO_PI: f64 = 1.837_877_066_409_345_3;
 
 /// χ²_dof's `p` quantile, if finite.
 #[cfg(feature = "std")]

@@ -89,6 +89,8 @@ fn report() -> Result<(), Error> {
     let mut ukf3 = shapes::ukf(shapes::prior3()?);
     let mut ekf6 = shapes::ekf(shapes::prior6()?);
     let mut ukf6 = shapes::ukf(shapes::prior6()?);
+    let mut srukf3 = shapes::srukf(shapes::prior3()?);
+    let mut srukf6 = shapes::srukf(shapes::prior6()?);
     let mut result = Ok(());
     let peaks = [
         (
@@ -106,6 +108,14 @@ fn report() -> Result<(), Error> {
         (
             "ukf6",
             peak_stack(|| result = result.and(shapes::step(&mut ukf6, &process6, &gps6, &z4))),
+        ),
+        (
+            "srukf3",
+            peak_stack(|| result = result.and(shapes::step(&mut srukf3, &process3, &gps3, &z2))),
+        ),
+        (
+            "srukf6",
+            peak_stack(|| result = result.and(shapes::step(&mut srukf6, &process6, &gps6, &z4))),
         ),
     ];
     result?;

@@ -1,4 +1,4 @@
-//! The filters whose footprint `docs/embedded.md` lists: EKF and UKF (cubature sigma points,
+//! The filters whose footprint `docs/embedded.md` lists: EKF, UKF and square-root UKF (cubature sigma points,
 //! whose weights are all positive, so f32 loses nothing to a large negative centre weight) on
 //!
 //! - 3 states, 2 measurements: Lu's error-state model of [`lu`](super::lu);
@@ -15,7 +15,7 @@ use estim_core::nalgebra::{
 use estim_core::{
     Alloc, Error, Gaussian, LinearMeasurement, LinearProcess, NoInput, ProcessModel, Unscented,
 };
-use estim_filters::{Ekf, GaussianFilter, Predict, Ukf, Update};
+use estim_filters::{Ekf, GaussianFilter, Predict, SrUkf, Ukf, Update};
 
 use super::table;
 
@@ -85,6 +85,15 @@ where
     DefaultAllocator: Alloc<N>,
 {
     GaussianFilter::with_propagator(prior, Unscented::cubature())
+}
+
+/// A square-root UKF (the covariance carried as its Cholesky factor) with cubature sigma
+/// points on `prior`.
+pub fn srukf<N: Dim>(prior: Gaussian<f32, N>) -> SrUkf<f32, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    SrUkf::with_propagator(prior, Unscented::cubature())
 }
 
 /// One predict (Δt of the record) and one update with `z`: the unit whose peak stack the
