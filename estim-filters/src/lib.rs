@@ -9,6 +9,7 @@
 //! | [`SecondOrderEkf`] | second order (Papoulis) | [`ProcessHessian`](estim_core::ProcessHessian) | [`MeasurementHessian`](estim_core::MeasurementHessian) |
 //! | [`GaussianSecondOrderEkf`] | second order + Gaussian 4th-moment terms | Hessians | Hessians |
 //! | [`Ukf`] | unscented | [`ProcessModel`](estim_core::ProcessModel) | [`MeasurementModel`](estim_core::MeasurementModel) |
+//! | [`Iekf`] | linearised, update iterated (Gauss–Newton) | [`ProcessJacobian`](estim_core::ProcessJacobian) | [`MeasurementJacobian`](estim_core::MeasurementJacobian) |
 //! | [`FadingMemoryRls`] | — (update only) | — | [`MeasurementJacobian`](estim_core::MeasurementJacobian) |
 //!
 //! The Kalman-family filters are one type, [`GaussianFilter`], parameterised by the
@@ -61,6 +62,7 @@ pub mod consistency;
 mod correlated;
 pub mod fusion;
 mod gaussian_filter;
+mod iterated;
 pub mod monte_carlo;
 pub mod noise_id;
 #[cfg(feature = "proptest-support")]
@@ -78,8 +80,9 @@ pub use correlated::Decorrelated;
 pub use gaussian_filter::{
     Ekf, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, SecondOrderEkf, Ukf,
 };
+pub use iterated::Iekf;
 pub use monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Progress, Recorder, Shard};
-pub use report::{UpdateOutcome, UpdateReport};
+pub use report::{Iterations, UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
 pub use smoother::{Rts, Sequence, SmootherError, filter_sequence, smooth_sequence};
 pub use smoother::{Smoothed, smooth_sequence_with_cross_covariances};

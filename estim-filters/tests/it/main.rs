@@ -30,6 +30,7 @@ mod fusion_sizes;
 mod fusion_support;
 mod fuzz;
 mod gating;
+mod iekf;
 mod multirate;
 mod nees;
 mod no_alloc;
