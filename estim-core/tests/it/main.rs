@@ -24,3 +24,4 @@ mod nonlinear;
 mod papoulis;
 mod quadratic;
 mod sigma_points;
+mod ukf_region;

@@ -48,3 +48,4 @@ mod smoother_bad_input;
 mod smoother_nonlinear;
 mod smoother_proptest;
 mod state_space;
+mod ukf_extreme;
