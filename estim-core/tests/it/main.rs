@@ -14,6 +14,7 @@ mod counting;
 mod angles;
 #[cfg(feature = "autodiff")]
 mod autodiff;
+mod checked;
 mod derivative;
 mod errors;
 mod gaussian;

@@ -39,6 +39,7 @@ mod noise_id_adaptive;
 mod noise_id_em;
 #[cfg(feature = "likelihood")]
 mod noise_id_likelihood;
+mod noise_policy;
 mod rls;
 mod second_order;
 #[cfg(feature = "serde")]
