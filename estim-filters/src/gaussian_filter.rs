@@ -240,6 +240,7 @@ where
     }
     /// The estimate (to update in place) and the update settings, for filters built on this
     /// one (the iterated EKF).
+    #[allow(clippy::type_complexity)]
     pub(crate) fn estimate_mut(
         &mut self,
     ) -> (&mut OVector<T, N>, &mut OMatrix<T, N, N>, UpdateSettings<T>) {

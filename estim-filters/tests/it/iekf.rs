@@ -347,6 +347,9 @@ fn step_halving_keeps_the_iterate_where_the_cost_decreases() {
     assert!(ekf.state()[0] < 0.0);
 }
 
+/// One failing update of the bad-input test.
+type Case = Box<dyn Fn(&mut Iekf<f64, U2>) -> Result<UpdateReport<f64, U1>, Error>>;
+
 /// Bad settings and bad input are typed errors; a failed update leaves the filter bit for bit
 /// as it was; a gated update does not iterate and changes nothing; a report reused by a
 /// one-step filter says `None`.
@@ -369,10 +372,7 @@ fn bad_input_is_a_typed_error_and_leaves_the_filter_unchanged() {
         );
     }
     let mut iekf = Iekf::new(prior.clone()).with_iterations(20, 1e-10).unwrap();
-    let cases: [(
-        Box<dyn Fn(&mut Iekf<f64, U2>) -> Result<UpdateReport<f64, U1>, Error>>,
-        Error,
-    ); 3] = [
+    let cases: [(Case, Error); 3] = [
         (
             Box::new(|f| f.update(&Range { r: 0.01 }, &Vector1::new(f64::NAN))),
             Error::NonFinite {
