@@ -10,7 +10,7 @@
 //! it apart with [`Checked::into_inner`] and check again. The public-field structs keep
 //! working as before for existing code (unchecked beyond the per-step O(n) checks).
 //!
-//! **Why semi-definite.** The factorisation is [`psd_factor`](crate::psd_factor) (a Cholesky
+//! **Why semi-definite.** The factorisation is [`psd_factor`] (a Cholesky
 //! factorisation that accepts zero pivots within 16 n ε max Qᵢᵢ, with diagonal pivoting as a
 //! fallback), not a plain Cholesky: a singular Q is common and legitimate (a constant bias
 //! with no process noise, a position driven only through its velocity), and so is a zero
