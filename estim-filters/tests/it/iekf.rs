@@ -5,6 +5,7 @@
 //! small Monte Carlo; bad input is a typed error that leaves the filter bit for bit unchanged.
 
 use crate::common::{assert_bitwise_eq, normal, random_spd, rng};
+use crate::counting::allocations_during;
 
 use estim_core::nalgebra::{
     DMatrix, DVector, Dyn, Matrix1, Matrix2, RowVector2, U1, U2, Vector1, Vector2,
@@ -439,4 +440,21 @@ fn bad_input_is_a_typed_error_and_leaves_the_filter_unchanged() {
     ekf.update_into(&Range { r: 0.01 }, &Vector1::new(12.0), &mut report)
         .unwrap();
     assert!(report.iterations.is_none());
+}
+
+/// Static sizes: an iterated update (several steps, with the safeguard's factorisations and
+/// cost evaluations) allocates nothing on the heap.
+#[test]
+fn static_size_updates_do_not_allocate() {
+    let mut iekf = Iekf::new(oblique_prior())
+        .with_iterations(20, 1e-10)
+        .unwrap();
+    let range = Range { r: 0.01 };
+    let mut report = UpdateReport::zeros(U1);
+    let n = allocations_during(|| {
+        iekf.update_into(&range, &Vector1::new(13.0), &mut report)
+            .unwrap();
+    });
+    assert!(report.iterations.unwrap().count > 1);
+    assert_eq!(n, 0, "{n} heap allocations");
 }
