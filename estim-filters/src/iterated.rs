@@ -55,10 +55,11 @@ const MAX_HALVINGS: usize = 30;
 /// also uses (a gated update does not iterate). [`UpdateReport::iterations`] says how the
 /// iterations went ([`Iterations`]).
 ///
-/// **One iteration is the EKF, bit for bit** when its full step lowers J (always for a linear
-/// model, where it is the exact minimiser): the first step is the EKF's update itself, run
-/// through the same code on the same values (at its linearisation point the affine model
-/// returns h(x⁻) itself, not h(x⁻) + H · 0).
+/// **One iteration is the EKF, bit for bit** (`with_iterations(1, _)`): the first step is the
+/// EKF's update itself, run through the same code on the same values (at its linearisation
+/// point the affine model returns h(x⁻) itself, not h(x⁻) + H · 0), and with one iteration
+/// the safeguard is off (J is not even formed). With more iterations the first step, too, is
+/// halved if it raises J.
 ///
 /// Requirements on the model: Jacobians ([`ProcessJacobian`](estim_core::ProcessJacobian),
 /// [`MeasurementJacobian`]). The state is a vector (the EKF's [`Euclidean`] state space) and R is

@@ -88,7 +88,8 @@ fn map_gradient(prior: &Gaussian<f64, U2>, r: f64, z: f64, x: &Vector2<f64>) -> 
 
 /// With one iteration the update is the EKF's, bit for bit, state, covariance and report
 /// (static and runtime sizes): the first Gauss–Newton step runs the EKF's own update code on
-/// the same values, and at its linearisation point the affine model returns h(x⁻) itself.
+/// the same values, at its linearisation point the affine model returns h(x⁻) itself, and
+/// with one iteration the step is never shortened.
 /// Prediction is the EKF's too.
 #[test]
 fn one_iteration_is_the_ekf_bit_for_bit() {
