@@ -70,9 +70,11 @@ pub enum Quantity {
 pub enum Parameter {
     /// Unscented spread α (must be finite and > 0).
     UnscentedAlpha,
-    /// Unscented β (must be finite).
+    /// Unscented β (must be finite, with α²κ + nβ ≥ 0 for the state dimension n; see
+    /// [`Unscented`](crate::Unscented#accepted-parameters)).
     UnscentedBeta,
-    /// Unscented κ (must be finite, and n + κ > 0 for the state dimension n).
+    /// Unscented κ (must be finite, with n + κ > 0 and α²κ + nβ ≥ 0 for the state
+    /// dimension n).
     UnscentedKappa,
     /// Number of Monte Carlo samples (at least 2).
     SampleCount,
@@ -97,6 +99,8 @@ pub enum Parameter {
     Period,
     /// A number of Monte Carlo runs (at least 1, at most a documented maximum).
     RunCount,
+    /// A convergence tolerance (must be finite and ≥ 0).
+    Tolerance,
 }
 
 /// Every error an estim algorithm returns.
@@ -221,6 +225,7 @@ impl fmt::Display for Parameter {
             Parameter::StepCount => "step count",
             Parameter::Period => "period",
             Parameter::RunCount => "run count",
+            Parameter::Tolerance => "tolerance",
         })
     }
 }

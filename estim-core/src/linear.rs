@@ -7,6 +7,9 @@
 //! traits on your own type. A process without input: [`LinearProcess::without_input`] (called
 //! with `&()`); a measurement with a constant offset: [`LinearMeasurement::with_offset`].
 //!
+//! To check Q and R once, when the model is built (symmetric, positive semi-definite), build
+//! it with [`LinearProcess::try_new`] / [`LinearMeasurement::try_new`] ([`crate::checked`]).
+//!
 //! Both implement the `_into` forms, so with `Dyn` sizes a filter step over them allocates
 //! nothing. Matrices whose shapes disagree with the state are reported by the filter as a
 //! [`DimensionMismatch`](crate::Error::DimensionMismatch) (or, for an inner dimension nalgebra

@@ -238,6 +238,14 @@ where
     pub fn gate(&self) -> Option<Gate<T>> {
         self.settings.gate
     }
+    /// The estimate (to update in place) and the update settings, for filters built on this
+    /// one (the iterated EKF).
+    #[allow(clippy::type_complexity)]
+    pub(crate) fn estimate_mut(
+        &mut self,
+    ) -> (&mut OVector<T, N>, &mut OMatrix<T, N, N>, UpdateSettings<T>) {
+        (&mut self.state, &mut self.covariance, self.settings)
+    }
 }
 
 impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>, S> Estimator<T, N> for GaussianFilter<T, N, Pr, S>

@@ -9,6 +9,7 @@
 //! | [`SecondOrderEkf`] | second order (Papoulis) | [`ProcessHessian`](estim_core::ProcessHessian) | [`MeasurementHessian`](estim_core::MeasurementHessian) |
 //! | [`GaussianSecondOrderEkf`] | second order + Gaussian 4th-moment terms | Hessians | Hessians |
 //! | [`Ukf`] | unscented | [`ProcessModel`](estim_core::ProcessModel) | [`MeasurementModel`](estim_core::MeasurementModel) |
+//! | [`Iekf`] | linearised, update iterated (Gauss–Newton) | [`ProcessJacobian`](estim_core::ProcessJacobian) | [`MeasurementJacobian`](estim_core::MeasurementJacobian) |
 //! | [`FadingMemoryRls`] | — (update only) | — | [`MeasurementJacobian`](estim_core::MeasurementJacobian) |
 //! | [`SrKalmanFilter`], [`SrEkf`], [`SrUkf`] | as KF, EKF, UKF, on the Cholesky factor ([`square_root`]) | as KF, EKF, UKF | as KF, EKF, UKF |
 //!
@@ -72,6 +73,7 @@ mod correlated;
 #[cfg(feature = "std")]
 pub mod fusion;
 mod gaussian_filter;
+mod iterated;
 #[cfg(feature = "std")]
 pub mod monte_carlo;
 #[cfg(feature = "std")]
@@ -95,9 +97,10 @@ pub use correlated::Decorrelated;
 pub use gaussian_filter::{
     Ekf, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, SecondOrderEkf, Ukf,
 };
+pub use iterated::Iekf;
 #[cfg(feature = "std")]
 pub use monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Progress, Recorder, Shard};
-pub use report::{UpdateOutcome, UpdateReport};
+pub use report::{Iterations, UpdateOutcome, UpdateReport};
 pub use rls::FadingMemoryRls;
 #[cfg(feature = "std")]
 pub use smoother::{Rts, Sequence, SmootherError, filter_sequence, smooth_sequence};

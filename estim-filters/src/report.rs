@@ -39,6 +39,23 @@ where
     pub log_likelihood: T,
     /// Whether the measurement was used.
     pub outcome: UpdateOutcome,
+    /// How the iterations of an iterated update went ([`Iekf`](crate::Iekf)); `None` for the
+    /// filters that update in one step.
+    pub iterations: Option<Iterations<T>>,
+}
+
+/// The convergence report of an iterated measurement update ([`Iekf`](crate::Iekf)).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct Iterations<T> {
+    /// Gauss–Newton steps computed (linearisations of h); 0 when the update was gated.
+    pub count: usize,
+    /// Whether the last step met the step tolerance (`false` when the iteration cap was
+    /// reached, the step-size safeguard found no decrease of the cost, or the update was
+    /// gated).
+    pub converged: bool,
+    /// ‖xᵢ₊₁ − xᵢ‖ of the last step taken (0 when gated).
+    pub step_norm: T,
 }
 
 impl<T: Real, M: Dim> UpdateReport<T, M>
@@ -54,6 +71,7 @@ where
             nis: T::zero(),
             log_likelihood: T::zero(),
             outcome: UpdateOutcome::Applied,
+            iterations: None,
         }
     }
 

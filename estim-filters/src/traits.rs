@@ -71,7 +71,8 @@ where
     /// ([`Parameter::TimeStep`](estim_core::Parameter::TimeStep): a negative step is refused
     /// even when Q ignores Δt). Q must be finite and have no negative variance on its diagonal
     /// (checked each step, O(n); its full positive semi-definiteness is not, which would cost
-    /// a factorisation per step).
+    /// a factorisation per step: check constant noise once instead, with
+    /// [`estim_core::checked`], which also lists what is and is not caught per step).
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()>;
 
     /// Sizes ahead of time every buffer that [`predict`](Self::predict) with this model needs,
@@ -101,7 +102,7 @@ where
     /// and the estimate is unchanged. On error the filter is left exactly as it was. R must
     /// be finite with no negative variance on its diagonal and S = cov ẑ + R positive
     /// definite (checked each step; R's full positive semi-definiteness is not, which would
-    /// cost a factorisation per step).
+    /// cost a factorisation per step: see [`estim_core::checked`]).
     ///
     /// The report is a new value each call; with runtime sizes that is the one allocation of
     /// the step, which [`update_into`](Self::update_into) avoids.

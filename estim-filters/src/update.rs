@@ -230,6 +230,8 @@ where
         cholesky,
         ..
     } = scratch;
+    // One-step filters report no iterations (the iterated EKF sets its own after this).
+    report.iterations = None;
     let m = predicted.mean.nrows();
     ensure_shape(noise, m, m, stage, Quantity::MeasurementNoise)?;
     ensure_shape(&report.innovation, m, 1, stage, Quantity::Measurement)?;

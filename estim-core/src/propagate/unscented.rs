@@ -44,6 +44,39 @@ use crate::scalar::{Real, real};
 /// first call.
 ///
 /// Requirements on g: [`VectorFunction`] only.
+///
+/// # Accepted parameters
+///
+/// Exactly those for which cov(y) as computed above is positive semi-definite for *every*
+/// function g (so a prediction never makes P⁻ indefinite, whatever the model): with the
+/// deviations as the columns of D (m × 2n) and 𝟙 the vector of 2n ones, d̄ = w D 𝟙 and
+///
+/// ```text
+/// cov(y) = D A Dᵀ,   A = w I + (β − α²) w² 𝟙 𝟙ᵀ,
+/// ```
+///
+/// whose eigenvalues are w (2n − 1 times, > 0) and w (1 + 2n (β − α²) w) along 𝟙. A
+/// function can make D any matrix (g is evaluated at 2n distinct points), e.g. D = d 𝟙ᵀ for
+/// a g that is even about μ, so cov(y) is PSD for every g if and only if
+/// 1 + 2n (β − α²) w ≥ 0, i.e. (with w = 1/(2c), c = α²(n + κ) > 0)
+///
+/// ```text
+/// c + n (β − α²) ≥ 0   ⟺   α² κ + n β ≥ 0     (and n + κ > 0).
+/// ```
+///
+/// The textbook condition, a non-negative centre weight W₀ᶜ = 1 − n/c + 1 − α² + β, is
+/// stricter: this form never multiplies by W₀ᶜ and is PSD whenever the centre-and-mean
+/// combination along 𝟙 is, so the Wan–van der Merwe default (α = 10⁻³, β = 2, κ = 0:
+/// W₀ᶜ ≈ −10⁶, α²κ + nβ = 2n) is accepted, and so are α up to 10³ with κ = 10⁶. Refused:
+/// β = 0 with κ < 0 (the classic Julier κ = 3 − n for n > 3), and a negative β unless
+/// α²κ ≥ n|β|. The cross-covariance adds nothing: the joint deviations (χᵢ ⊟ μ, dᵢ) have the
+/// same A and the χ deviations sum to zero, so the joint covariance of (x, y) is PSD too, and
+/// so is the Kalman posterior built from it. Round-off can still leave eigenvalues of order
+/// ε‖cov(y)‖ below zero at the boundary itself (A singular), as for any computed covariance.
+///
+/// [`Unscented::new`] refuses sets outside the region for every n; the rest is checked in
+/// O(1) when n is known ([`check_dimension`](Self::check_dimension), run first by every
+/// propagation).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Unscented<T> {
     alpha: T,
@@ -53,7 +86,22 @@ pub struct Unscented<T> {
 
 impl<T: Real> Unscented<T> {
     /// The scaled transform with spread α > 0, prior-knowledge weight β and secondary scaling
-    /// κ, all finite. (n + κ > 0 is checked when the dimension n is known, at propagation.)
+    /// κ, all finite, refused if no state dimension n ≥ 1 is in the [accepted
+    /// region](Self#accepted-parameters): β = 0 with κ < 0 ([`Parameter::UnscentedKappa`]), or
+    /// β < 0 with α²κ < −β ([`Parameter::UnscentedBeta`]). The conditions that depend on n
+    /// are checked at propagation, when n is known, or ahead of time with
+    /// [`check_dimension`](Self::check_dimension).
+    ///
+    /// ```
+    /// use estim_core::{Error, Parameter, propagate::Unscented};
+    /// assert!(Unscented::new(1e-3, 2.0, 0.0).is_ok());
+    /// // A negative β with α²κ + nβ < 0 for every n ≥ 1: refused.
+    /// assert!(matches!(
+    ///     Unscented::new(1e-3, -1.0, 0.0),
+    ///     Err(Error::InvalidParameter { parameter: Parameter::UnscentedBeta, .. })
+    /// ));
+    /// # Ok::<(), Error>(())
+    /// ```
     pub fn new(alpha: T, beta: T, kappa: T) -> Result<Self> {
         let invalid = |parameter, value: T| Error::InvalidParameter {
             parameter,
@@ -68,11 +116,62 @@ impl<T: Real> Unscented<T> {
         if !kappa.is_finite() {
             return Err(invalid(Parameter::UnscentedKappa, kappa));
         }
+        // Some n ≥ 1 must have α²κ + nβ ≥ 0: any n for β > 0 (take n large), κ ≥ 0 for β = 0,
+        // and α²κ + β ≥ 0 (n = 1 is the best) for β < 0.
+        let a2k = alpha * alpha * kappa;
+        if beta == T::zero() && kappa < T::zero() {
+            return Err(invalid(Parameter::UnscentedKappa, kappa));
+        }
+        if beta < T::zero() && a2k + beta < T::zero() {
+            return Err(invalid(Parameter::UnscentedBeta, beta));
+        }
         Ok(Self { alpha, beta, kappa })
     }
 
-    /// The classic Julier–Uhlmann (1997) set: α = 1, β = 0, centre weight κ/(n + κ).
-    /// κ = 3 − n matches the fourth moment of a Gaussian in each direction.
+    /// `Ok(())` if the parameters are in the [accepted region](Self#accepted-parameters) for
+    /// an `n`-dimensional input, O(1): c = α²(n + κ) > 0 ([`Parameter::UnscentedKappa`]
+    /// otherwise) and α²κ + nβ ≥ 0 (otherwise [`Parameter::UnscentedBeta`] if β < 0, else
+    /// [`Parameter::UnscentedKappa`]). Every propagation runs it first, so a failing step
+    /// changes nothing.
+    ///
+    /// ```
+    /// use estim_core::{Error, Parameter, propagate::Unscented};
+    /// // α = 1, β = 1, κ = −3: fine for n ≥ 3 (α²κ + nβ = n − 3 ≥ 0 and n + κ > 0 for n > 3).
+    /// let ut = Unscented::new(1.0, 1.0, -3.0)?;
+    /// assert!(ut.check_dimension(4).is_ok() && ut.check_dimension(30).is_ok());
+    /// assert!(matches!(
+    ///     ut.check_dimension(3),
+    ///     Err(Error::InvalidParameter { parameter: Parameter::UnscentedKappa, .. })
+    /// ));
+    /// # Ok::<(), Error>(())
+    /// ```
+    pub fn check_dimension(&self, n: usize) -> Result<()> {
+        let (alpha, beta, kappa) = (self.alpha, self.beta, self.kappa);
+        let n = real::<T>(n as f64);
+        let invalid = |parameter, value: T| Error::InvalidParameter {
+            parameter,
+            value: nalgebra::try_convert::<T, f64>(value).unwrap_or(f64::NAN),
+        };
+        let a2 = alpha * alpha;
+        if !(a2 * (n + kappa) > T::zero()) {
+            return Err(invalid(Parameter::UnscentedKappa, kappa));
+        }
+        if !(a2 * kappa + n * beta >= T::zero()) {
+            return Err(if beta < T::zero() {
+                invalid(Parameter::UnscentedBeta, beta)
+            } else {
+                invalid(Parameter::UnscentedKappa, kappa)
+            });
+        }
+        Ok(())
+    }
+
+    /// The classic Julier–Uhlmann (1997) set: α = 1, β = 0, centre weight κ/(n + κ), for
+    /// κ ≥ 0 ([`Parameter::UnscentedKappa`] otherwise). κ = 3 − n matches the fourth moment of
+    /// a Gaussian in each direction, but for n > 3 that κ is negative, and with β = 0 a
+    /// negative κ makes the covariance indefinite for some functions (see the [accepted
+    /// region](Self#accepted-parameters)); `Unscented::new(1.0, β, 3 − n)` with
+    /// β ≥ (n − 3)/n is the nearest accepted set.
     pub fn julier(kappa: T) -> Result<Self> {
         Self::new(T::one(), T::zero(), kappa)
     }
@@ -195,13 +294,8 @@ where
         let (n_dim, m_dim) = check_inputs(mean, covariance, &mut out)?;
         let (n, m) = (n_dim.value(), m_dim.value());
         let stage = Stage::Propagation;
+        self.check_dimension(n)?;
         let c = self.alpha * self.alpha * (real::<T>(n as f64) + self.kappa);
-        if !(c > T::zero()) {
-            return Err(Error::InvalidParameter {
-                parameter: Parameter::UnscentedKappa,
-                value: nalgebra::try_convert::<T, f64>(self.kappa).unwrap_or(f64::NAN),
-            });
-        }
         let l = buffer(&mut workspace.factor, n_dim, n_dim);
         psd_factor_into(covariance, l, &mut workspace.cholesky, stage)?;
         *l *= c.sqrt();

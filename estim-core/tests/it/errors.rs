@@ -42,9 +42,12 @@ fn unscented_parameters_are_validated() {
         invalid(Parameter::UnscentedKappa, kappa)(Unscented::new(1e-3, 2.0, kappa));
         invalid(Parameter::UnscentedKappa, kappa)(Unscented::julier(kappa));
     }
-    // Valid corner values: tiny α, negative β, negative κ (n + κ is checked later).
-    let ut = Unscented::new(1e-8, -1.0, -2.0).unwrap();
-    assert_eq!((ut.alpha(), ut.beta(), ut.kappa()), (1e-8, -1.0, -2.0));
+    // Valid corner values: tiny α with a negative κ, a negative β with α²κ ≥ |β| (the
+    // conditions on n are checked later; see ukf_region.rs).
+    let ut = Unscented::new(1e-8, 1.0, -2.0).unwrap();
+    assert_eq!((ut.alpha(), ut.beta(), ut.kappa()), (1e-8, 1.0, -2.0));
+    let ut = Unscented::new(1.0, -1.0, 4.0).unwrap();
+    assert_eq!((ut.alpha(), ut.beta(), ut.kappa()), (1.0, -1.0, 4.0));
     let d = Unscented::<f64>::default();
     assert_eq!((d.alpha(), d.beta(), d.kappa()), (1e-3, 2.0, 0.0));
     let c = Unscented::<f64>::cubature();
@@ -67,14 +70,8 @@ fn unscented_needs_n_plus_kappa_positive_at_propagation() {
     let (mu, c) = (Vector3::new(0.1, 0.2, 0.3), Matrix3::identity() * 0.01);
     // n = 3: κ = −3 gives n + κ = 0, κ = −5 gives −2.
     for kappa in [-3.0, -5.0, -100.0] {
-        let ut = Unscented::julier(kappa).unwrap();
-        assert_eq!(
-            ut.propagate(&mu, &c, &g),
-            Err(Error::InvalidParameter {
-                parameter: Parameter::UnscentedKappa,
-                value: kappa
-            })
-        );
+        // Julier's set (β = 0) with κ < 0 is refused for every n (ukf_region.rs).
+        invalid(Parameter::UnscentedKappa, kappa)(Unscented::julier(kappa));
         let ut = Unscented::new(0.5, 2.0, kappa).unwrap();
         assert!(matches!(
             ut.propagate(&mu, &c, &g),
@@ -84,9 +81,9 @@ fn unscented_needs_n_plus_kappa_positive_at_propagation() {
             })
         ));
     }
-    // κ = −2.5 (n + κ = 0.5 > 0) is valid.
+    // κ = −2.5 (n + κ = 0.5 > 0, and α²κ + nβ = 0.5 ≥ 0 with β = 1) is valid.
     assert!(
-        Unscented::julier(-2.5)
+        Unscented::new(1.0, 1.0, -2.5)
             .unwrap()
             .propagate(&mu, &c, &g)
             .is_ok()
@@ -101,7 +98,7 @@ fn unscented_needs_n_plus_kappa_positive_at_propagation() {
         OMatrix::<f64, U6, U6>::identity(),
     );
     assert!(
-        Unscented::julier(-5.0)
+        Unscented::new(1.0, 1.0, -5.0)
             .unwrap()
             .propagate(&mu6, &c6, &g6)
             .is_ok()

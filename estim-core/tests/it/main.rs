@@ -14,6 +14,7 @@ mod counting;
 mod angles;
 #[cfg(feature = "autodiff")]
 mod autodiff;
+mod checked;
 mod derivative;
 mod errors;
 mod gaussian;
@@ -24,3 +25,4 @@ mod nonlinear;
 mod papoulis;
 mod quadratic;
 mod sigma_points;
+mod ukf_region;

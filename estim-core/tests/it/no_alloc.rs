@@ -66,7 +66,8 @@ where
     check!("SecondOrderGaussian", SecondOrderGaussian);
     check!("Unscented::default", Unscented::<f64>::default());
     check!("Unscented::cubature", Unscented::<f64>::cubature());
-    check!("Unscented::julier", Unscented::julier(-3.0).unwrap());
+    // A negative κ (accepted with β = 1: α²κ + nβ = 3 ≥ 0 for n = 6).
+    check!("Unscented κ = −3", Unscented::new(1.0, 1.0, -3.0).unwrap());
     // Sampled seeds a StdRng (ChaCha12, state inline) and draws with the ziggurat tables
     // (statics): it does not allocate either.
     check!("Sampled", Sampled::new(1000, 7).unwrap());
@@ -158,7 +159,9 @@ fn checks_and_errors_do_not_allocate() {
     let (r, n) = allocations(|| Unscented::<f64>::default().propagate(&mu, &(-c), &trig));
     assert!(matches!(r, Err(Error::NotPositiveSemiDefinite { .. })));
     assert_eq!(n, 0, "unscented error path");
-    let (r, n) = allocations(|| Unscented::julier(-6.0).unwrap().propagate(&mu, &c, &trig));
+    // n + κ = 0 for n = 6, refused at propagation.
+    let ut = Unscented::new(1.0, 2.0, -6.0).unwrap();
+    let (r, n) = allocations(|| ut.propagate(&mu, &c, &trig));
     assert!(matches!(r, Err(Error::InvalidParameter { .. })));
     assert_eq!(n, 0, "unscented parameter error path");
 }

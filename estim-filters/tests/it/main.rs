@@ -30,6 +30,7 @@ mod fusion_sizes;
 mod fusion_support;
 mod fuzz;
 mod gating;
+mod iekf;
 mod multirate;
 mod nees;
 mod no_alloc;
@@ -38,6 +39,7 @@ mod noise_id_adaptive;
 mod noise_id_em;
 #[cfg(feature = "likelihood")]
 mod noise_id_likelihood;
+mod noise_policy;
 mod rls;
 mod second_order;
 #[cfg(feature = "serde")]
@@ -48,3 +50,4 @@ mod smoother_nonlinear;
 mod smoother_proptest;
 mod square_root;
 mod state_space;
+mod ukf_extreme;

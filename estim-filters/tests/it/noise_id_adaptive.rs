@@ -185,6 +185,7 @@ fn bad_settings_and_reports_are_typed_errors_that_change_nothing() {
         nis: f64::NAN,
         log_likelihood: f64::NAN,
         outcome: UpdateOutcome::Applied,
+        iterations: None,
     };
     assert!(matches!(
         adaptive.observe(&bad),

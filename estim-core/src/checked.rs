@@ -1,0 +1,385 @@
+//! Validate once: linear models whose noise covariances are checked when the model is built.
+//!
+//! A filter step checks its noise only in O(n): shape, finiteness, and no negative variance on
+//! the diagonal (a full check would cost a factorisation per step). For constant matrices that
+//! check can be done once instead: [`LinearProcess::try_new`] and [`LinearMeasurement::try_new`]
+//! verify that Q (resp. R) is finite, symmetric (within √ε of its largest entry) and positive
+//! **semi**-definite, by one factorisation, and return the model wrapped in [`Checked`], which
+//! implements every model trait of the inner model and gives read-only access to it (`Deref`,
+//! no `DerefMut`): a checked model cannot be mutated into an unchecked one; to change it, take
+//! it apart with [`Checked::into_inner`] and check again. The public-field structs keep
+//! working as before for existing code (unchecked beyond the per-step O(n) checks).
+//!
+//! **Why semi-definite.** The factorisation is [`psd_factor`] (a Cholesky
+//! factorisation that accepts zero pivots within 16 n ε max Qᵢᵢ, with diagonal pivoting as a
+//! fallback), not a plain Cholesky: a singular Q is common and legitimate (a constant bias
+//! with no process noise, a position driven only through its velocity), and so is a zero
+//! variance in R for a component that is measured exactly, as long as S = H P Hᵀ + R stays
+//! positive definite (checked at every update). An eigenvalue below −16 n ε max Qᵢᵢ is refused.
+//!
+//! # What is caught, and when
+//!
+//! | noise | at construction | at every step |
+//! |---|---|---|
+//! | [`Checked`] linear models | shape, NaN/∞, asymmetry, any negative eigenvalue (one factorisation) | the O(n) checks below, which cannot fail |
+//! | any other model (Q(x, u, Δt), R(x) evaluated per step) | — | shape; NaN/∞; a negative diagonal entry ([`NotPositiveSemiDefinite`](crate::Error::NotPositiveSemiDefinite)), O(n); for R, also S = cov(ẑ) + R not positive definite ([`NotPositiveDefinite`](crate::Error::NotPositiveDefinite), from the Cholesky factorisation the update does anyway) |
+//!
+//! Not caught per step, by design (each would cost a factorisation per step): a Q(x) or R(x)
+//! that is indefinite with a non-negative diagonal (e.g. [[1, 2], [2, 1]]) while P⁻ (resp. S)
+//! keeps a non-negative diagonal (resp. stays positive definite) — then the step returns `Ok`
+//! and P may be indefinite; and an asymmetric Q or R, of which the filters use the symmetric
+//! part (Q + Qᵀ)/2. Every error leaves the filter unchanged. A model with state-dependent noise
+//! that may be badly conditioned can check it itself with [`check_noise`] (one factorisation).
+//!
+//! ```
+//! use estim_core::nalgebra::{Matrix2, Matrix2x1};
+//! use estim_core::{Error, LinearMeasurement, LinearProcess, Quantity, Stage};
+//!
+//! // A bias with no process noise: Q singular, accepted.
+//! let f = Matrix2::new(1.0, 0.1, 0.0, 1.0);
+//! let q = Matrix2::new(1e-3, 0.0, 0.0, 0.0);
+//! let process = LinearProcess::try_new(f, Matrix2x1::zeros(), q)?;
+//! assert_eq!(process.noise, q); // read access through Deref
+//! // Indefinite with a positive diagonal: refused when built, not at some later step.
+//! let r = Matrix2::new(1.0, 2.0, 2.0, 1.0);
+//! assert_eq!(
+//!     LinearMeasurement::try_new(Matrix2::identity(), r).unwrap_err(),
+//!     Error::NotPositiveSemiDefinite {
+//!         stage: Stage::Construction,
+//!         quantity: Quantity::MeasurementNoise
+//!     }
+//! );
+//! # Ok::<(), Error>(())
+//! ```
+//!
+//! A checked model cannot be changed in place:
+//!
+//! ```compile_fail
+//! use estim_core::nalgebra::{Matrix2, Matrix2x1};
+//! use estim_core::LinearProcess;
+//! let mut process =
+//!     LinearProcess::try_new(Matrix2::identity(), Matrix2x1::zeros(), Matrix2::identity())
+//!         .unwrap();
+//! process.noise = Matrix2::new(1.0, 2.0, 2.0, 1.0); // error: no DerefMut
+//! ```
+
+use core::ops::Deref;
+
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+
+use crate::alloc::Alloc;
+use crate::error::{Error, Quantity, Result, Stage};
+use crate::function::SigmaScratch;
+use crate::linalg::{ensure_finite, ensure_shape, ensure_symmetric, psd_factor};
+use crate::linear::{LinearMeasurement, LinearProcess};
+use crate::model::{
+    LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
+    MeasurementModel, ProcessHessian, ProcessJacobian, ProcessModel,
+};
+use crate::scalar::Real;
+
+/// `Ok(())` if the noise covariance `noise` (Q or R, named by `quantity`) is square, finite,
+/// symmetric within √ε · max|nᵢⱼ| and positive semi-definite (no pivot of its factorisation
+/// below −16 n ε max nᵢᵢ), checked in that order at [`Stage::Construction`]; else the
+/// [`Error`] of the first failed check: [`DimensionMismatch`](Error::DimensionMismatch),
+/// [`NonFinite`](Error::NonFinite), [`NotSymmetric`](Error::NotSymmetric) or
+/// [`NotPositiveSemiDefinite`](Error::NotPositiveSemiDefinite). One factorisation, O(n³).
+///
+/// ```
+/// use estim_core::{Quantity, checked::check_noise, nalgebra::Matrix2};
+/// assert!(check_noise(&Matrix2::new(1.0, 1.0, 1.0, 1.0), Quantity::ProcessNoise).is_ok());
+/// assert!(check_noise(&Matrix2::new(1.0, 0.0, 0.5, 1.0), Quantity::ProcessNoise).is_err());
+/// ```
+pub fn check_noise<T: Real, D: Dim>(noise: &OMatrix<T, D, D>, quantity: Quantity) -> Result<()>
+where
+    DefaultAllocator: Alloc<D>,
+{
+    let stage = Stage::Construction;
+    let n = noise.nrows();
+    ensure_shape(noise, n, n, stage, quantity)?;
+    ensure_finite(noise, stage, quantity)?;
+    ensure_symmetric(noise, stage, quantity)?;
+    psd_factor(noise, stage)
+        .map(|_| ())
+        .map_err(|_| Error::NotPositiveSemiDefinite { stage, quantity })
+}
+
+/// A model whose matrices were checked when it was built ([`LinearProcess::try_new`],
+/// [`LinearMeasurement::try_new`]; see the [module docs](self)). Implements every model trait
+/// of the inner model by delegation, bit for bit, and dereferences to it for reading; it cannot
+/// be mutated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Checked<M>(M);
+
+impl<M> Checked<M> {
+    /// The inner model, by reference (as `Deref` gives).
+    pub fn get(&self) -> &M {
+        &self.0
+    }
+
+    /// The inner model, to change (and check again).
+    pub fn into_inner(self) -> M {
+        self.0
+    }
+}
+
+impl<M> Deref for Checked<M> {
+    type Target = M;
+
+    fn deref(&self) -> &M {
+        &self.0
+    }
+}
+
+impl<T: Real, N: Dim, U: Dim> LinearProcess<T, N, U>
+where
+    DefaultAllocator: Alloc<N, U>,
+{
+    /// x⁺ = F x + B u + w, w ~ N(0, Q), checked once: F (n × n) and B (n × p) of matching
+    /// shapes and finite (reported as [`Quantity::Jacobian`]), Q by [`check_noise`]
+    /// ([`Quantity::ProcessNoise`]), all at [`Stage::Construction`].
+    ///
+    /// ```
+    /// use estim_core::{Error, LinearProcess, Quantity, Stage};
+    /// use estim_core::nalgebra::{Matrix2, Matrix2x1};
+    /// let f = Matrix2::identity();
+    /// let bad = Matrix2::new(1.0, 0.0, 0.0, f64::NAN);
+    /// assert_eq!(
+    ///     LinearProcess::try_new(f, Matrix2x1::zeros(), bad).unwrap_err(),
+    ///     Error::NonFinite { stage: Stage::Construction, quantity: Quantity::ProcessNoise }
+    /// );
+    /// ```
+    pub fn try_new(
+        transition: OMatrix<T, N, N>,
+        input: OMatrix<T, N, U>,
+        noise: OMatrix<T, N, N>,
+    ) -> Result<Checked<Self>> {
+        let stage = Stage::Construction;
+        let n = transition.nrows();
+        ensure_shape(&transition, n, n, stage, Quantity::Jacobian)?;
+        ensure_shape(&input, n, input.ncols(), stage, Quantity::Jacobian)?;
+        ensure_shape(&noise, n, n, stage, Quantity::ProcessNoise)?;
+        ensure_finite(&transition, stage, Quantity::Jacobian)?;
+        ensure_finite(&input, stage, Quantity::Jacobian)?;
+        check_noise(&noise, Quantity::ProcessNoise)?;
+        Ok(Checked(Self {
+            transition,
+            input,
+            noise,
+        }))
+    }
+}
+
+impl<T: Real, N: Dim, M: Dim> LinearMeasurement<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// z = H x + v, v ~ N(0, R), checked once: H (m × n) finite (reported as
+    /// [`Quantity::Jacobian`]), R (m × m) by [`check_noise`] ([`Quantity::MeasurementNoise`]),
+    /// at [`Stage::Construction`]. A singular R is accepted (S = H P Hᵀ + R is factorised, and
+    /// must be positive definite, at every update).
+    ///
+    /// ```
+    /// use estim_core::{Error, LinearMeasurement, Quantity, Stage};
+    /// use estim_core::nalgebra::Matrix2;
+    /// let r = Matrix2::new(1.0, 0.3, 0.0, 1.0); // not symmetric
+    /// assert!(matches!(
+    ///     LinearMeasurement::try_new(Matrix2::identity(), r),
+    ///     Err(Error::NotSymmetric { quantity: Quantity::MeasurementNoise, .. })
+    /// ));
+    /// ```
+    pub fn try_new(
+        observation: OMatrix<T, M, N>,
+        noise: OMatrix<T, M, M>,
+    ) -> Result<Checked<Self>> {
+        let stage = Stage::Construction;
+        let m = observation.nrows();
+        ensure_shape(&noise, m, m, stage, Quantity::MeasurementNoise)?;
+        ensure_finite(&observation, stage, Quantity::Jacobian)?;
+        check_noise(&noise, Quantity::MeasurementNoise)?;
+        Ok(Checked(Self { observation, noise }))
+    }
+}
+
+impl<T: Real, N: Dim, P: ProcessModel<T, N>> ProcessModel<T, N> for Checked<P>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Input = P::Input;
+
+    fn transition(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OVector<T, N> {
+        self.0.transition(x, u, dt)
+    }
+
+    fn process_noise(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OMatrix<T, N, N> {
+        self.0.process_noise(x, u, dt)
+    }
+
+    #[inline(always)]
+    fn transition_into(&self, x: &OVector<T, N>, u: &P::Input, dt: T, out: &mut OVector<T, N>) {
+        self.0.transition_into(x, u, dt, out);
+    }
+
+    #[inline(always)]
+    fn process_noise_into(
+        &self,
+        x: &OVector<T, N>,
+        u: &P::Input,
+        dt: T,
+        out: &mut OMatrix<T, N, N>,
+    ) {
+        self.0.process_noise_into(x, u, dt, out);
+    }
+
+    #[inline(always)]
+    fn transition_sigma_points_into(
+        &self,
+        mean: &OVector<T, N>,
+        offsets: &OMatrix<T, N, N>,
+        u: &P::Input,
+        dt: T,
+        plus: &mut OMatrix<T, N, N>,
+        minus: &mut OMatrix<T, N, N>,
+        scratch: &mut SigmaScratch<T, N, N>,
+    ) -> Result<()> {
+        self.0
+            .transition_sigma_points_into(mean, offsets, u, dt, plus, minus, scratch)
+    }
+}
+
+impl<T: Real, N: Dim, P: ProcessJacobian<T, N>> ProcessJacobian<T, N> for Checked<P>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    fn transition_jacobian(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OMatrix<T, N, N> {
+        self.0.transition_jacobian(x, u, dt)
+    }
+
+    #[inline(always)]
+    fn transition_jacobian_into(
+        &self,
+        x: &OVector<T, N>,
+        u: &P::Input,
+        dt: T,
+        out: &mut OMatrix<T, N, N>,
+    ) {
+        self.0.transition_jacobian_into(x, u, dt, out);
+    }
+}
+
+impl<T: Real, N: Dim, P: ProcessHessian<T, N>> ProcessHessian<T, N> for Checked<P>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    fn transition_hessian(
+        &self,
+        x: &OVector<T, N>,
+        u: &P::Input,
+        dt: T,
+        k: usize,
+    ) -> Option<OMatrix<T, N, N>> {
+        self.0.transition_hessian(x, u, dt, k)
+    }
+
+    fn transition_hessian_into(
+        &self,
+        x: &OVector<T, N>,
+        u: &P::Input,
+        dt: T,
+        k: usize,
+        out: &mut OMatrix<T, N, N>,
+    ) -> bool {
+        self.0.transition_hessian_into(x, u, dt, k, out)
+    }
+}
+
+impl<T: Real, N: Dim, P: LinearProcessModel<T, N>> LinearProcessModel<T, N> for Checked<P> where
+    DefaultAllocator: Alloc<N>
+{
+}
+
+impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>> MeasurementModel<T, N, M> for Checked<H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn measure(&self, x: &OVector<T, N>) -> OVector<T, M> {
+        self.0.measure(x)
+    }
+
+    fn measurement_noise(&self, x: &OVector<T, N>) -> OMatrix<T, M, M> {
+        self.0.measurement_noise(x)
+    }
+
+    fn residual(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
+        self.0.residual(a, b)
+    }
+
+    #[inline(always)]
+    fn measure_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
+        self.0.measure_into(x, out);
+    }
+
+    #[inline(always)]
+    fn measurement_noise_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, M>) {
+        self.0.measurement_noise_into(x, out);
+    }
+
+    #[inline(always)]
+    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        self.0.residual_into(a, b, out);
+    }
+
+    #[inline(always)]
+    fn measure_sigma_points_into(
+        &self,
+        mean: &OVector<T, N>,
+        offsets: &OMatrix<T, N, N>,
+        plus: &mut OMatrix<T, M, N>,
+        minus: &mut OMatrix<T, M, N>,
+        scratch: &mut SigmaScratch<T, N, M>,
+    ) -> Result<()> {
+        self.0
+            .measure_sigma_points_into(mean, offsets, plus, minus, scratch)
+    }
+}
+
+impl<T: Real, N: Dim, M: Dim, H: MeasurementJacobian<T, N, M>> MeasurementJacobian<T, N, M>
+    for Checked<H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn measurement_jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
+        self.0.measurement_jacobian(x)
+    }
+
+    #[inline(always)]
+    fn measurement_jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
+        self.0.measurement_jacobian_into(x, out);
+    }
+}
+
+impl<T: Real, N: Dim, M: Dim, H: MeasurementHessian<T, N, M>> MeasurementHessian<T, N, M>
+    for Checked<H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
+        self.0.measurement_hessian(x, k)
+    }
+
+    fn measurement_hessian_into(
+        &self,
+        x: &OVector<T, N>,
+        k: usize,
+        out: &mut OMatrix<T, N, N>,
+    ) -> bool {
+        self.0.measurement_hessian_into(x, k, out)
+    }
+}
+
+impl<T: Real, N: Dim, M: Dim, H: LinearMeasurementModel<T, N, M>> LinearMeasurementModel<T, N, M>
+    for Checked<H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+}

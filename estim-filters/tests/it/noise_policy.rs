@@ -1,0 +1,198 @@
+//! The per-step policy for noise computed by the model at each step (Q(x, u, Δt), R(x)),
+//! case by case as documented in `estim_core::checked`: caught with a typed error that
+//! leaves the filter bit for bit unchanged (negative variance, non-finite entry, an R that
+//! makes S = H P Hᵀ + R not positive definite), and not caught (an indefinite matrix with a
+//! non-negative diagonal that leaves P⁻'s diagonal non-negative or S positive definite; an
+//! asymmetric matrix, used through its symmetric part), which the checked models refuse
+//! when built instead.
+
+use crate::common::assert_bitwise_eq;
+
+use estim_core::nalgebra::{Matrix2, Matrix2x1, U2, Vector1, Vector2};
+use estim_core::{
+    Error, Gaussian, LinearMeasurement, LinearProcess, MeasurementModel, ProcessModel, Quantity,
+    Stage,
+};
+use estim_filters::{Ekf, Estimator, Predict, Update};
+
+/// x⁺ = x, with Q(x) = the matrix it carries (a state-dependent noise evaluated per step).
+struct NoisyProcess(Matrix2<f64>);
+impl ProcessModel<f64, U2> for NoisyProcess {
+    type Input = ();
+    fn transition(&self, x: &Vector2<f64>, _: &(), _: f64) -> Vector2<f64> {
+        *x
+    }
+    fn process_noise(&self, _: &Vector2<f64>, _: &(), _: f64) -> Matrix2<f64> {
+        self.0
+    }
+}
+impl estim_core::ProcessJacobian<f64, U2> for NoisyProcess {
+    fn transition_jacobian(&self, _: &Vector2<f64>, _: &(), _: f64) -> Matrix2<f64> {
+        Matrix2::identity()
+    }
+}
+
+/// z = x, with R(x) = the matrix it carries.
+struct NoisySensor(Matrix2<f64>);
+impl MeasurementModel<f64, U2, U2> for NoisySensor {
+    fn measure(&self, x: &Vector2<f64>) -> Vector2<f64> {
+        *x
+    }
+    fn measurement_noise(&self, _: &Vector2<f64>) -> Matrix2<f64> {
+        self.0
+    }
+}
+impl estim_core::MeasurementJacobian<f64, U2, U2> for NoisySensor {
+    fn measurement_jacobian(&self, _: &Vector2<f64>) -> Matrix2<f64> {
+        Matrix2::identity()
+    }
+}
+
+fn filter() -> Ekf<f64, U2> {
+    Ekf::new(Gaussian::new(Vector2::new(0.5, -0.2), Matrix2::identity() * 0.1).unwrap())
+}
+
+#[track_caller]
+fn fails_unchanged<R: core::fmt::Debug>(
+    op: impl FnOnce(&mut Ekf<f64, U2>) -> Result<R, Error>,
+    expected: Error,
+) {
+    let mut f = filter();
+    let before = f.clone();
+    assert_eq!(op(&mut f).unwrap_err(), expected);
+    assert!(f == before);
+    assert_bitwise_eq(f.state(), before.state(), "state");
+    assert_bitwise_eq(f.covariance(), before.covariance(), "covariance");
+}
+
+#[test]
+fn caught_per_step_with_a_typed_error_and_no_change() {
+    let z = Vector2::new(0.4, 0.0);
+    // A negative variance in Q(x) or R(x): the O(n) diagonal check.
+    let negative = Matrix2::new(0.01, 0.0, 0.0, -0.01);
+    fails_unchanged(
+        |f| f.predict(&NoisyProcess(negative), &(), 1.0),
+        Error::NotPositiveSemiDefinite {
+            stage: Stage::Prediction,
+            quantity: Quantity::ProcessNoise,
+        },
+    );
+    fails_unchanged(
+        |f| f.update(&NoisySensor(negative), &z),
+        Error::NotPositiveSemiDefinite {
+            stage: Stage::Update,
+            quantity: Quantity::MeasurementNoise,
+        },
+    );
+    // A NaN.
+    let nan = Matrix2::new(0.01, 0.0, 0.0, f64::NAN);
+    fails_unchanged(
+        |f| f.predict(&NoisyProcess(nan), &(), 1.0),
+        Error::NonFinite {
+            stage: Stage::Prediction,
+            quantity: Quantity::ProcessNoise,
+        },
+    );
+    fails_unchanged(
+        |f| f.update(&NoisySensor(nan), &z),
+        Error::NonFinite {
+            stage: Stage::Update,
+            quantity: Quantity::MeasurementNoise,
+        },
+    );
+    // Indefinite with a positive diagonal, large enough that S = P + R (P = 0.1 I) is not
+    // positive definite (eigenvalues of R: 1.01, −0.99; of S: 1.11, −0.89): the update's
+    // Cholesky factorisation, which it does anyway, refuses it.
+    let indefinite = Matrix2::new(0.01, 1.0, 1.0, 0.01);
+    fails_unchanged(
+        |f| f.update(&NoisySensor(indefinite), &z),
+        Error::NotPositiveDefinite {
+            stage: Stage::Update,
+            quantity: Quantity::InnovationCovariance,
+        },
+    );
+}
+
+/// Documented limits of the per-step checks (each would cost a factorisation per step): an
+/// indefinite Q(x) or R(x) whose diagonal is non-negative, while P⁻'s diagonal stays
+/// non-negative (resp. S stays positive definite), returns `Ok`, and P can come back
+/// indefinite; an asymmetric R is used through its symmetric part. The checked models refuse
+/// all of these when built.
+#[test]
+fn not_caught_per_step_but_refused_by_the_checked_models() {
+    // Q with eigenvalues 0.06 and −0.04 and a positive diagonal; from P = 0.01 I,
+    // P⁻ = P + Q has eigenvalues 0.07 and −0.03 but a positive diagonal: returned as Ok.
+    let q = Matrix2::new(0.01, 0.05, 0.05, 0.01);
+    let mut f = Ekf::new(Gaussian::new(Vector2::zeros(), Matrix2::identity() * 0.01).unwrap());
+    f.predict(&NoisyProcess(q), &(), 1.0).unwrap();
+    let eig = f.covariance().symmetric_eigenvalues();
+    assert!(
+        eig.min() < 0.0,
+        "P⁻ eigenvalues {eig}: indefinite, returned as Ok"
+    );
+    assert!(
+        LinearProcess::try_new(Matrix2::identity(), Matrix2x1::zeros(), q).is_err(),
+        "the checked model refuses this Q"
+    );
+
+    // R with eigenvalues 0.09, −0.01 and S = P + R positive definite (P = 0.1 I; eigenvalues
+    // 0.19, 0.09): accepted, and P⁺ = P − P S⁻¹ P has eigenvalues 0.1 − 0.01/0.19 ≈ 0.047 and
+    // 0.1 − 0.01/0.09 ≈ −0.011 with a positive diagonal (≈ 0.018).
+    let r = Matrix2::new(0.04, 0.05, 0.05, 0.04);
+    let mut f = filter();
+    assert!(f.update(&NoisySensor(r), &Vector2::new(0.4, 0.0)).is_ok());
+    let eig = f.covariance().symmetric_eigenvalues();
+    assert!(
+        eig.min() < 0.0,
+        "P⁺ eigenvalues {eig}: indefinite, returned as Ok"
+    );
+    assert!(LinearMeasurement::try_new(Matrix2::identity(), r).is_err());
+
+    // An asymmetric R: the update equals the one with (R + Rᵀ)/2 to rounding (S is formed as
+    // the average of the two triangles of cov(ẑ) + R; the two orders of summation differ by
+    // a few ε on entries of size 0.1: bound 1e-15).
+    let asym = Matrix2::new(0.02, 0.01, 0.0, 0.02);
+    let sym = (asym + asym.transpose()) * 0.5;
+    let (mut a, mut b) = (filter(), filter());
+    a.update(&NoisySensor(asym), &Vector2::new(0.4, 0.1))
+        .unwrap();
+    b.update(&NoisySensor(sym), &Vector2::new(0.4, 0.1))
+        .unwrap();
+    assert!((a.state() - b.state()).abs().max() < 1e-15);
+    assert!((a.covariance() - b.covariance()).abs().max() < 1e-15);
+    assert!(LinearMeasurement::try_new(Matrix2::identity(), asym).is_err());
+}
+
+/// A checked model runs through a filter exactly as the unchecked one (bit for bit).
+#[test]
+fn checked_models_filter_bit_for_bit() {
+    let (f, b) = (Matrix2::new(1.0, 0.1, 0.0, 1.0), Matrix2x1::new(0.005, 0.1));
+    let q = Matrix2::new(2e-3, 1e-3, 1e-3, 1e-3);
+    let (h, r) = (Matrix2::new(1.0, 0.0, 0.3, 1.0), Matrix2::identity() * 0.01);
+    let checked = (
+        LinearProcess::try_new(f, b, q).unwrap(),
+        LinearMeasurement::try_new(h, r).unwrap(),
+    );
+    let plain = (
+        LinearProcess {
+            transition: f,
+            input: b,
+            noise: q,
+        },
+        LinearMeasurement {
+            observation: h,
+            noise: r,
+        },
+    );
+    let (mut x, mut y) = (filter(), filter());
+    for k in 0..5 {
+        let u = Vector1::new(k as f64 * 0.1);
+        let z = Vector2::new(0.1 * k as f64, -0.05);
+        x.predict(&checked.0, &u, 0.1).unwrap();
+        y.predict(&plain.0, &u, 0.1).unwrap();
+        x.update(&checked.1, &z).unwrap();
+        y.update(&plain.1, &z).unwrap();
+    }
+    assert_bitwise_eq(x.state(), y.state(), "state");
+    assert_bitwise_eq(x.covariance(), y.covariance(), "covariance");
+}
