@@ -528,9 +528,7 @@ where
     let nis = whitened.norm_squared();
     report.nis = nis;
     report.log_likelihood = -real::<T>(0.5)
-        * (nis
-            + log_det_from_cholesky(l)
-            + real::<T>(m as f64 * crate::update::LN_TWO_PI));
+        * (nis + log_det_from_cholesky(l) + real::<T>(m as f64 * crate::update::LN_TWO_PI));
     if settings.threshold(m).is_some_and(|g| !(nis <= g)) {
         report.outcome = UpdateOutcome::Gated;
         return Ok(None);
