@@ -417,27 +417,32 @@ fn bad_input_is_a_typed_error_and_leaves_the_filter_unchanged() {
     bad_input_for::<f32, Unscented<f32>>();
 }
 
-/// h(x) = x² with no noise: the sigma-point gain of a rule with β − α² < 0 can claim more
-/// information than the prior holds.
-struct Square;
-impl<T: Real> MeasurementModel<T, U1, U1> for Square {
+/// h(x) = (x − 1)² with no noise: even about the prior mean x̂ = 1, so every sigma point
+/// sees the same deviation from the predicted measurement.
+struct EvenAboutOne;
+impl<T: Real> MeasurementModel<T, U1, U1> for EvenAboutOne {
     fn measure(&self, x: &Vector1<T>) -> Vector1<T> {
-        x.map(|v| v * v)
+        x.map(|v| (v - T::one()) * (v - T::one()))
     }
     fn measurement_noise(&self, _: &Vector1<T>) -> Matrix1<T> {
         Matrix1::zeros()
     }
 }
 
-/// With α = 1, β = 0, κ = −½ (c = ½, w = 1) at x̂ = 1, P = 1: the points 1 ± 1/√2 give
-/// d = (1.914, −0.914), d̄ = 1, S_zz = 4.5 − 1 = 3.5 and P_xz = 2, so K S_zz Kᵀ = 4/3.5 > P = 1.
-/// In the array form the even part B = ½, so R̃ = R + 2w B² − d̄² = 0.5 − 1 < 0: the centre
-/// downdate must fail, with a typed error and the filter unchanged. The full-P UKF with the
-/// same rule produces P⁺ = 1 − 8/7 < 0 and refuses it too.
+/// The accepted unscented rules give a PSD predicted measurement covariance for every model
+/// (estim_core::Unscented, "Accepted parameters"), so a centre downdate can fail only where
+/// that covariance is singular. At the boundary α²κ + nβ = 0 (α = 1, β = ½, κ = −½, n = 1:
+/// c = ½, w = 1/(2c) = 1) and a model even about x̂ = 1, the points 1 ± 1/√2 both deviate from
+/// h(x̂) = 0 by d = ½, so cov(ẑ) = w Σ d² + (β − α²) w² (Σ d)² = ½ − ½ = 0, up to the rounding
+/// of (±1/√2)²,
+/// and with R = 0, S is singular. The square-root update must refuse it with a typed error and
+/// leave the filter unchanged; the full-P UKF refuses it too.
 #[test]
 fn a_failed_downdate_is_a_typed_error() {
     fn check<T: Real + Into<f64>>() {
-        let rule = Unscented::new(T::one(), T::zero(), estim_core::scalar::real(-0.5)).unwrap();
+        let half = estim_core::scalar::real::<T>(0.5);
+        let rule = Unscented::new(T::one(), half, -half).unwrap();
+        rule.check_dimension(1).unwrap();
         let prior = Gaussian::new(Vector1::new(T::one()), Matrix1::new(T::one())).unwrap();
         let mut f = SrUkf::with_propagator(prior.clone(), rule);
         let z = Vector1::new(estim_core::scalar::real::<T>(1.5));
@@ -447,10 +452,10 @@ fn a_failed_downdate_is_a_typed_error() {
                 stage: Stage::Update,
                 quantity: Quantity::InnovationCovariance,
             },
-            |f| f.update(&Square, &z).map(|_| ()),
+            |f| f.update(&EvenAboutOne, &z).map(|_| ()),
         );
         let mut full = estim_filters::GaussianFilter::with_propagator(prior, rule);
-        assert!(full.update(&Square, &z).is_err());
+        assert!(full.update(&EvenAboutOne, &z).is_err());
     }
     check::<f64>();
     check::<f32>();
