@@ -305,13 +305,10 @@ where
     out
 }
 
-/// Every ∂²gₖ/∂xᵢ∂xⱼ (i ≤ j, mirrored) by hyper-dual passes: `store(k, i, j, value)`.
-/// Returns m, the value's length.
-fn all_hessians<T, N, M, G>(
-    g: &G,
-    x: &OVector<T, N>,
-    mut store: impl FnMut(usize, usize, usize, T),
-) -> usize
+/// Every ∂²gₖ/∂xᵢ∂xⱼ (i ≤ j, mirrored) by hyper-dual passes, written straight into `values`
+/// (Hₖ column-major at `k * n * n`, as `f64`). Returns m, the value's length; `values` holds
+/// exactly m n² numbers.
+fn all_hessians<T, N, M, G>(g: &G, x: &OVector<T, N>, values: &mut Vec<f64>) -> usize
 where
     T: AdReal,
     N: Dim,
@@ -320,6 +317,11 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     let n = x.nrows();
+    let nn = n * n;
+    if n == 0 {
+        values.clear();
+        return g.apply(x).nrows();
+    }
     let mut xd: OVector<HyperDual<T>, N> = x.map(HyperDual::from_re);
     let mut m = 0;
     for i in 0..n {
@@ -328,16 +330,21 @@ where
             xd[j].eps2 = T::one();
             let y = g.apply(&xd);
             xd[j].eps2 = T::zero();
+            // One length check per pass, not per entry (a value whose length changes between
+            // passes keeps the last pass's, as the shape check downstream expects). The buffer
+            // is not cleared: the passes i ≤ j, mirrored, overwrite every entry.
             m = y.nrows();
-            for (k, yk) in y.iter().enumerate() {
-                store(k, i, j, yk.eps1eps2);
+            if values.len() < m * nn {
+                values.resize(m * nn, 0.0);
+            }
+            for (h, yk) in values.chunks_exact_mut(nn).zip(y.iter()) {
+                let v = yk.eps1eps2.widen();
+                (h[j * n + i], h[i * n + j]) = (v, v);
             }
         }
         xd[i].eps1 = T::zero();
     }
-    if n == 0 {
-        m = g.apply(x).nrows();
-    }
+    values.truncate(m * nn);
     m
 }
 
@@ -379,14 +386,15 @@ impl<G> AutoDiff<G> {
                 key(buf);
             },
             x.nrows(),
-            |store| all_hessians(f, x, |k, i, j, v| store(k, i, j, v.widen())),
+            |values| all_hessians(f, x, values),
             k,
             |values| {
                 let n = x.shape_generic().0;
                 if out.shape() != (n.value(), n.value()) {
                     *out = OMatrix::zeros_generic(n, n);
                 }
-                for (o, v) in out.iter_mut().zip(values) {
+                // Slices, not nalgebra's strided iterator: this copy runs once per request.
+                for (o, v) in out.as_mut_slice().iter_mut().zip(values) {
                     *o = T::narrow(*v);
                 }
             },

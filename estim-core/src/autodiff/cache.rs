@@ -112,26 +112,15 @@ impl Entries {
                 .all(|(a, b)| a.to_bits() == b.to_bits())
     }
 
-    fn fill(
-        &mut self,
-        kind: Kind,
-        n: usize,
-        compute: impl FnOnce(&mut dyn FnMut(usize, usize, usize, f64)) -> usize,
-    ) {
-        self.values.clear();
-        let values = &mut self.values;
+    /// Computes the m Hessians into `values` (`compute` leaves m n² numbers there, Hₖ
+    /// column-major at `k * n * n`, and returns m) and makes the probe the key.
+    fn fill(&mut self, kind: Kind, n: usize, compute: impl FnOnce(&mut Vec<f64>) -> usize) {
+        let m = compute(&mut self.values);
         let nn = n * n;
-        let m = compute(&mut |k, i, j, v| {
-            if values.len() < (k + 1) * nn {
-                values.resize((k + 1) * nn, 0.0);
-            }
-            values[k * nn + j * n + i] = v;
-            values[k * nn + i * n + j] = v;
-        });
-        values.resize(m * nn, 0.0);
+        self.values.resize(m * nn, 0.0);
         self.nonzero.clear();
         self.nonzero.extend(
-            values
+            self.values
                 .chunks(nn.max(1))
                 .map(|h| h.iter().any(|v| *v != 0.0)),
         );
@@ -164,14 +153,15 @@ impl HessianCache {
         entries.kind = None;
     }
 
-    /// Hₖ at the point whose key `fill_key` pushes, computed by `compute` (which reports each
-    /// entry and returns m) unless cached; `write` receives it column-major.
+    /// Hₖ at the point whose key `fill_key` pushes, computed by `compute` (which writes all m
+    /// Hessians into the buffer it is given and returns m) unless cached; `write` receives it
+    /// column-major.
     pub(super) fn hessian_into(
         &self,
         kind: Kind,
         fill_key: impl FnOnce(&mut Vec<f64>),
         n: usize,
-        compute: impl FnOnce(&mut dyn FnMut(usize, usize, usize, f64)) -> usize,
+        compute: impl FnOnce(&mut Vec<f64>) -> usize,
         k: usize,
         write: impl FnOnce(&[f64]),
     ) -> bool {
