@@ -81,7 +81,7 @@ pub mod prelude {
         GaussianSecondOrderEkf, KalmanFilter, MonteCarlo, Predict, PredictCorrelated, Recorder,
         SecondOrderEkf, Ukf, Update, UpdateOutcome, UpdateReport, Verdict,
     };
-    pub use estim_filters::{SquareRootFilter, SrEkf, SrKalmanFilter, SrUkf};
+    pub use estim_filters::{Iekf, SquareRootFilter, SrEkf, SrKalmanFilter, SrUkf};
 }
 
 #[doc = include_str!("../README.md")]
