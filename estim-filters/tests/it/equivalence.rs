@@ -6,15 +6,16 @@
 use crate::common;
 
 use common::{
-    DynSystem, LinearSystem, ReferenceKf, StaticSystem, Trajectory, UKF_SMALL_ALPHA_STATE_TOL,
-    estimate_rel_diff, random_dyn_system, random_static_system, rng, simulate,
+    DynSystem, LinearSystem, Run, StaticSystem, Trajectory, UKF_SMALL_ALPHA_STATE_TOL,
+    assert_runs_agree_to, random_dyn_system, random_static_system, rng, run, run_reference,
+    simulate,
 };
-use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+use estim_core::Alloc;
+use estim_core::nalgebra::{DefaultAllocator, Dim};
 use estim_core::propagate::Unscented;
-use estim_core::{Alloc, LinearMeasurement, LinearProcess};
 use estim_filters::{
-    CovarianceUpdate, Ekf, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, Predict,
-    SecondOrderEkf, Ukf, Update,
+    CovarianceUpdate, Ekf, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, SecondOrderEkf,
+    Ukf,
 };
 use proptest::prelude::*;
 
@@ -42,82 +43,6 @@ const TOL: f64 = 1e-9;
 
 // The UKF's state tolerance for the default α = 10⁻³: see
 // `common::UKF_SMALL_ALPHA_STATE_TOL` (its covariance uses `TOL`).
-
-/// Runs `filter` over the trajectory (predict with uₖ, then update with zₖ₊₁) and returns the
-/// estimate after each update.
-fn run<F, N, M, U>(
-    mut filter: F,
-    system: &LinearSystem<N, M, U>,
-    traj: &Trajectory<N, M, U>,
-) -> Run<N>
-where
-    N: Dim,
-    M: Dim,
-    U: Dim,
-    DefaultAllocator: Alloc<N, M> + Alloc<N, U>,
-    F: Predict<f64, N, LinearProcess<f64, N, U>> + Update<f64, N, M, LinearMeasurement<f64, N, M>>,
-{
-    let mut out = Vec::with_capacity(traj.inputs.len());
-    for (u, z) in traj.inputs.iter().zip(&traj.measurements) {
-        filter
-            .predict(&system.process, u, 1.0)
-            .expect("predict on a well-posed linear system");
-        let report = filter
-            .update(&system.measurement, z)
-            .expect("update on a well-posed linear system");
-        assert!(report.applied());
-        out.push((filter.state().clone(), filter.covariance().clone()));
-    }
-    out
-}
-
-/// The hand-written Kalman equations over the same trajectory.
-fn run_reference<N, M, U>(system: &LinearSystem<N, M, U>, traj: &Trajectory<N, M, U>) -> Run<N>
-where
-    N: Dim,
-    M: Dim,
-    U: Dim,
-    DefaultAllocator: Alloc<N, M> + Alloc<N, U>,
-{
-    let mut kf = ReferenceKf::new(&system.prior);
-    traj.inputs
-        .iter()
-        .zip(&traj.measurements)
-        .map(|(u, z)| {
-            kf.predict(&system.process, u);
-            kf.update(&system.measurement, z);
-            (kf.x.clone(), kf.p.clone())
-        })
-        .collect()
-}
-
-type Run<N> = Vec<(OVector<f64, N>, OMatrix<f64, N, N>)>;
-
-/// Asserts two runs agree at every step: state to `tol_x`, covariance to `tol_p` (relative).
-///
-/// The state is compared on the largest state scale the reference has had so far (see
-/// `common::estimate_rel_diff` for one step's scale): round-off enters the state in
-/// proportion to the values computed at each step and then decays through the closed loop, so
-/// a trajectory that shrinks (|x| from 19 to 1.6 in four steps, seed 6742016220725902189)
-/// still carries, for a few steps, the error made on the larger scale.
-fn assert_runs_agree_to<N: Dim>(a: &Run<N>, b: &Run<N>, tol_x: f64, tol_p: f64, what: &str)
-where
-    DefaultAllocator: Alloc<N>,
-{
-    assert_eq!(a.len(), b.len());
-    let mut largest_scale = 0.0_f64;
-    for (k, ((xa, pa), (xb, pb))) in a.iter().zip(b).enumerate() {
-        let (dx, dp) = estimate_rel_diff(xa, pa, xb, pb);
-        let scale = common::state_scale(xb, pb);
-        largest_scale = largest_scale.max(scale);
-        let dx = dx * scale / largest_scale;
-        assert!(
-            dx <= tol_x && dp <= tol_p,
-            "{what}, step {k}: relative state diff {dx:e} (tol {tol_x:e}), covariance diff \
-             {dp:e} (tol {tol_p:e})\nxa = {xa}xb = {xb}Pa = {pa}Pb = {pb}"
-        );
-    }
-}
 
 fn assert_runs_agree<N: Dim>(a: &Run<N>, b: &Run<N>, what: &str)
 where

@@ -5,12 +5,12 @@
 use crate::common;
 
 use common::{
-    LinearSystem, ReferenceKf, Trajectory, UKF_SMALL_ALPHA_STATE_TOL, estimate_rel_diff,
-    random_dyn_system, random_static_system, rng, simulate,
+    LinearSystem, Trajectory, UKF_SMALL_ALPHA_STATE_TOL, assert_runs_agree_to, random_dyn_system,
+    random_static_system, rng, run, run_reference, simulate,
 };
 use estim_core::nalgebra::{
-    DMatrix, DVector, DefaultAllocator, Dim, Matrix1, Matrix2, Matrix2x3, Matrix3, OMatrix,
-    OVector, U1, U3, Vector1, Vector2, Vector3,
+    DMatrix, DVector, DefaultAllocator, Dim, Matrix1, Matrix2, Matrix2x3, Matrix3, OMatrix, U1, U3,
+    Vector1, Vector2, Vector3,
 };
 use estim_core::propagate::Unscented;
 use estim_core::{
@@ -38,74 +38,6 @@ const STEPS: usize = 50;
 /// sigma-point mean), which no factorisation changes.
 const TOL: f64 = 1e-9;
 
-type Run<N> = Vec<(OVector<f64, N>, OMatrix<f64, N, N>)>;
-
-fn run<F, N, M, U>(
-    mut filter: F,
-    system: &LinearSystem<N, M, U>,
-    traj: &Trajectory<N, M, U>,
-) -> Run<N>
-where
-    N: Dim,
-    M: Dim,
-    U: Dim,
-    DefaultAllocator: Alloc<N, M> + Alloc<N, U>,
-    F: Predict<f64, N, LinearProcess<f64, N, U>> + Update<f64, N, M, LinearMeasurement<f64, N, M>>,
-{
-    traj.inputs
-        .iter()
-        .zip(&traj.measurements)
-        .map(|(u, z)| {
-            filter.predict(&system.process, u, 1.0).expect("predict");
-            assert!(
-                filter
-                    .update(&system.measurement, z)
-                    .expect("update")
-                    .applied()
-            );
-            (filter.state().clone(), filter.covariance().clone())
-        })
-        .collect()
-}
-
-fn reference<N, M, U>(system: &LinearSystem<N, M, U>, traj: &Trajectory<N, M, U>) -> Run<N>
-where
-    N: Dim,
-    M: Dim,
-    U: Dim,
-    DefaultAllocator: Alloc<N, M> + Alloc<N, U>,
-{
-    let mut kf = ReferenceKf::new(&system.prior);
-    traj.inputs
-        .iter()
-        .zip(&traj.measurements)
-        .map(|(u, z)| {
-            kf.predict(&system.process, u);
-            kf.update(&system.measurement, z);
-            (kf.x.clone(), kf.p.clone())
-        })
-        .collect()
-}
-
-/// Every step within `tol_x` (state, on the largest scale so far, as equivalence.rs does) and
-/// `tol_p` (covariance).
-fn assert_agree<N: Dim>(a: &Run<N>, b: &Run<N>, tol_x: f64, tol_p: f64, what: &str)
-where
-    DefaultAllocator: Alloc<N>,
-{
-    let mut largest = 0.0_f64;
-    for (k, ((xa, pa), (xb, pb))) in a.iter().zip(b).enumerate() {
-        let (dx, dp) = estimate_rel_diff(xa, pa, xb, pb);
-        let scale = common::state_scale(xb, pb);
-        largest = largest.max(scale);
-        let dx = dx * scale / largest;
-        assert!(
-            dx <= tol_x && dp <= tol_p,
-            "{what}, step {k}: state {dx:e}, covariance {dp:e}"
-        );
-    }
-}
-
 fn check_system<N, M, U>(system: &LinearSystem<N, M, U>, traj: &Trajectory<N, M, U>)
 where
     N: Dim,
@@ -114,22 +46,22 @@ where
     DefaultAllocator: Alloc<N, M> + Alloc<N, U>,
 {
     let prior = || system.prior.clone();
-    let truth = reference(system, traj);
-    assert_agree(
+    let truth = run_reference(system, traj);
+    assert_runs_agree_to(
         &run(SrKalmanFilter::new(prior()), system, traj),
         &truth,
         TOL,
         TOL,
         "SR-KF",
     );
-    assert_agree(
+    assert_runs_agree_to(
         &run(SrEkf::new(prior()), system, traj),
         &truth,
         TOL,
         TOL,
         "SR-EKF",
     );
-    assert_agree(
+    assert_runs_agree_to(
         &run(SrUkf::new(prior()), system, traj),
         &truth,
         UKF_SMALL_ALPHA_STATE_TOL,
@@ -137,7 +69,7 @@ where
         "SR-UKF (alpha = 1e-3)",
     );
     // β − α² = −1 < 0: the centre term is a downdate.
-    assert_agree(
+    assert_runs_agree_to(
         &run(
             SquareRootFilter::with_propagator(prior(), Unscented::cubature()),
             system,
@@ -149,7 +81,7 @@ where
         "SR cubature",
     );
     // And the Joseph-form filters of the same name agree with them, to the same tolerance.
-    assert_agree(
+    assert_runs_agree_to(
         &run(KalmanFilter::new(prior()), system, traj),
         &truth,
         TOL,
