@@ -45,8 +45,7 @@ use rand_distr::{Distribution, StandardNormal};
 
 // The root tests include this file as a module and bring their own `crate::common`.
 #[cfg(not(test))]
-#[path = "common/mod.rs"]
-mod common;
+use estim_reproductions::common;
 
 /// Gyro step, s.
 pub const DT: f64 = 0.01;

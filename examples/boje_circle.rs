@@ -9,9 +9,8 @@
 //!
 //! `cargo run --release --example boje_circle [-- --json] [-- --quick]`
 
-#[path = "reproductions/boje_circle.rs"]
-mod boje_circle;
-mod common;
+use estim_reproductions::boje_circle;
+use estim_reproductions::common;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let output = boje_circle::run(common::quick_requested())?;

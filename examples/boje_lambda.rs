@@ -4,9 +4,8 @@
 //!
 //! `cargo run --release --example boje_lambda [-- --json] [-- --quick]`
 
-#[path = "reproductions/boje_lambda.rs"]
-mod boje_lambda;
-mod common;
+use estim_reproductions::boje_lambda;
+use estim_reproductions::common;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let output = boje_lambda::run(common::quick_requested())?;

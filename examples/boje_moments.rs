@@ -5,9 +5,8 @@
 //!
 //! `cargo run --release --example boje_moments [-- --json] [-- --quick]`
 
-#[path = "reproductions/boje_moments.rs"]
-mod boje_moments;
-mod common;
+use estim_reproductions::boje_moments;
+use estim_reproductions::common;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let output = boje_moments::run(common::quick_requested())?;

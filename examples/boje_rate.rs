@@ -5,9 +5,8 @@
 //!
 //! `cargo run --release --example boje_rate [-- --json] [-- --quick]`
 
-#[path = "reproductions/boje_rate.rs"]
-mod boje_rate;
-mod common;
+use estim_reproductions::boje_rate;
+use estim_reproductions::common;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let output = boje_rate::run(common::quick_requested())?;

@@ -4,13 +4,8 @@
 //!
 //! `cargo run --release --example consistency [-- --json] [-- --quick]`
 
-mod common;
-#[path = "reproductions/consistency.rs"]
-mod consistency;
-#[path = "reproductions/lee_huang.rs"]
-mod lee_huang;
-#[path = "reproductions/lu_calibration.rs"]
-mod lu_calibration;
+use estim_reproductions::common;
+use estim_reproductions::consistency;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let output = consistency::run(common::quick_requested())?;

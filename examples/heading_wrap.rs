@@ -33,8 +33,7 @@ use rand_distr::{Distribution, StandardNormal};
 
 // The root tests include this file as a module and bring their own `crate::common`.
 #[cfg(not(test))]
-#[path = "common/mod.rs"]
-mod common;
+use estim_reproductions::common;
 
 /// Time step, s.
 pub const DT: f64 = 0.1;

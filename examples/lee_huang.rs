@@ -9,9 +9,8 @@
 //!
 //! `cargo run --release --example lee_huang [-- --json] [-- --quick]`
 
-mod common;
-#[path = "reproductions/lee_huang.rs"]
-mod lee_huang;
+use estim_reproductions::common;
+use estim_reproductions::lee_huang;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let output = lee_huang::run(common::quick_requested())?;

@@ -17,9 +17,8 @@
 //!
 //! `cargo run --release --example lu_calibration [-- --json] [-- --quick] [-- --sequential] [-- --bench]`
 
-mod common;
-#[path = "reproductions/lu_calibration.rs"]
-mod lu_calibration;
+use estim_reproductions::common;
+use estim_reproductions::lu_calibration;
 
 use lu_calibration::{Execution, MonteCarloConfig, run_monte_carlo};
 

@@ -6,9 +6,8 @@
 //!
 //! `cargo run --release --example lu_delays [-- --json] [-- --quick]`
 
-mod common;
-#[path = "reproductions/lu_delays.rs"]
-mod lu_delays;
+use estim_reproductions::common;
+use estim_reproductions::lu_delays;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let output = lu_delays::run(common::quick_requested())?;

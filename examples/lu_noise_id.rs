@@ -5,9 +5,8 @@
 //!
 //! `cargo run --release --example lu_noise_id [-- --json] [-- --quick]`
 
-mod common;
-#[path = "reproductions/lu_noise_id.rs"]
-mod lu_noise_id;
+use estim_reproductions::common;
+use estim_reproductions::lu_noise_id;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let output = lu_noise_id::run(common::quick_requested())?;

@@ -11,9 +11,8 @@
 //! each axis), `target/figures/lv2_chi2_cdf.svg` (Monte Carlo χ² CDF against χ²₁, fault-free
 //! and with a biased x axis).
 
-mod common;
-#[path = "reproductions/lv2_fusion.rs"]
-mod lv2_fusion;
+use estim_reproductions::common;
+use estim_reproductions::lv2_fusion;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let output = lv2_fusion::run(common::quick_requested())?;

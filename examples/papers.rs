@@ -13,28 +13,19 @@
 //! object, keyed by example name, as the last stdout line.
 //!
 //! Each paper example `X` is `examples/X.rs` (flags and `main`) and its reproduction (the
-//! experiment, tables, figures, headlines and JSON) is `examples/reproductions/X.rs`; this file
-//! includes the same reproduction modules by `#[path]`, so each is written once.
+//! experiment, tables, figures, headlines and JSON) is `examples/reproductions/X.rs`, module `X`
+//! of the `estim-reproductions` library that this file, `X.rs` and the tests share.
 
-#[path = "reproductions/boje_circle.rs"]
-mod boje_circle;
-#[path = "reproductions/boje_lambda.rs"]
-mod boje_lambda;
-#[path = "reproductions/boje_moments.rs"]
-mod boje_moments;
-#[path = "reproductions/boje_rate.rs"]
-mod boje_rate;
-mod common;
-#[path = "reproductions/lee_huang.rs"]
-mod lee_huang;
-#[path = "reproductions/lu_calibration.rs"]
-mod lu_calibration;
-#[path = "reproductions/lu_delays.rs"]
-mod lu_delays;
-#[path = "reproductions/lu_noise_id.rs"]
-mod lu_noise_id;
-#[path = "reproductions/lv2_fusion.rs"]
-mod lv2_fusion;
+use estim_reproductions::boje_circle;
+use estim_reproductions::boje_lambda;
+use estim_reproductions::boje_moments;
+use estim_reproductions::boje_rate;
+use estim_reproductions::common;
+use estim_reproductions::lee_huang;
+use estim_reproductions::lu_calibration;
+use estim_reproductions::lu_delays;
+use estim_reproductions::lu_noise_id;
+use estim_reproductions::lv2_fusion;
 
 use std::fmt::Write as _;
 use std::time::{Instant, SystemTime};

@@ -2,11 +2,11 @@
 //! plots, and what an example's run returns ([`Output`], [`Headline`]).
 //!
 //! Layout: example `X` is `examples/X.rs` (its flags and `main`), and its body, the paper's
-//! reproduction (experiment, tables, figures, JSON), is `examples/reproductions/X.rs`, which
-//! `X.rs` names with `#[path]`; `papers.rs` includes every paper's body the same way, and the
-//! `estim` package's tests (`tests/it`) include them to check the reproductions. Each
-//! reproduction reaches these helpers as `crate::common`.
-#![allow(dead_code)] // each example uses a subset
+//! reproduction (experiment, tables, figures, JSON), is `examples/reproductions/X.rs`, module
+//! `X` of the `estim-reproductions` library (`examples/reproductions/lib.rs`, which also holds
+//! this module as `common`): `X.rs` runs one, `papers.rs` all of them, and the `estim`
+//! package's tests (`tests/it`) check them. Each reproduction reaches these helpers as
+//! `crate::common`.
 
 use core::fmt;
 use std::path::PathBuf;

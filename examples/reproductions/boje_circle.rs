@@ -8,7 +8,6 @@
 //! heading tangent, ω = sgn(t − t_end/2)·0.1·t rad/s, t_end = 20 s. "Settled" = t ∈ [2, 20] s.
 //!
 //! `cargo run --release --example boje_circle [-- --json] [-- --quick]`
-#![allow(dead_code)] // also compiled into `papers` and the tests, each using a subset
 
 use crate::common::{Band, Headline, Output, Series, band_plot, line_plot};
 use estim::core::error::Result;

@@ -3,7 +3,6 @@
 //! Monte Carlo; the printed eq 13 is shown beside (λ33/λ44 swapped).
 //!
 //! `cargo run --release --example boje_lambda [-- --json] [-- --quick]`
-#![allow(dead_code)] // also compiled into `papers` and the tests, each using a subset
 
 use crate::common::{Headline, Output, Series, line_plot};
 use estim::core::error::Result;

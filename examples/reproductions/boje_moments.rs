@@ -4,7 +4,6 @@
 //! seeded Monte Carlo.
 //!
 //! `cargo run --release --example boje_moments [-- --json] [-- --quick]`
-#![allow(dead_code)] // also compiled into `papers` and the tests, each using a subset
 
 use crate::common::{Headline, Output, Series, line_plot};
 use estim::core::error::Result;

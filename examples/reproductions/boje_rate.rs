@@ -4,7 +4,6 @@
 //! model) at constant rate on simulated accelerometer samples.
 //!
 //! `cargo run --release --example boje_rate [-- --json] [-- --quick]`
-#![allow(dead_code)] // also compiled into `papers` and the tests, each using a subset
 
 use crate::common::{Headline, Output, Series, line_plot};
 use estim::core::error::Result;

@@ -19,7 +19,6 @@
 //! whatever the filter. The summary line therefore also states the verdict without it.
 //!
 //! `cargo run --release --example consistency [-- --json] [-- --quick]`
-#![allow(dead_code)] // also compiled into `papers` and the tests, each using a subset
 
 use std::time::Instant;
 

@@ -8,7 +8,6 @@
 //! `--json` prints one JSON line last. `--quick` uses 5 seeds instead of 20.
 //!
 //! `cargo run --release --example lee_huang [-- --json] [-- --quick]`
-#![allow(dead_code)] // also compiled into `papers` and the tests, each using a subset
 
 use crate::common::{Headline, Output, Series, line_plot};
 use estim::core::{Error, Gaussian, Parameter};

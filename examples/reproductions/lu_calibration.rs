@@ -13,7 +13,6 @@
 //! realizations on one thread (the default uses rayon; `RAYON_NUM_THREADS` sets the threads).
 //!
 //! `cargo run --release --example lu_calibration [-- --json] [-- --quick] [-- --sequential]`
-#![allow(dead_code)] // also compiled into `papers` and the tests, each using a subset
 
 use std::time::Instant;
 

@@ -34,7 +34,6 @@
 //! `estim_filters::fusion`: ⌈q / c⌉ fixes over the clip, plus the latency.
 //!
 //! `cargo run --release --example lu_delays [-- --json] [-- --quick]`
-#![allow(dead_code)] // also compiled into `papers` and the tests, each using a subset
 
 use std::sync::Mutex;
 use std::time::Instant;

@@ -22,7 +22,6 @@
 //! errors absorb the slow part of the record. Runs of 600 s identify it.
 //!
 //! `cargo run --release --example lu_noise_id [-- --json] [-- --quick]`
-#![allow(dead_code)] // also compiled into `papers` and the tests, each using a subset
 
 use std::time::Instant;
 

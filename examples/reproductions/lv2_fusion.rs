@@ -10,7 +10,6 @@
 //! Figures: `target/figures/lv2_error_ellipses.svg` (1σ ellipses of (x̂, ŷ) with and without
 //! each axis), `target/figures/lv2_chi2_cdf.svg` (Monte Carlo χ² CDF against χ²₁, fault-free
 //! and with a biased x axis).
-#![allow(dead_code)] // also compiled into `papers` and the tests, each using a subset
 
 use core::f64::consts::SQRT_2;
 

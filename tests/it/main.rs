@@ -1,43 +1,32 @@
 //! The `estim` package's integration tests, one binary: the examples' reproductions of the
-//! papers (each example's body, `examples/reproductions/<name>.rs`, included by `#[path]` as
-//! module `<name>`, exactly as the examples include it) and the other examples' runs.
+//! papers (each example's body, module `<name>` of the `estim-reproductions` library in
+//! `examples/reproductions/`, the one the examples run) and the other examples' runs (their
+//! files included by `#[path]`).
 //!
 //! `cargo test -p estim --test it`
 
-// The examples' shared helpers and bodies, under the names they have in the examples (the
-// bodies refer to `crate::common` and to each other by these names).
+// The examples' shared helpers and bodies, under the names they have in the examples.
 #[cfg(feature = "autodiff")]
 #[allow(dead_code)] // its `main` and printing helpers
 #[path = "../../examples/attitude.rs"]
 mod attitude;
-#[path = "../../examples/reproductions/boje_circle.rs"]
-mod boje_circle;
-#[path = "../../examples/reproductions/boje_lambda.rs"]
-mod boje_lambda;
-#[path = "../../examples/reproductions/boje_moments.rs"]
-mod boje_moments;
-#[path = "../../examples/reproductions/boje_rate.rs"]
-mod boje_rate;
-#[path = "../../examples/common/mod.rs"]
-mod common;
-#[path = "../../examples/reproductions/consistency.rs"]
-mod consistency;
+use estim_reproductions::boje_circle;
+use estim_reproductions::boje_lambda;
+use estim_reproductions::boje_moments;
+use estim_reproductions::boje_rate;
+use estim_reproductions::common;
+use estim_reproductions::consistency;
 #[allow(dead_code)] // its `main` and printing helpers
 #[path = "../../examples/heading_wrap.rs"]
 mod heading_wrap;
 #[allow(dead_code)] // its `main` and printing helpers
 #[path = "../../examples/large_state.rs"]
 mod large_state;
-#[path = "../../examples/reproductions/lee_huang.rs"]
-mod lee_huang;
-#[path = "../../examples/reproductions/lu_calibration.rs"]
-mod lu_calibration;
-#[path = "../../examples/reproductions/lu_delays.rs"]
-mod lu_delays;
-#[path = "../../examples/reproductions/lu_noise_id.rs"]
-mod lu_noise_id;
-#[path = "../../examples/reproductions/lv2_fusion.rs"]
-mod lv2_fusion;
+use estim_reproductions::lee_huang;
+use estim_reproductions::lu_calibration;
+use estim_reproductions::lu_delays;
+use estim_reproductions::lu_noise_id;
+use estim_reproductions::lv2_fusion;
 
 // The tests, one module per example (or per paper for Boje's four).
 #[cfg(feature = "autodiff")]
