@@ -18,6 +18,22 @@
 //!
 //! The products, the factorisation and the solves go through [`estim_core::kernel`]: nalgebra
 //! on the stack for static sizes, faer in the filter's preallocated buffers for runtime sizes.
+//!
+//! # Optimised builds (erratum, rustc 1.95 / LLVM 22)
+//!
+//! Up to `df5c075`, an optimised build (opt-level 3, 16 codegen units: `--release` and
+//! `cargo bench`) could compute a wrong Joseph-form covariance in a static-size update: the
+//! analytic 6-state EKF of `benches/autodiff.rs` gave P⁺ off by 4·10⁻² (relative) from the
+//! first update on, while the same code at opt-level 1 or 2, with one codegen unit, or with
+//! `-C no-vectorize-slp` was right to rounding. The cause is LLVM's SLP vectoriser, not estim's
+//! arithmetic: narrowed with `-C llvm-args=-debug-counter=slp-vectorized=0-N`, one vectorised
+//! tree, rooted at the stores of the `Symmetrized` arm below and reaching back into the product
+//! X = −K Pₓᵤᵀ that every arm shares, was enough; the Joseph arm, the one executed, then used
+//! wrong values of X. The two non-default forms are now finished in a separate, never-inlined
+//! function, so no vector tree can span the arms; the results are bit for bit those of
+//! opt-level 1. The AD bench's lockstep check (analytic against automatic derivatives, to
+//! 10⁻¹²) is the guard: it fails before timing anything if this recurs. The reproduction is
+//! `docs/errata/slp_joseph_repro.rs`.
 
 use estim_core::kernel::{self, Accum};
 use estim_core::linalg::{
@@ -347,12 +363,7 @@ where
                 },
             )
         }
-        CovarianceUpdate::Standard => {
-            // P⁺ = P − K Pₓᵤᵀ, as computed.
-            *new_covariance += covariance;
-            all_finite(new_covariance)
-        }
-        CovarianceUpdate::Symmetrized => symmetrize_add_checked(new_covariance, covariance),
+        form => add_prior(form, new_covariance, covariance),
     };
     // A non-finite gain shows up in both the state and the covariance.
     ensure_finite(new_state, stage, Quantity::Mean)
@@ -363,6 +374,35 @@ where
     // tests/it/fuzz.rs); only a square-root form avoids it. The diagonal costs O(n) to check.
     ensure_nonnegative_diagonal(new_covariance, stage, Quantity::Covariance)?;
     Ok(true)
+}
+
+/// P⁺ = P + X (X = −K Pₓᵤᵀ in `x`) in the [`Standard`](CovarianceUpdate::Standard) form, or
+/// (P⁺ + P⁺ᵀ)/2 in the [`Symmetrized`](CovarianceUpdate::Symmetrized) one; true if finite.
+///
+/// Out of line on purpose, at a small cost to the two non-default forms (one call per update:
+/// +16 and +17 instructions on 5,344 and 5,414 per 6/4 EKF step, callgrind):
+/// inlined into [`apply`] beside the Joseph arm, LLVM 22's SLP vectoriser (rustc 1.95) built
+/// one vector tree from the symmetrisation's stores back into the product X that all three
+/// arms share, and the Joseph arm, the one executed, then used wrong values of X: the analytic
+/// EKF of `benches/autodiff.rs` gave P⁺ wrong by 4·10⁻² from the first update on, in
+/// optimised builds with 16 codegen units (not at opt-level 1, not with
+/// `-C no-vectorize-slp`). See the [module docs](self), "Optimised builds".
+#[inline(never)]
+fn add_prior<T: Real, N: Dim>(
+    form: CovarianceUpdate,
+    x: &mut OMatrix<T, N, N>,
+    covariance: &OMatrix<T, N, N>,
+) -> bool
+where
+    DefaultAllocator: Alloc<N>,
+{
+    if form == CovarianceUpdate::Symmetrized {
+        symmetrize_add_checked(x, covariance)
+    } else {
+        // P⁺ = P − K Pₓᵤᵀ, as computed.
+        *x += covariance;
+        all_finite(x)
+    }
 }
 
 #[cfg(test)]
