@@ -106,8 +106,8 @@ use core::fmt;
 use core::marker::PhantomData;
 use core::ops::Range;
 
-use estim_core::linalg::ensure_shape;
-use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector};
+use estim_core::linalg::{ensure_shape, inverse_quadratic_form};
+use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector, SMatrix};
 use estim_core::{Alloc, Error, Quantity, Real};
 
 use crate::validation::{Result, Setting, ValidationError};
@@ -277,6 +277,55 @@ fn mismatch(quantity: Quantity, expected: usize, found: usize) -> ValidationErro
     })
 }
 
+/// An n × n column-major buffer as N columns of N, if it has N² entries.
+#[inline(always)]
+fn square<const N: usize>(m: &[f64]) -> Option<&[[f64; N]; N]> {
+    let (columns, rest) = m.as_chunks::<N>();
+    if rest.is_empty() {
+        columns.try_into().ok()
+    } else {
+        None
+    }
+}
+
+/// [`square`], mutably.
+#[inline(always)]
+fn square_mut<const N: usize>(m: &mut [f64]) -> Option<&mut [[f64; N]; N]> {
+    let (columns, rest) = m.as_chunks_mut::<N>();
+    if rest.is_empty() {
+        columns.try_into().ok()
+    } else {
+        None
+    }
+}
+
+/// The NEES eᵀP⁻¹e of a state of n ≤ 6 components by [`inverse_quadratic_form`] on a
+/// fixed-size copy of P (the algorithm of the runtime-size path, unrolled): `Some(None)` if P
+/// is not positive definite, `None` if n is not small.
+fn small_nees(p: &[f64], e: &[f64], n: usize) -> Option<Option<f64>> {
+    fn fixed<const N: usize>(p: &[f64], e: &[f64]) -> Option<Option<f64>> {
+        if p.len() != N * N || e.len() != N {
+            return None;
+        }
+        let mut c = SMatrix::<f64, N, N>::zeros();
+        c.as_mut_slice().copy_from_slice(p);
+        let mut v = SMatrix::<f64, N, 1>::zeros();
+        v.as_mut_slice().copy_from_slice(e);
+        // |L⁻¹e|² summed in index order, as the runtime-size dot product does below 8 entries
+        // (nalgebra's fixed-size one pairs the terms differently at n = 4).
+        Some(inverse_quadratic_form(&mut c, &mut v).map(|_| v.iter().fold(0.0, |s, &x| s + x * x)))
+    }
+    match n {
+        1 => fixed::<1>(p, e),
+        2 => fixed::<2>(p, e),
+        3 => fixed::<3>(p, e),
+        4 => fixed::<4>(p, e),
+        5 => fixed::<5>(p, e),
+        6 => fixed::<6>(p, e),
+        _ => None,
+    }
+}
+
 impl SlotAcc {
     fn ensure_dim(&mut self, n: usize) -> Result<()> {
         if self.count == 0 && self.n == 0 {
@@ -295,8 +344,78 @@ impl SlotAcc {
         }
     }
 
-    /// Welford: with δ = v − mean_old, mean += δ/k and C += (k − 1)/k δ δᵀ.
+    /// Welford: with δ = v − mean_old, mean += δ/k and C += (k − 1)/k δ δᵀ. States of up to
+    /// 6 components go through [`add_small`](Self::add_small) (the same operations in
+    /// the same order, so the same bits, on fixed-size arrays the compiler unrolls).
     fn add(&mut self, e: &[f64], x: &[f64], p: &[f64], nees: f64, de: &mut [f64], dx: &mut [f64]) {
+        let done = match self.n {
+            1 => self.add_small::<1>(e, x, p, nees),
+            2 => self.add_small::<2>(e, x, p, nees),
+            3 => self.add_small::<3>(e, x, p, nees),
+            4 => self.add_small::<4>(e, x, p, nees),
+            5 => self.add_small::<5>(e, x, p, nees),
+            6 => self.add_small::<6>(e, x, p, nees),
+            _ => false,
+        };
+        if !done {
+            self.add_any(e, x, p, nees, de, dx);
+        }
+    }
+
+    /// [`add_any`](Self::add_any) for n = N; false (nothing changed) if a buffer is not of the
+    /// size n says (never, for what this crate builds).
+    #[inline(always)]
+    fn add_small<const N: usize>(&mut self, e: &[f64], x: &[f64], p: &[f64], nees: f64) -> bool {
+        let (Ok(e), Ok(x)) = (<&[f64; N]>::try_from(e), <&[f64; N]>::try_from(x)) else {
+            return false;
+        };
+        let (Some(p), Some(c_ee), Some(c_ex), Some(sum_p)) = (
+            square::<N>(p),
+            square_mut::<N>(&mut self.c_ee),
+            square_mut::<N>(&mut self.c_ex),
+            square_mut::<N>(&mut self.sum_p),
+        ) else {
+            return false;
+        };
+        let (Ok(mean_e), Ok(mean_x), Ok(m2_x)) = (
+            <&mut [f64; N]>::try_from(self.mean_e.as_mut_slice()),
+            <&mut [f64; N]>::try_from(self.mean_x.as_mut_slice()),
+            <&mut [f64; N]>::try_from(self.m2_x.as_mut_slice()),
+        ) else {
+            return false;
+        };
+        self.count += 1;
+        let k = self.count as f64;
+        let f = (k - 1.0) / k;
+        let (mut de, mut dx) = ([0.0; N], [0.0; N]);
+        for i in 0..N {
+            de[i] = e[i] - mean_e[i];
+            dx[i] = x[i] - mean_x[i];
+            mean_e[i] += de[i] / k;
+            mean_x[i] += dx[i] / k;
+            m2_x[i] += f * (dx[i] * dx[i]);
+        }
+        for j in 0..N {
+            for i in 0..N {
+                c_ee[j][i] += f * (de[i] * de[j]);
+                c_ex[j][i] += f * (de[i] * dx[j]);
+                sum_p[j][i] += p[j][i];
+            }
+        }
+        self.sum_nees += nees;
+        true
+    }
+
+    /// The Welford update for any n.
+    fn add_any(
+        &mut self,
+        e: &[f64],
+        x: &[f64],
+        p: &[f64],
+        nees: f64,
+        de: &mut [f64],
+        dx: &mut [f64],
+    ) {
         let n = self.n;
         self.count += 1;
         let k = self.count as f64;
@@ -623,14 +742,19 @@ impl Recorder {
             }
             .into());
         }
-        self.chol.clone_from(&self.p);
-        self.de.clone_from(&self.e);
-        let nees = cholesky_quadratic_form(&mut self.chol, &mut self.de, n).ok_or(
-            Error::NotPositiveDefinite {
-                stage: STAGE,
-                quantity: Quantity::Covariance,
-            },
-        )?;
+        let nees = match small_nees(&self.p, &self.e, n) {
+            Some(nees) => nees,
+            None => {
+                self.chol.clone_from(&self.p);
+                self.de.clone_from(&self.e);
+                cholesky_quadratic_form(&mut self.chol, &mut self.de, n)
+            }
+        }
+        .ok_or(Error::NotPositiveDefinite {
+            stage: STAGE,
+            quantity: Quantity::Covariance,
+        })?;
+        self.de.resize(n, 0.0);
         self.dx.resize(n, 0.0);
         let acc = &mut self.acc.slots[slot];
         acc.ensure_dim(n)?;
@@ -1581,6 +1705,57 @@ fn estimate_tests(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fixed-size recording path (n ≤ 6) gives the bits of the runtime-size one: NEES by
+    /// the same factorisation, Welford moments by the same operations.
+    #[test]
+    fn small_states_record_the_bits_of_the_runtime_size_path() {
+        // Deterministic pseudo-random entries in (−1, 1) (SplitMix64).
+        let mut seed = 0;
+        let mut next = || {
+            seed += 1;
+            (run_seed(11, seed) >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+        };
+        for n in 1..=6 {
+            let (mut small, mut any) = (SlotAcc::default(), SlotAcc::default());
+            small.ensure_dim(n).unwrap();
+            any.ensure_dim(n).unwrap();
+            for _ in 0..5 {
+                let e: Vec<f64> = (0..n).map(|_| next()).collect();
+                let x: Vec<f64> = (0..n).map(|_| 10.0 * next()).collect();
+                // P = A Aᵀ + I, positive definite.
+                let a: Vec<f64> = (0..n * n).map(|_| next()).collect();
+                let p: Vec<f64> = (0..n * n)
+                    .map(|ij| {
+                        let (i, j) = (ij % n, ij / n);
+                        let aat: f64 = (0..n).map(|k| a[i + k * n] * a[j + k * n]).sum();
+                        aat + if i == j { 1.0 } else { 0.0 }
+                    })
+                    .collect();
+                let (mut chol, mut v) = (p.clone(), e.clone());
+                let reference = cholesky_quadratic_form(&mut chol, &mut v, n).unwrap();
+                let nees = small_nees(&p, &e, n).unwrap().unwrap();
+                assert_eq!(nees.to_bits(), reference.to_bits(), "n = {n}");
+                let (mut de, mut dx) = (vec![0.0; n], vec![0.0; n]);
+                small.add(&e, &x, &p, nees, &mut de, &mut dx);
+                any.add_any(&e, &x, &p, nees, &mut de, &mut dx);
+            }
+            let bits = |a: &SlotAcc| {
+                [&a.mean_e, &a.mean_x, &a.c_ee, &a.c_ex, &a.m2_x, &a.sum_p]
+                    .iter()
+                    .flat_map(|v| v.iter().map(|x| x.to_bits()))
+                    .chain([a.sum_nees.to_bits(), a.count as u64])
+                    .collect::<Vec<u64>>()
+            };
+            assert_eq!(bits(&small), bits(&any), "n = {n}");
+        }
+        // Not positive definite: refused on both paths.
+        assert_eq!(
+            small_nees(&[1.0, 2.0, 2.0, 1.0], &[1.0, 0.0], 2),
+            Some(None)
+        );
+        assert!(small_nees(&[1.0; 49], &[1.0; 7], 7).is_none());
+    }
 
     #[test]
     fn chunk_ranges_cover_every_run_once() {

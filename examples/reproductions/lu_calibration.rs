@@ -24,8 +24,8 @@ use estim::filters::monte_carlo::{EnsembleStats, MonteCarlo, Progress, Recorder}
 use estim::filters::smoother::Rts;
 use estim::filters::{Estimator, KalmanFilter, Update};
 use estim::models::lu::{
-    CovarianceAnalysis, CovarianceHistory, FilterSettings, LuFilter, Mechanisation,
-    PAPER_RESIDUAL_CORRELATION, Realization, Scenario, Simulator, TruthIntegration,
+    AccelerationProfile, CovarianceAnalysis, CovarianceHistory, FilterSettings, LuFilter,
+    Mechanisation, PAPER_RESIDUAL_CORRELATION, Realization, Scenario, Simulator, TruthIntegration,
     covariance_analysis, covariance_history, run_realization,
 };
 use estim::nalgebra::{Matrix2, Matrix3, Matrix3x2, Vector2, Vector3};
@@ -48,7 +48,8 @@ pub mod labels {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Execution {
     /// [`MonteCarlo::run`]: on rayon's thread pool when estim-filters' `parallel` feature is on
-    /// (the `estim` facade's default; `RAYON_NUM_THREADS` sets the threads), else sequential.
+    /// (as it is for the examples, through the root package's dev-dependency;
+    /// `RAYON_NUM_THREADS` sets the threads), else sequential. The same bits either way.
     #[default]
     Default,
     /// [`MonteCarlo::run_sequential`] on the calling thread (same bits).
@@ -302,8 +303,10 @@ pub fn run_monte_carlo(config: &MonteCarloConfig) -> Result<MonteCarloResult, Va
     let mc = MonteCarlo::new(config.runs, slots)?
         .with_seed(config.seed)
         .with_residual_pair(a, b)?;
+    // a(t_j) once for all runs (bit-identical to each simulator computing it).
+    let profile = AccelerationProfile::new(&scenario)?;
     let realization = |_run: usize, seed: u64, rec: &mut Recorder| -> Result<(), ValidationError> {
-        let mut sim = Simulator::new(&scenario, seed);
+        let mut sim = Simulator::with_profile(&scenario, seed, &profile);
         let mut filter = LuFilter::new(&scenario, &settings)?;
         let truth = sim.truth().error_state(filter.mechanisation());
         rec.record_filter(0, &truth, filter.kalman())?;

@@ -144,4 +144,4 @@ pub use model::{
     Mechanisation, PRINTED_FILTER_ACCEL_NOISE_VARIANCE, Scenario, TruthIntegration, noise_input,
     transition_matrix,
 };
-pub use simulation::{SensorRecord, Simulator, Truth, simulate};
+pub use simulation::{AccelerationProfile, SensorRecord, Simulator, Truth, simulate};

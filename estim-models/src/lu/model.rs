@@ -391,6 +391,7 @@ impl Mechanisation {
     }
 
     /// One step with the accelerometer reading `acceleration` over `dt`.
+    #[inline]
     pub fn step(&mut self, acceleration: f64, dt: f64) {
         self.position += self.velocity * dt + 0.5 * acceleration * dt * dt;
         self.velocity += acceleration * dt;
