@@ -6,11 +6,12 @@
 //! - **Small static sizes** (every dimension a `Const<N>`, the largest ≤
 //!   [`STATIC_NALGEBRA_MAX`]): nalgebra's fixed-size code on the stack, and our inlined
 //!   left-looking Cholesky loop. Nothing is faster for small matrices, and nothing allocates.
-//! - **Runtime sizes** (any dimension `Dyn`) and larger static sizes: faer, over zero-copy views of the same column-major
-//!   storage, writing into the destination (one-column products: our [`Matvec`] sweep). Nothing
-//!   allocates (the Cholesky factor's scratch lives in a [`CholeskyScratch`] the caller keeps).
-//!   Static sizes take this route too above [`STATIC_NALGEBRA_MAX`]: nalgebra's fixed-size
-//!   products are not blocked and lose to faer's there.
+//! - **Runtime sizes** (any dimension `Dyn`) and larger static sizes: faer, over zero-copy
+//!   views of the same column-major storage, writing into the destination (one-column
+//!   products: our `Matvec` sweep). Nothing allocates (the Cholesky factor's scratch lives in
+//!   a [`CholeskyScratch`] the caller keeps). Static sizes take this route above
+//!   [`STATIC_NALGEBRA_MAX`]: nalgebra's fixed-size products are not blocked and lose to
+//!   faer's there.
 //!
 //! faer is reached through [`Real`]'s sealed supertrait `Dense`, implemented once for `f32`
 //! and once for `f64` here: faer's generic code is compiled in this crate only, not again in
@@ -20,7 +21,7 @@
 //!
 //! Without the `std` feature there is no faer and [`Alloc`](crate::Alloc) holds for static
 //! sizes only, so every call takes the static route whatever its size; the runtime branches
-//! fall back to nalgebra's loops (correct, unoptimised) that estim then never reaches.
+//! fall back to generic loops (correct, unoptimised) that estim then never reaches.
 //!
 //! All shapes must agree (the callers check model outputs first); a mismatch here is a
 //! programmer error and panics.
@@ -669,7 +670,7 @@ impl CholeskyScratch {
 
 /// Replaces the lower triangle of the symmetric positive definite `a` by its Cholesky factor L
 /// (a = L Lᵀ): faer's for runtime sizes and static sizes above [`STATIC_NALGEBRA_MAX`], our
-/// left-looking loop below ([`left_looking_cholesky`]; without `std`, always). The strict upper
+/// left-looking loop below (`left_looking_cholesky`; without `std`, always). The strict upper
 /// triangle is left unspecified. `false` if `a` is not (numerically) positive definite or not
 /// finite, and then `a` is unspecified. (A covariance that may be only semi-definite goes to
 /// [`crate::linalg::psd_factor`] instead.)
