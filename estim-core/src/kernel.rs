@@ -1,23 +1,27 @@
 //! Internal, not public API (hidden from the docs; estim-filters uses it): the dense kernels
 //! behind every filter step, namely products into a destination, the Cholesky factor in place
-//! and triangular solves.
+//! and triangular solves. Two routes, chosen from the dimension types and sizes
+//! (`D::try_to_usize()` and the static sizes fold at compile time):
 //!
-//! - **Static sizes** (every dimension a `Const<N>`): nalgebra, on the stack. Nothing is faster
-//!   for small matrices, and nothing allocates.
-//! - **Runtime sizes** (any dimension `Dyn`): faer, over zero-copy views of the same
-//!   column-major storage, writing into the destination. Nothing allocates (the Cholesky
-//!   factor's scratch lives in a [`CholeskyScratch`] the caller keeps).
+//! - **Small static sizes** (every dimension a `Const<N>`, the largest ≤
+//!   [`STATIC_NALGEBRA_MAX`]): nalgebra's fixed-size code on the stack, and our inlined
+//!   left-looking Cholesky loop. Nothing is faster for small matrices, and nothing allocates.
+//! - **Runtime sizes** (any dimension `Dyn`) and larger static sizes: faer, over zero-copy
+//!   views of the same column-major storage, writing into the destination (one-column
+//!   products: our `Matvec` sweep). Nothing allocates (the Cholesky factor's scratch lives in
+//!   a [`CholeskyScratch`] the caller keeps). Static sizes take this route above
+//!   [`STATIC_NALGEBRA_MAX`]: nalgebra's fixed-size products are not blocked and lose to
+//!   faer's there.
 //!
-//! The choice is made from the dimension types (`D::try_to_usize()`, which the compiler folds),
-//! so static-size code compiles to pure nalgebra. faer is reached through [`Real`]'s sealed
-//! supertrait `Dense`, implemented once for `f32` and once for `f64` here: faer's generic
-//! code is compiled in this crate only, not again in every crate that calls a kernel. faer
-//! runs single-threaded (`Par::Seq`) unless the `parallel` feature is on *and* the operation
-//! is at least [`PARALLEL_THRESHOLD`] on its smallest side.
+//! faer is reached through [`Real`]'s sealed supertrait `Dense`, implemented once for `f32`
+//! and once for `f64` here: faer's generic code is compiled in this crate only, not again in
+//! every crate that calls a kernel. faer runs single-threaded (`Par::Seq`) unless the
+//! `parallel` feature is on *and* the operation is at least [`PARALLEL_THRESHOLD`] on its
+//! smallest side.
 //!
 //! Without the `std` feature there is no faer and [`Alloc`](crate::Alloc) holds for static
-//! sizes only, so every call takes the nalgebra route; the runtime branches fall back to
-//! generic nalgebra code (correct, unoptimised) that estim then never reaches.
+//! sizes only, so every call takes the static route whatever its size; the runtime branches
+//! fall back to generic loops (correct, unoptimised) that estim then never reaches.
 //!
 //! All shapes must agree (the callers check model outputs first); a mismatch here is a
 //! programmer error and panics.
@@ -34,7 +38,7 @@ use faer::linalg::triangular_solve::{
 };
 #[cfg(feature = "std")]
 use faer::{MatMut, MatRef, Par};
-use nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, OVector, allocator::Allocator};
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, allocator::Allocator};
 
 use crate::scalar::Real;
 
@@ -72,6 +76,21 @@ pub const PARALLEL_THRESHOLD: usize = 256;
 /// 10 %, UKF 6 %).
 #[cfg(feature = "std")]
 const LOWER_TRIANGLE_MIN: usize = 32;
+
+/// Static-size operations whose largest dimension is at most this run nalgebra's fixed-size
+/// code; larger ones run the runtime-size kernels on views of the same storage, as a `Dyn`
+/// operation would (with `std`; without it, nalgebra always). nalgebra's fixed-size products
+/// are unrolled, not blocked, and lose to faer's from n ≈ 12 (BENCHMARKS.md, "Static or
+/// dynamic").
+pub const STATIC_NALGEBRA_MAX: usize = 8;
+
+/// Whether an operation whose dimensions are all static (`fixed`) and whose largest dimension
+/// is `size` runs nalgebra's fixed-size code ([`STATIC_NALGEBRA_MAX`]); folded by the compiler
+/// for static sizes.
+#[inline(always)]
+fn fixed_route(fixed: bool, size: usize) -> bool {
+    fixed && (!cfg!(feature = "std") || size <= STATIC_NALGEBRA_MAX)
+}
 
 /// `true` when `D` is a compile-time dimension.
 #[inline(always)]
@@ -476,7 +495,8 @@ pub fn mul<T, R, K, C>(
     C: Dim,
     DefaultAllocator: Allocator<R, C> + Allocator<R, K> + Allocator<K, C>,
 {
-    if is_static::<R>() && is_static::<K>() && is_static::<C>() {
+    let fixed = is_static::<R>() && is_static::<K>() && is_static::<C>();
+    if fixed_route(fixed, a.nrows().max(a.ncols()).max(b.ncols())) {
         store(dst, accum, alpha, a * b);
     } else {
         runtime_product(dst, accum, alpha, a, false, b, false, false);
@@ -499,7 +519,8 @@ pub fn mul_tr<T, R, K, C>(
     C: Dim,
     DefaultAllocator: Allocator<R, C> + Allocator<R, K> + Allocator<C, K> + Allocator<K, C>,
 {
-    if is_static::<R>() && is_static::<K>() && is_static::<C>() {
+    let fixed = is_static::<R>() && is_static::<K>() && is_static::<C>();
+    if fixed_route(fixed, a.nrows().max(a.ncols()).max(b.nrows())) {
         // The operator form: for small static sizes it unrolls, where nalgebra's generic
         // `gemm` loops column by column (measured: the filters bench).
         store(dst, accum, alpha, a * b.transpose());
@@ -527,7 +548,8 @@ pub fn mul_lower<T, D, K>(
     K: Dim,
     DefaultAllocator: Allocator<D, D> + Allocator<D, K> + Allocator<K, D>,
 {
-    if is_static::<D>() && is_static::<K>() {
+    let fixed = is_static::<D>() && is_static::<K>();
+    if fixed_route(fixed, a.nrows().max(a.ncols())) {
         store(dst, accum, alpha, a * b);
     } else {
         runtime_product(dst, accum, alpha, a, false, b, false, true);
@@ -549,7 +571,8 @@ pub fn mul_tr_lower<T, D, K>(
     K: Dim,
     DefaultAllocator: Allocator<D, D> + Allocator<D, K> + Allocator<K, D>,
 {
-    if is_static::<D>() && is_static::<K>() {
+    let fixed = is_static::<D>() && is_static::<K>();
+    if fixed_route(fixed, a.nrows().max(a.ncols())) {
         store(dst, accum, alpha, a * b.transpose());
     } else {
         runtime_product(dst, accum, alpha, a, false, b, true, true);
@@ -581,9 +604,13 @@ pub(crate) fn mul_into_column<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim
         x.shape()
     );
     #[cfg(feature = "std")]
-    if !(is_static::<R>() && is_static::<RA>() && is_static::<CA>()) {
-        let y = &mut dst.as_mut_slice()[column * rows..(column + 1) * rows];
-        return T::matvec(y, accum, alpha, a.as_slice(), x.as_slice());
+    {
+        let fixed = is_static::<R>() && is_static::<RA>() && is_static::<CA>();
+        let size = rows.max(x.nrows());
+        if !fixed_route(fixed, size) {
+            let y = &mut dst.as_mut_slice()[column * rows..(column + 1) * rows];
+            return T::matvec(y, accum, alpha, a.as_slice(), x.as_slice());
+        }
     }
     column_by_dot_products(dst, column, accum, alpha, a, x);
 }
@@ -609,8 +636,9 @@ fn column_by_dot_products<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim>(
     }
 }
 
-/// Scratch memory for [`cholesky_in_place`] on runtime sizes, grown on first use for a
-/// dimension and reused after (static sizes never touch it).
+/// Scratch memory for [`cholesky_in_place`]'s faer route (runtime sizes, and static sizes above
+/// [`STATIC_NALGEBRA_MAX`]), grown on first use for a dimension and reused after (small static
+/// sizes never touch it).
 #[derive(Default)]
 pub struct CholeskyScratch {
     #[cfg(feature = "std")]
@@ -641,7 +669,8 @@ impl CholeskyScratch {
 }
 
 /// Replaces the lower triangle of the symmetric positive definite `a` by its Cholesky factor L
-/// (a = L Lᵀ): faer's for runtime sizes, nalgebra's for static sizes. The strict upper
+/// (a = L Lᵀ): faer's for runtime sizes and static sizes above [`STATIC_NALGEBRA_MAX`], our
+/// left-looking loop below (`left_looking_cholesky`; without `std`, always). The strict upper
 /// triangle is left unspecified. `false` if `a` is not (numerically) positive definite or not
 /// finite, and then `a` is unspecified. (A covariance that may be only semi-definite goes to
 /// [`crate::linalg::psd_factor`] instead.)
@@ -655,19 +684,43 @@ where
 {
     let _ = &scratch;
     #[cfg(feature = "std")]
-    if !is_static::<D>() {
+    if !fixed_route(is_static::<D>(), a.nrows()) {
         let n = a.nrows();
         let ok = T::cholesky(view_mut(a), scratch.stack::<T>(n));
-        // faer leaves NaN pivots unreported on some paths; a factor must be finite to be used.
+        // faer leaves NaN pivots unreported on some paths; a factor must be finite.
         return ok && (0..n).all(|i| a[(i, i)].is_finite());
     }
-    match Cholesky::new(a.clone_owned()) {
-        Some(chol) => {
-            *a = chol.unpack_dirty();
-            true
+    left_looking_cholesky(a)
+}
+
+/// [`cholesky_in_place`] for static sizes up to [`STATIC_NALGEBRA_MAX`] (every size without
+/// `std`): column j of L from the finished columns, lᵢⱼ = (aᵢⱼ − Σₖ₍ⱼ lᵢₖ lⱼₖ) /
+/// lⱼⱼ, each sum in a register, in place (column j reads only the original column j and the
+/// finished columns before it). The operations and order of [`crate::linalg::psd_factor`]'s
+/// loop, so a positive definite matrix gets the same bits from both, without its tolerance,
+/// pivoting and closures. Inlined, it replaced nalgebra's out-of-line `Cholesky::new` (with
+/// its copies in and out): the KF 3/2 step 933 → 908 instructions, the UKF 6/4 step 14,671 →
+/// 14,600 (BENCHMARKS.md, "Static filter steps"). `false` at a pivot that is not finite and
+/// > 0.
+#[inline(always)]
+fn left_looking_cholesky<T: Real, D: Dim>(a: &mut OMatrix<T, D, D>) -> bool
+where
+    DefaultAllocator: Allocator<D, D>,
+{
+    let n = a.nrows();
+    for j in 0..n {
+        let d = (0..j).fold(a[(j, j)], |d, k| d - a[(j, k)] * a[(j, k)]);
+        if !(d > T::zero() && d.is_finite()) {
+            return false;
         }
-        None => false,
+        let ljj = d.sqrt();
+        a[(j, j)] = ljj;
+        for i in (j + 1)..n {
+            let s = (0..j).fold(a[(i, j)], |s, k| s - a[(i, k)] * a[(j, k)]);
+            a[(i, j)] = s / ljj;
+        }
     }
+    true
 }
 
 /// Solves L X = B in place (`b` ← L⁻¹ b) with L the lower triangle of `l` (its diagonal nonzero,
@@ -678,8 +731,11 @@ where
     DefaultAllocator: Allocator<D, D> + Allocator<D, C>,
 {
     #[cfg(feature = "std")]
-    if !(is_static::<D>() && is_static::<C>()) {
-        return T::solve_lower(view(l), view_mut(b), false);
+    {
+        let size = b.nrows().max(b.ncols());
+        if !fixed_route(is_static::<D>() && is_static::<C>(), size) {
+            return T::solve_lower(view(l), view_mut(b), false);
+        }
     }
     l.solve_lower_triangular_unchecked_mut(b);
 }
@@ -695,8 +751,11 @@ pub fn solve_right_lower_transpose_in_place<T: Real, R: Dim, D: Dim>(
     DefaultAllocator: Allocator<D, D> + Allocator<R, D>,
 {
     #[cfg(feature = "std")]
-    if !(is_static::<D>() && is_static::<R>()) {
-        return T::solve_lower(view(l), view_mut(b).transpose_mut(), false);
+    {
+        let size = b.nrows().max(b.ncols());
+        if !fixed_route(is_static::<D>() && is_static::<R>(), size) {
+            return T::solve_lower(view(l), view_mut(b).transpose_mut(), false);
+        }
     }
     // Column j of X Lᵀ = B: Σₖ≤ⱼ Lⱼₖ X[:, k] = B[:, j], forward over the columns.
     let (rows, n) = b.shape();
@@ -721,8 +780,11 @@ pub fn solve_right_lower_in_place<T: Real, R: Dim, D: Dim>(
     DefaultAllocator: Allocator<D, D> + Allocator<R, D>,
 {
     #[cfg(feature = "std")]
-    if !(is_static::<D>() && is_static::<R>()) {
-        return T::solve_lower(view(l), view_mut(b).transpose_mut(), true);
+    {
+        let size = b.nrows().max(b.ncols());
+        if !fixed_route(is_static::<D>() && is_static::<R>(), size) {
+            return T::solve_lower(view(l), view_mut(b).transpose_mut(), true);
+        }
     }
     // Column j of X L = B: Σₖ≥ⱼ Lₖⱼ X[:, k] = B[:, j], backward over the columns.
     let (rows, n) = b.shape();
@@ -1046,6 +1108,39 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A static size above [`STATIC_NALGEBRA_MAX`] (12 × 12, 12 × 5) takes the runtime-size
+    /// kernels on its own storage: products, the Cholesky factor and the solves agree with
+    /// nalgebra's own fixed-size operators and `Cholesky` to round-off.
+    #[test]
+    fn large_static_sizes_match_nalgebra() {
+        use nalgebra::{SMatrix, SVector};
+        let a = SMatrix::<f64, 12, 12>::from_fn(|i, j| ((i * 5 + j * 3) as f64 * 0.7).sin());
+        let b = SMatrix::<f64, 12, 5>::from_fn(|i, j| ((i * 2 + j * 7) as f64 * 0.3).cos());
+        let s = a * a.transpose() + SMatrix::<f64, 12, 12>::identity();
+        let mut dst = SMatrix::<f64, 12, 5>::from_element(1.0);
+        mul(&mut dst, Accum::Add, 2.0, &a, &b);
+        let expected = SMatrix::<f64, 12, 5>::from_element(1.0) + 2.0 * a * b;
+        assert!((dst - expected).amax() < 1e-12);
+        let mut aat = SMatrix::<f64, 12, 12>::zeros();
+        mul_tr(&mut aat, Accum::Replace, 1.0, &a, &a);
+        assert!((aat - a * a.transpose()).amax() < 1e-12);
+        let mut x = SVector::<f64, 12>::zeros();
+        let v = SVector::<f64, 12>::from_fn(|i, _| i as f64 - 5.5);
+        mul(&mut x, Accum::Replace, 1.0, &a, &v);
+        assert!((x - a * v).amax() < 1e-12);
+        let mut l = s;
+        let mut scratch = CholeskyScratch::default();
+        assert!(cholesky_in_place(&mut l, &mut scratch));
+        let reference = s.cholesky().expect("positive definite").unpack();
+        assert!((l.lower_triangle() - reference).amax() < 1e-12);
+        let mut y = b;
+        solve_lower_in_place(&l, &mut y);
+        assert!((reference * y - b).amax() < 1e-10);
+        let mut bad = s;
+        bad[(11, 11)] = -1.0;
+        assert!(!cholesky_in_place(&mut bad, &mut scratch));
     }
 
     #[test]

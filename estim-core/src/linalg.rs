@@ -11,7 +11,7 @@ use nalgebra::{
 };
 
 use crate::error::{Error, Quantity, Result, Stage};
-use crate::kernel::{CholeskyScratch, cholesky_in_place, copy, is_static};
+use crate::kernel::{CholeskyScratch, cholesky_in_place, copy};
 use crate::scalar::{Real, real};
 
 /// Whether every entry of `m` is finite. A branch-free scan of the contiguous storage
@@ -134,9 +134,11 @@ fn tolerance_for<T: Real>(n: usize, max_diag: T) -> T {
 /// negative direction is C rejected. Either way the unscented and sampled propagators get a
 /// valid square root, and states that are known exactly (zero variance) are allowed.
 ///
-/// This is the one factorisation of a covariance in the library (`lower_factor_in_place`);
-/// the runtime-size fast path of [`psd_factor_into`] and the update's innovation covariance use
-/// faer's Cholesky factor, which agrees with it up to round-off on positive definite matrices.
+/// This is the one semi-definite factorisation of a covariance in the library
+/// (`lower_factor_in_place`); the fast path of [`psd_factor_into`] and the update's innovation
+/// covariance use the plain Cholesky factor ([`cholesky_in_place`]: the same loop without the
+/// tolerance at small sizes, bit for bit the same when every pivot exceeds it; faer's at larger
+/// ones, equal up to round-off).
 ///
 /// ```
 /// use estim_core::{psd_factor, Stage};
@@ -179,10 +181,13 @@ where
     Ok(root)
 }
 
-/// [`psd_factor`] into `out`. For runtime sizes it first tries faer's Cholesky factor in place
+/// [`psd_factor`] into `out`. It first tries the plain Cholesky factor in place
 /// ([`cholesky_in_place`], allocation-free with a sized `scratch`), which succeeds for every
-/// positive definite C and gives the same lower factor up to round-off; only a semi-definite
-/// C falls back to [`psd_factor`] (which allocates). Static sizes use [`psd_factor`] directly.
+/// positive definite C and gives the same lower factor up to round-off; only a semi-definite C
+/// falls back to [`psd_factor`] (which allocates for runtime sizes). For small static sizes
+/// the plain factor is [`psd_factor`]'s own loop inlined, without its tolerance (trying it
+/// first took the UKF 6/4 step from 15,233 to 14,600 instructions; BENCHMARKS.md, "Static
+/// filter steps").
 pub fn psd_factor_into<T: Real, D: Dim>(
     c: &OMatrix<T, D, D>,
     out: &mut OMatrix<T, D, D>,
@@ -192,7 +197,7 @@ pub fn psd_factor_into<T: Real, D: Dim>(
 where
     DefaultAllocator: Allocator<D> + Allocator<D, D>,
 {
-    if !is_static::<D>() && out.shape() == c.shape() {
+    if out.shape() == c.shape() {
         copy(out, c);
         if cholesky_in_place(out, scratch) {
             out.fill_upper_triangle(T::zero(), 1);

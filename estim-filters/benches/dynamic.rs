@@ -1,28 +1,34 @@
-//! One filter step (predict + update) of the KF, EKF and UKF at runtime sizes n = 12, 24, 50,
-//! 100, 200 states with m = n/2 measurements, measured four ways side by side:
+//! One filter step (predict + update) of the KF, EKF and UKF at runtime sizes n = 2, 4, 6, 12,
+//! 16, 24, 50, 100, 200 states with m = n/2 measurements (1, 2, 3, 6, 8, …), measured five ways
+//! side by side:
 //!
 //! - `estim`: the library through its public API with `N = M = Dyn` ([`DVector`], [`DMatrix`]):
 //!   [`KalmanFilter`], [`Ekf`], [`Ukf`], calling [`Predict::predict`] then
 //!   [`Update::update_into`] with one [`UpdateReport`] made before timing (`update` would
 //!   allocate a fresh report each call). The bench's nonlinear models implement every `_into`
 //!   method in place, as the library's linear models do, so a `Dyn` step allocates nothing.
-//! - `estim_static`: the same with static sizes (`Const<12>`/`Const<6>`, `Const<24>`/`Const<12>`,
-//!   `Const<50>`/`Const<25>`; n = 12, 24, 50 only), for the static/dynamic crossover.
+//! - `estim_static`: the same with static sizes (`Const<n>`/`Const<n/2>` for n = 2, 4, 6, 12,
+//!   16, 24, 50), for the static/dynamic crossover and the static reference at small n.
 //! - `dmatrix`: a hand-written step with nalgebra `DMatrix` operator formulas, allocating
 //!   freely, as a user would write it (no estim code).
+//! - `dmatrix_prealloc`: the same algebra on nalgebra `DMatrix`es with every buffer (model
+//!   outputs, Jacobians and their transposes, the sigma-point deviations) allocated once before
+//!   timing, as a careful user would write it: `mul_to`, `gemm`, `gemm_tr`, `gemv_tr`, `ger`,
+//!   `transpose_to`, nalgebra's `Cholesky` on the moved buffer (`unpack_dirty` gives the same
+//!   storage back) and its in-place triangular solves. The baseline of the small sizes.
 //! - `faer`: a hand-written step with faer 0.24, single-threaded (`Par::Seq`), every buffer
 //!   (including the model outputs and the Cholesky scratch) allocated once before timing:
 //!   `matmul` into preallocated matrices, `cholesky_in_place`, triangular solves in place,
 //!   transposes as free views.
 //!
 //! **Names.** One criterion group per filter and size, `kf/n=12` … `ukf/n=200`, holding the
-//! functions `estim`, `estim_static`, `dmatrix`, `faer`; so the benchmark ids are e.g.
-//! `ukf/n=200/faer`.
+//! functions `estim`, `estim_static`, `dmatrix`, `dmatrix_prealloc`, `faer`; so the benchmark
+//! ids are e.g. `ukf/n=200/faer`.
 //!
 //! **Commands.**
 //!
 //! ```text
-//! # everything (≈ 3.5 min on the shared 2-core box; results in target/criterion/)
+//! # everything (≈ 8 min on the shared 2-core box; results in target/criterion/)
 //! cargo bench -p estim-filters --bench dynamic
 //! # one group or one id (criterion's regex filter; anchor it, or kf/ matches ekf/ and ukf/)
 //! cargo bench -p estim-filters --bench dynamic -- '^ukf/n=100/'
@@ -43,7 +49,7 @@
 //! [`STEPS`] readings of a simulation of the true system (with noise drawn from Q and R), one
 //! set for the linear and one for the nonlinear system.
 //!
-//! **The algebra** (all three ways compute it):
+//! **The algebra** (every way computes it):
 //!
 //! ```text
 //! KF/EKF predict: x⁻ = f(x); F = ∂f/∂x(x); A = F P; P⁻ = A Fᵀ + Q; P⁻ ← (P⁻ + P⁻ᵀ)/2
@@ -93,7 +99,7 @@ use criterion::{Criterion, SamplingMode, criterion_group, criterion_main};
 use estim_core::kernel::{self, is_static};
 use estim_core::nalgebra::allocator::Allocator;
 use estim_core::nalgebra::{
-    Const, DMatrix, DVector, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U0,
+    Const, DMatrix, DVector, DVectorViewMut, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U0,
 };
 use estim_core::{
     Alloc, Gaussian, LinearMeasurement, LinearProcess, MeasurementJacobian, MeasurementModel,
@@ -115,7 +121,7 @@ use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 
 /// State dimensions; m = n/2.
-const SIZES: [usize; 5] = [12, 24, 50, 100, 200];
+const SIZES: [usize; 9] = [2, 4, 6, 12, 16, 24, 50, 100, 200];
 
 /// Recorded measurements per system; the filters are reset to the prior after each pass.
 const STEPS: usize = 200;
@@ -606,13 +612,29 @@ fn bench_estim<N: Dim, M: Dim>(
     }
 }
 
-/// `Some(body)` with `models` bound to the static-size [`Models`] for n = 12, 24, 50; `None`
-/// for the other sizes.
+/// `Some(body)` with `models` bound to the static-size [`Models`] for n = 2, 4, 6, 12, 16, 24,
+/// 50; `None` for the other sizes.
 macro_rules! with_static_models {
     ($problem:expr, |$models:ident| $body:expr) => {
         match $problem.n {
+            2 => {
+                let $models = Models::new($problem, Const::<2>, Const::<1>);
+                Some($body)
+            }
+            4 => {
+                let $models = Models::new($problem, Const::<4>, Const::<2>);
+                Some($body)
+            }
+            6 => {
+                let $models = Models::new($problem, Const::<6>, Const::<3>);
+                Some($body)
+            }
             12 => {
                 let $models = Models::new($problem, Const::<12>, Const::<6>);
+                Some($body)
+            }
+            16 => {
+                let $models = Models::new($problem, Const::<16>, Const::<8>);
                 Some($body)
             }
             24 => {
@@ -747,6 +769,324 @@ fn dm_prior(n: usize) -> DmEstimate {
     DmEstimate {
         x: DVector::zeros(n),
         p: DMatrix::identity(n, n),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Baseline 1b: nalgebra DMatrix, every buffer allocated once
+// ---------------------------------------------------------------------------------------------
+
+/// A model function for the preallocated `DMatrix` baseline: writes into given outputs.
+trait PaFunction {
+    /// out = g(x).
+    fn eval(&self, x: &DVector<f64>, out: DVectorViewMut<'_, f64>);
+    /// ∂g/∂x at x, in `buf` or borrowed from the model (constant Jacobians are not copied).
+    fn jacobian<'a>(&'a self, x: &DVector<f64>, buf: &'a mut DMatrix<f64>) -> &'a DMatrix<f64>;
+}
+
+/// g(x) = A x.
+struct PaLinear<'a>(&'a DMatrix<f64>);
+
+impl PaFunction for PaLinear<'_> {
+    fn eval(&self, x: &DVector<f64>, mut out: DVectorViewMut<'_, f64>) {
+        self.0.mul_to(x, &mut out);
+    }
+
+    fn jacobian<'a>(&'a self, _: &DVector<f64>, _: &'a mut DMatrix<f64>) -> &'a DMatrix<f64> {
+        self.0
+    }
+}
+
+/// g(x) = F x + ε sin x.
+struct PaSineProcess<'a>(&'a DMatrix<f64>);
+
+impl PaFunction for PaSineProcess<'_> {
+    fn eval(&self, x: &DVector<f64>, mut out: DVectorViewMut<'_, f64>) {
+        self.0.mul_to(x, &mut out);
+        out.zip_apply(x, |yi, xi| *yi += EPS * xi.sin());
+    }
+
+    fn jacobian<'a>(&'a self, x: &DVector<f64>, buf: &'a mut DMatrix<f64>) -> &'a DMatrix<f64> {
+        buf.copy_from(self.0);
+        for i in 0..x.len() {
+            buf[(i, i)] += EPS * x[i].cos();
+        }
+        buf
+    }
+}
+
+/// g(x) = H x + ε sin(H x).
+struct PaSineMeasurement<'a>(&'a DMatrix<f64>);
+
+impl PaFunction for PaSineMeasurement<'_> {
+    fn eval(&self, x: &DVector<f64>, mut out: DVectorViewMut<'_, f64>) {
+        self.0.mul_to(x, &mut out);
+        out.apply(|v| *v += EPS * v.sin());
+    }
+
+    /// Row i of H scaled by 1 + ε cos((H x)ᵢ) (the dot product per row: no scratch).
+    fn jacobian<'a>(&'a self, x: &DVector<f64>, buf: &'a mut DMatrix<f64>) -> &'a DMatrix<f64> {
+        buf.copy_from(self.0);
+        for i in 0..self.0.nrows() {
+            let s = 1.0 + EPS * self.0.row(i).tr_dot(x).cos();
+            buf.row_mut(i).scale_mut(s);
+        }
+        buf
+    }
+}
+
+/// Every buffer of the preallocated `DMatrix` steps, allocated once.
+#[derive(Clone)]
+struct PaWork {
+    /// x⁻ while P⁻ is computed from x (n).
+    x_pred: DVector<f64>,
+    /// ∂f/∂x (n × n) and its transpose.
+    jf: DMatrix<f64>,
+    jft: DMatrix<f64>,
+    /// ∂h/∂x (m × n) and its transpose.
+    jh: DMatrix<f64>,
+    jht: DMatrix<f64>,
+    /// F P (n × n).
+    a: DMatrix<f64>,
+    /// ẑ (m).
+    z_hat: DVector<f64>,
+    /// B = H P⁻ or Pₓᵤᵀ (m × n).
+    b: DMatrix<f64>,
+    /// S (m × m) and its factor L (lower triangle).
+    s: DMatrix<f64>,
+    l: DMatrix<f64>,
+    /// ν, L⁻¹ ν (m).
+    nu: DVector<f64>,
+    w: DVector<f64>,
+    /// Kᵀ and S Kᵀ (m × n).
+    kt: DMatrix<f64>,
+    skt: DMatrix<f64>,
+    /// X = (Kᵀ)ᵀ (−B) (n × n).
+    t: DMatrix<f64>,
+    ut_process: PaUnscented,
+    ut_measurement: PaUnscented,
+}
+
+/// Buffers of one unscented transform from dimension n to dimension k.
+#[derive(Clone)]
+struct PaUnscented {
+    /// √c L (n × n, upper triangle zero) and its transpose.
+    l: DMatrix<f64>,
+    lt: DMatrix<f64>,
+    /// A sigma point (n).
+    sigma: DVector<f64>,
+    /// y₀ (k).
+    y0: DVector<f64>,
+    /// [D₊ D₋] (k × 2n) and its transpose.
+    d: DMatrix<f64>,
+    dt: DMatrix<f64>,
+    /// d̄ (k).
+    d_bar: DVector<f64>,
+    /// The output covariance (k × k).
+    cov: DMatrix<f64>,
+    /// D₊ − D₋ (k × n).
+    diff: DMatrix<f64>,
+}
+
+impl PaUnscented {
+    fn new(n: usize, k: usize) -> Self {
+        Self {
+            l: DMatrix::zeros(n, n),
+            lt: DMatrix::zeros(n, n),
+            sigma: DVector::zeros(n),
+            y0: DVector::zeros(k),
+            d: DMatrix::zeros(k, 2 * n),
+            dt: DMatrix::zeros(2 * n, k),
+            d_bar: DVector::zeros(k),
+            cov: DMatrix::zeros(k, k),
+            diff: DMatrix::zeros(k, n),
+        }
+    }
+}
+
+impl PaWork {
+    fn new(n: usize, m: usize) -> Self {
+        Self {
+            x_pred: DVector::zeros(n),
+            jf: DMatrix::zeros(n, n),
+            jft: DMatrix::zeros(n, n),
+            jh: DMatrix::zeros(m, n),
+            jht: DMatrix::zeros(n, m),
+            a: DMatrix::zeros(n, n),
+            z_hat: DVector::zeros(m),
+            b: DMatrix::zeros(m, n),
+            s: DMatrix::zeros(m, m),
+            l: DMatrix::zeros(m, m),
+            nu: DVector::zeros(m),
+            w: DVector::zeros(m),
+            kt: DMatrix::zeros(m, n),
+            skt: DMatrix::zeros(m, n),
+            t: DMatrix::zeros(n, n),
+            ut_process: PaUnscented::new(n, n),
+            ut_measurement: PaUnscented::new(n, m),
+        }
+    }
+}
+
+/// A ← (A + Aᵀ)/2 in place.
+fn pa_symmetrize(a: &mut DMatrix<f64>) {
+    for j in 0..a.ncols() {
+        for i in (j + 1)..a.nrows() {
+            let v = (a[(i, j)] + a[(j, i)]) * 0.5;
+            a[(i, j)] = v;
+            a[(j, i)] = v;
+        }
+    }
+}
+
+/// `a` ← its lower Cholesky factor, in place (nalgebra's `Cholesky` takes the matrix by value
+/// and gives the same storage back: no allocation).
+fn pa_cholesky(a: &mut DMatrix<f64>) {
+    let owned = std::mem::replace(a, DMatrix::zeros(0, 0));
+    *a = owned.cholesky().expect("positive definite").unpack_dirty();
+}
+
+/// The update from ws.z_hat, ws.b (B) and ws.s (S, R included, symmetrised); returns the NIS
+/// (ln p(z) goes through `black_box`).
+fn pa_kalman_update(e: &mut DmEstimate, ws: &mut PaWork, z: &DVector<f64>) -> f64 {
+    let (n, m) = (e.x.len(), z.len());
+    ws.l.copy_from(&ws.s);
+    pa_cholesky(&mut ws.l);
+    ws.nu.copy_from(z);
+    ws.nu -= &ws.z_hat;
+    ws.w.copy_from(&ws.nu);
+    ws.l.solve_lower_triangular_unchecked_mut(&mut ws.w);
+    let nis = ws.w.norm_squared();
+    let log_det = 2.0 * (0..m).map(|i| ws.l[(i, i)].ln()).sum::<f64>();
+    black_box(-0.5 * (nis + log_det + m as f64 * (2.0 * PI).ln()));
+    ws.kt.copy_from(&ws.b);
+    ws.l.solve_lower_triangular_unchecked_mut(&mut ws.kt);
+    ws.l.tr_solve_lower_triangular_unchecked_mut(&mut ws.kt);
+    e.x.gemv_tr(1.0, &ws.kt, &ws.nu, 1.0);
+    // X = (Kᵀ)ᵀ (−B); P⁺ = (P + X) + Xᵀ elementwise, then + (S Kᵀ)ᵀ Kᵀ, symmetrised.
+    ws.t.gemm_tr(-1.0, &ws.kt, &ws.b, 0.0);
+    for j in 0..n {
+        for i in 0..n {
+            e.p[(i, j)] = (e.p[(i, j)] + ws.t[(i, j)]) + ws.t[(j, i)];
+        }
+    }
+    ws.s.mul_to(&ws.kt, &mut ws.skt);
+    e.p.gemm_tr(1.0, &ws.skt, &ws.kt, 1.0);
+    pa_symmetrize(&mut e.p);
+    nis
+}
+
+/// KF/EKF predict.
+fn pa_linearized_predict(
+    e: &mut DmEstimate,
+    ws: &mut PaWork,
+    f: &impl PaFunction,
+    q: &DMatrix<f64>,
+) {
+    f.eval(&e.x, ws.x_pred.column_mut(0));
+    let jf = f.jacobian(&e.x, &mut ws.jf);
+    jf.mul_to(&e.p, &mut ws.a);
+    jf.transpose_to(&mut ws.jft);
+    e.p.copy_from(q);
+    e.p.gemm(1.0, &ws.a, &ws.jft, 1.0);
+    pa_symmetrize(&mut e.p);
+    e.x.copy_from(&ws.x_pred);
+}
+
+/// KF/EKF update.
+fn pa_linearized_update(
+    e: &mut DmEstimate,
+    ws: &mut PaWork,
+    h: &impl PaFunction,
+    r: &DMatrix<f64>,
+    z: &DVector<f64>,
+) -> f64 {
+    h.eval(&e.x, ws.z_hat.column_mut(0));
+    let jh = h.jacobian(&e.x, &mut ws.jh);
+    jh.mul_to(&e.p, &mut ws.b);
+    jh.transpose_to(&mut ws.jht);
+    ws.s.copy_from(r);
+    ws.s.gemm(1.0, &ws.b, &ws.jht, 1.0);
+    pa_symmetrize(&mut ws.s);
+    pa_kalman_update(e, ws, z)
+}
+
+/// The unscented transform of g at (x, P) into `u` (mean in `u.y0`, covariance in `u.cov`);
+/// with `b`, also B = Pₓᵤᵀ = w (D₊ − D₋) Lᵀ.
+fn pa_unscented(
+    x: &DVector<f64>,
+    p: &DMatrix<f64>,
+    g: &impl PaFunction,
+    u: &mut PaUnscented,
+    b: Option<&mut DMatrix<f64>>,
+) {
+    let n = x.len();
+    let c = ALPHA * ALPHA * (n as f64 + KAPPA);
+    u.l.copy_from(p);
+    pa_cholesky(&mut u.l);
+    let sc = c.sqrt();
+    for j in 0..n {
+        for i in 0..j {
+            u.l[(i, j)] = 0.0;
+        }
+        for i in j..n {
+            u.l[(i, j)] *= sc;
+        }
+    }
+    g.eval(x, u.y0.column_mut(0));
+    for j in 0..n {
+        for (col, sign) in [(j, 1.0), (n + j, -1.0)] {
+            u.sigma.copy_from(x);
+            u.sigma.axpy(sign, &u.l.column(j), 1.0);
+            g.eval(&u.sigma, u.d.column_mut(col));
+            u.d.column_mut(col).axpy(-1.0, &u.y0, 1.0);
+        }
+    }
+    let w = 1.0 / (2.0 * c);
+    u.d_bar.fill(0.0);
+    for j in 0..2 * n {
+        u.d_bar += u.d.column(j);
+    }
+    u.d_bar *= w;
+    u.d.transpose_to(&mut u.dt);
+    u.cov.gemm(w, &u.d, &u.dt, 0.0);
+    u.cov.ger(BETA - ALPHA * ALPHA, &u.d_bar, &u.d_bar, 1.0);
+    u.y0 += &u.d_bar;
+    if let Some(b) = b {
+        u.diff.copy_from(&u.d.columns(0, n));
+        u.diff -= &u.d.columns(n, n);
+        u.l.transpose_to(&mut u.lt);
+        b.gemm(w, &u.diff, &u.lt, 0.0);
+    }
+}
+
+fn pa_ukf_step(pr: &Problem, e: &mut DmEstimate, ws: &mut PaWork, z: &DVector<f64>) -> f64 {
+    let u = &mut ws.ut_process;
+    pa_unscented(&e.x, &e.p, &PaSineProcess(&pr.f), u, None);
+    e.x.copy_from(&u.y0);
+    e.p.copy_from(&u.cov);
+    e.p += &pr.q;
+    pa_symmetrize(&mut e.p);
+    let u = &mut ws.ut_measurement;
+    pa_unscented(&e.x, &e.p, &PaSineMeasurement(&pr.h), u, Some(&mut ws.b));
+    ws.z_hat.copy_from(&u.y0);
+    ws.s.copy_from(&u.cov);
+    ws.s += &pr.r;
+    pa_symmetrize(&mut ws.s);
+    pa_kalman_update(e, ws, z)
+}
+
+fn pa_step(kind: Kind, pr: &Problem, e: &mut DmEstimate, ws: &mut PaWork, i: usize) -> f64 {
+    match kind {
+        Kind::Kf => {
+            pa_linearized_predict(e, ws, &PaLinear(&pr.f), &pr.q);
+            pa_linearized_update(e, ws, &PaLinear(&pr.h), &pr.r, &pr.z_linear[i])
+        }
+        Kind::Ekf => {
+            pa_linearized_predict(e, ws, &PaSineProcess(&pr.f), &pr.q);
+            pa_linearized_update(e, ws, &PaSineMeasurement(&pr.h), &pr.r, &pr.z_sine[i])
+        }
+        Kind::Ukf => pa_ukf_step(pr, e, ws, &pr.z_sine[i]),
     }
 }
 
@@ -1274,6 +1614,13 @@ fn check(kind: Kind, pr: &Problem, models: &Models<Dyn, Dyn>, fm: &FaerModels) {
         faer_nis,
     );
 
+    let mut pa = dm_prior(n);
+    let mut pws = PaWork::new(n, m);
+    let pa_nis = (0..CHECK_STEPS)
+        .map(|k| pa_step(kind, pr, &mut pa, &mut pws, k))
+        .collect();
+    let pa: Outcome = (pa.x, pa.p, pa_nis);
+
     let tolerance = TOLERANCE;
     let mut gaps = vec![
         (
@@ -1281,6 +1628,7 @@ fn check(kind: Kind, pr: &Problem, models: &Models<Dyn, Dyn>, fm: &FaerModels) {
             outcome_gap(&estim_run(kind, models, CHECK_STEPS), &reference),
         ),
         ("faer", outcome_gap(&faer, &reference)),
+        ("dmatrix_prealloc", outcome_gap(&pa, &reference)),
     ];
     if let Some(gap) = with_static_models!(pr, |s| outcome_gap(
         &estim_run(kind, &s, CHECK_STEPS),
@@ -1362,6 +1710,10 @@ fn dynamic(c: &mut Criterion) {
             let pr = &problem;
             group.bench("dmatrix", &dm_prior(n), |e, i| {
                 dm_step(kind, black_box(pr), e, i)
+            });
+            let mut pws = PaWork::new(n, problem.m);
+            group.bench("dmatrix_prealloc", &dm_prior(n), |e, i| {
+                pa_step(kind, black_box(pr), e, &mut pws, i)
             });
             let mut ws = FaerWork::new(n, problem.m);
             let fm = &fm;
