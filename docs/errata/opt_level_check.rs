@@ -7,9 +7,9 @@
 //! built by the workspace.
 //!
 //! To run it: copy it to `estim-filters/benches/opt_level_check.rs`, add
-//! `[[bench]] name = "opt_level_check" harness = false` to `estim-filters/Cargo.toml`, and
+//! `[[bench]] name = "opt_level_check" path = "opt_level_check.rs" harness = false` to `estim-filters/benches/Cargo.toml`, and
 //! compare the output of the binary built by
-//! `cargo rustc -p estim-filters --profile bench --bench opt_level_check` with and without
+//! `cargo rustc -p estim-filters-benches --profile bench --bench opt_level_check` with and without
 //! `-- -C opt-level=1` (the filter code is generic, so it is all compiled in this crate).
 //! At `05d49fa`: all 17 × 2 hashes identical between opt-level 1 and 3, and identical to
 //! those of `df5c075` at opt-level 1. (At `df5c075` this file did not show the miscompile:

@@ -3,11 +3,11 @@
 //! its trajectory and the EKF lockstep, no criterion. Not built by the workspace.
 //!
 //! To run it: copy it to `estim-filters/benches/slp_repro.rs`, add
-//! `[[bench]] name = "slp_repro" harness = false` to `estim-filters/Cargo.toml`, restore the
+//! `[[bench]] name = "slp_repro" path = "slp_repro.rs" harness = false` to `estim-filters/benches/Cargo.toml`, restore the
 //! inlined `Standard`/`Symmetrized` arms of `update::apply` (as at `df5c075`) and
 //!
 //! ```text
-//! cargo rustc -p estim-filters --profile bench --bench slp_repro            # gap 4.1e-2
+//! cargo rustc -p estim-filters-benches --profile bench --bench slp_repro            # gap 4.1e-2
 //! cargo rustc ... -- -C no-vectorize-slp                                    # 6.7e-16
 //! cargo rustc ... -- -C codegen-units=1   (or -C opt-level=1, -C opt-level=2) # 6.7e-16
 //! RUSTC_BOOTSTRAP=1 cargo rustc -j1 ... -- -C llvm-args=-debug-counter=slp-vectorized=0-N

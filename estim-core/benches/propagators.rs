@@ -18,7 +18,7 @@
 //! itself (value, Jacobian, Hessians), so the propagator times can be split into model
 //! evaluations and propagator work.
 //!
-//! Run with `cargo bench -p estim-core --bench propagators`.
+//! Run with `cargo bench -p estim-core-benches --bench propagators`.
 
 use std::hint::black_box;
 use std::time::Duration;

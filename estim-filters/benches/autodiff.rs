@@ -21,7 +21,7 @@
 //! Targets (issue 19): AD EKF within 2× of the analytic EKF, AD second-order EKF within 4×.
 //! Ratios in BENCHMARKS.md.
 //!
-//! Run with `cargo bench -p estim-filters --bench autodiff`.
+//! Run with `cargo bench -p estim-filters-benches --bench autodiff`.
 
 mod common;
 

@@ -29,12 +29,12 @@
 //!
 //! ```text
 //! # everything (≈ 8 min on the shared 2-core box; results in target/criterion/)
-//! cargo bench -p estim-filters --bench dynamic
+//! cargo bench -p estim-filters-benches --bench dynamic
 //! # one group or one id (criterion's regex filter; anchor it, or kf/ matches ekf/ and ukf/)
-//! cargo bench -p estim-filters --bench dynamic -- '^ukf/n=100/'
+//! cargo bench -p estim-filters-benches --bench dynamic -- '^ukf/n=100/'
 //! # counted mode: no criterion; only the named (filter, n) is set up and cross-checked (5 steps),
 //! # then the named variant runs <count> steps. For CPU time per step, run the binary under perf:
-//! BIN=$(cargo bench -p estim-filters --bench dynamic --no-run --message-format=json \
+//! BIN=$(cargo bench -p estim-filters-benches --bench dynamic --no-run --message-format=json \
 //!       | jq -r 'select(.executable != null) | .executable')
 //! DYNAMIC_BENCH_STEPS=ukf/n=200/estim=200 perf stat -e task-clock "$BIN" --bench
 //! # (count = 0 measures the set-up and the cross-check alone, to subtract)

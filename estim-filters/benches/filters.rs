@@ -54,7 +54,7 @@
 //! `FILTERS_BENCH_STEPS=<group>/<name>=<count>` to run one variant for `count` steps outside
 //! criterion (see [`common`]).
 //!
-//! Run with `cargo bench -p estim-filters --bench filters`.
+//! Run with `cargo bench -p estim-filters-benches --bench filters`.
 
 mod common;
 

@@ -15,7 +15,7 @@
 //! - `parallel_1_thread`, `parallel_2_threads`: [`MonteCarlo::run_parallel`] in a rayon pool
 //!   of that size (feature `parallel`; bit-identical to `sequential`).
 //!
-//! Run: `cargo bench -p estim-filters --features parallel --bench monte_carlo`.
+//! Run: `cargo bench -p estim-filters-benches --features parallel --bench monte_carlo`.
 
 use std::hint::black_box;
 use std::time::Duration;

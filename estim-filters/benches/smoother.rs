@@ -5,7 +5,7 @@
 //! a linear Kalman filter on a stable n-state system with m = n/2 measured components: static
 //! n = 6, runtime n = 50 and 200.
 //!
-//! Run: `cargo bench -p estim-filters --bench smoother`; the figure is the ratio of the two
+//! Run: `cargo bench -p estim-filters-benches --bench smoother`; the figure is the ratio of the two
 //! medians of each size (BENCHMARKS.md, "Smoother").
 
 use std::hint::black_box;

@@ -6,7 +6,7 @@
 //! i of a recorded 64-step trajectory; after step 64 it is reset to the prior. The estimate
 //! passes through `black_box` after every step.
 //!
-//! Run with `cargo bench -p estim-filters --bench square_root`.
+//! Run with `cargo bench -p estim-filters-benches --bench square_root`.
 
 use std::hint::black_box;
 
