@@ -264,6 +264,42 @@ where
         &self.factor
     }
 
+    /// Replaces the state x̂, keeping the factor S as it is: the reset of a closed-loop
+    /// error-state filter (after feeding the estimated error into the nominal solution,
+    /// x̂ ← 0 with P unchanged). [`Estimator::reset`] would factorise S Sᵀ again, which in
+    /// `f32` can lose the small directions the factor still holds.
+    ///
+    /// A `state` of the wrong length (runtime sizes) is
+    /// [`Error::DimensionMismatch`], one with NaN or ±∞ is [`Error::NonFinite`] (quantity
+    /// `Mean`); either leaves the filter unchanged.
+    ///
+    /// ```
+    /// use estim_core::{Gaussian, nalgebra::{Matrix2, Vector2}};
+    /// use estim_filters::{Estimator, SrKalmanFilter};
+    ///
+    /// let prior = Gaussian::new(Vector2::new(1.0, 2.0), Matrix2::new(4.0, 2.0, 2.0, 2.0))?;
+    /// let mut kf = SrKalmanFilter::new(prior);
+    /// let factor = *kf.factor();
+    /// kf.set_state(Vector2::zeros())?;
+    /// assert_eq!(kf.state(), &Vector2::zeros());
+    /// assert_eq!(kf.factor(), &factor);
+    /// assert!(kf.set_state(Vector2::new(f64::NAN, 0.0)).is_err());
+    /// assert_eq!(kf.state(), &Vector2::zeros());
+    /// # Ok::<(), estim_core::Error>(())
+    /// ```
+    pub fn set_state(&mut self, state: OVector<T, N>) -> Result<()> {
+        let n = self.state.nrows();
+        ensure_shape(&state, n, 1, Stage::Construction, Quantity::Mean)?;
+        if !all_finite(&state) {
+            return Err(Error::NonFinite {
+                stage: Stage::Construction,
+                quantity: Quantity::Mean,
+            });
+        }
+        self.state = state;
+        Ok(())
+    }
+
     fn ensure_factored(&self, stage: Stage) -> Result<()> {
         if self.factored {
             Ok(())
