@@ -4,14 +4,16 @@
 //! (`D::try_to_usize()` and the static sizes fold at compile time):
 //!
 //! - **Small static sizes** (every dimension a `Const<N>`, the largest ≤
-//!   [`STATIC_NALGEBRA_MAX`]): nalgebra's fixed-size code on the stack, and our inlined
-//!   left-looking Cholesky loop. Nothing is faster for small matrices, and nothing allocates.
-//! - **Runtime sizes** (any dimension `Dyn`) and larger static sizes: faer, over zero-copy
-//!   views of the same column-major storage, writing into the destination (one-column
-//!   products: our `Matvec` sweep). Nothing allocates (the Cholesky factor's scratch lives in
-//!   a [`CholeskyScratch`] the caller keeps). Static sizes take this route above
+//!   [`STATIC_NALGEBRA_MAX`]): nalgebra's fixed-size code on the stack. Nothing is faster for
+//!   small matrices, and nothing allocates.
+//! - **Runtime sizes** (any dimension `Dyn`) and larger static sizes: faer's products, over
+//!   zero-copy views of the same column-major storage, writing into the destination
+//!   (one-column products: our `Matvec` sweep). Static sizes take this route above
 //!   [`STATIC_NALGEBRA_MAX`]: nalgebra's fixed-size products are not blocked and lose to
 //!   faer's there.
+//! - **Cholesky**: faer's for runtime sizes (its scratch lives in a [`CholeskyScratch`] the
+//!   caller keeps, so nothing allocates after the first use), our inlined left-looking loop for
+//!   static sizes of every size (no scratch: a static-size step allocates nothing).
 //!
 //! faer is reached through [`Real`]'s sealed supertrait `Dense`, implemented once for `f32`
 //! and once for `f64` here: faer's generic code is compiled in this crate only, not again in
@@ -636,9 +638,8 @@ fn column_by_dot_products<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim>(
     }
 }
 
-/// Scratch memory for [`cholesky_in_place`]'s faer route (runtime sizes, and static sizes above
-/// [`STATIC_NALGEBRA_MAX`]), grown on first use for a dimension and reused after (small static
-/// sizes never touch it).
+/// Scratch memory for [`cholesky_in_place`]'s faer route (runtime sizes), grown on first use
+/// for a dimension and reused after (static sizes never touch it).
 #[derive(Default)]
 pub struct CholeskyScratch {
     #[cfg(feature = "std")]
@@ -669,8 +670,9 @@ impl CholeskyScratch {
 }
 
 /// Replaces the lower triangle of the symmetric positive definite `a` by its Cholesky factor L
-/// (a = L Lᵀ): faer's for runtime sizes and static sizes above [`STATIC_NALGEBRA_MAX`], our
-/// left-looking loop below (`left_looking_cholesky`; without `std`, always). The strict upper
+/// (a = L Lᵀ): faer's for runtime sizes, our left-looking loop for static sizes of any size
+/// (`left_looking_cholesky`): faer's needs scratch memory, which a static-size step, whose
+/// buffers are locals, would allocate at every call. The strict upper
 /// triangle is left unspecified. `false` if `a` is not (numerically) positive definite or not
 /// finite, and then `a` is unspecified. (A covariance that may be only semi-definite goes to
 /// [`crate::linalg::psd_factor`] instead.)
@@ -684,7 +686,7 @@ where
 {
     let _ = &scratch;
     #[cfg(feature = "std")]
-    if !fixed_route(is_static::<D>(), a.nrows()) {
+    if !is_static::<D>() {
         let n = a.nrows();
         let ok = T::cholesky(view_mut(a), scratch.stack::<T>(n));
         // faer leaves NaN pivots unreported on some paths; a factor must be finite.
@@ -693,8 +695,7 @@ where
     left_looking_cholesky(a)
 }
 
-/// [`cholesky_in_place`] for static sizes up to [`STATIC_NALGEBRA_MAX`] (every size without
-/// `std`): column j of L from the finished columns, lᵢⱼ = (aᵢⱼ − Σₖ₍ⱼ lᵢₖ lⱼₖ) /
+/// [`cholesky_in_place`] for static sizes: column j of L from the finished columns, lᵢⱼ = (aᵢⱼ − Σₖ₍ⱼ lᵢₖ lⱼₖ) /
 /// lⱼⱼ, each sum in a register, in place (column j reads only the original column j and the
 /// finished columns before it). The operations and order of [`crate::linalg::psd_factor`]'s
 /// loop, so a positive definite matrix gets the same bits from both, without its tolerance,

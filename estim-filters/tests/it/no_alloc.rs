@@ -301,3 +301,43 @@ fn fading_memory_rls_does_not_allocate_per_step() {
     });
     assert_eq!(nonlinear, 0);
 }
+
+/// Static sizes above `kernel::STATIC_NALGEBRA_MAX` run faer's products on views of their
+/// storage; the step still allocates nothing (a 12-state, 10-measurement KF and UKF: the
+/// Cholesky factors of S and P on the static route, no faer scratch made per step).
+#[test]
+fn large_static_sizes_do_not_allocate_per_step() {
+    const N: usize = 12;
+    const M: usize = 10;
+    let process = LinearProcess {
+        transition: SMatrix::<f64, N, N>::from_fn(|i, j| {
+            if i == j {
+                0.95
+            } else {
+                0.01 / (1.0 + (i + j) as f64)
+            }
+        }),
+        input: SMatrix::<f64, N, 0>::zeros(),
+        noise: SMatrix::<f64, N, N>::identity() * 0.01,
+    };
+    let sensor = LinearMeasurement {
+        observation: SMatrix::<f64, M, N>::from_fn(|i, j| if i == j { 1.0 } else { 0.1 }),
+        noise: SMatrix::<f64, M, M>::identity() * 0.1,
+    };
+    let prior = Gaussian::new(SMatrix::<f64, N, 1>::zeros(), SMatrix::identity()).unwrap();
+    let zs: Vec<_> = (0..8)
+        .map(|k| SMatrix::<f64, M, 1>::from_fn(|i, _| ((k * M + i) as f64).sin()))
+        .collect();
+    let none = SMatrix::<f64, 0, 1>::zeros();
+    let mut kf = KalmanFilter::new(prior.clone());
+    let mut ukf = Ukf::new(prior);
+    let allocations = allocations_during(|| {
+        for z in &zs {
+            kf.predict(&process, &none, 1.0).unwrap();
+            black_box(kf.update(&sensor, z).unwrap());
+            ukf.predict(&process, &none, 1.0).unwrap();
+            black_box(ukf.update(&sensor, z).unwrap());
+        }
+    });
+    assert_eq!(allocations, 0);
+}
