@@ -115,7 +115,8 @@ mod triangular;
 
 use estim_core::kernel::{self, Accum};
 use estim_core::linalg::{
-    all_finite, ensure_nonnegative_diagonal, ensure_shape, mirror_lower_checked, psd_factor,
+    all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_shape, mirror_lower_checked,
+    psd_factor,
 };
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::{Affine, Linearized, Unscented};
@@ -290,12 +291,7 @@ where
     pub fn set_state(&mut self, state: OVector<T, N>) -> Result<()> {
         let n = self.state.nrows();
         ensure_shape(&state, n, 1, Stage::Construction, Quantity::Mean)?;
-        if !all_finite(&state) {
-            return Err(Error::NonFinite {
-                stage: Stage::Construction,
-                quantity: Quantity::Mean,
-            });
-        }
+        ensure_finite(&state, Stage::Construction, Quantity::Mean)?;
         self.state = state;
         Ok(())
     }
