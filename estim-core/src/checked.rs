@@ -1,14 +1,15 @@
 //! Validate once: linear models whose noise covariances are checked when the model is built.
 //!
-//! A filter step checks its noise only in O(n): shape, finiteness, and no negative variance on
-//! the diagonal (a full check would cost a factorisation per step). For constant matrices that
-//! check can be done once instead: [`LinearProcess::try_new`] and [`LinearMeasurement::try_new`]
-//! verify that Q (resp. R) is finite, symmetric (within √ε of its largest entry) and positive
-//! **semi**-definite, by one factorisation, and return the model wrapped in [`Checked`], which
-//! implements every model trait of the inner model and gives read-only access to it (`Deref`,
-//! no `DerefMut`): a checked model cannot be mutated into an unchecked one; to change it, take
-//! it apart with [`Checked::into_inner`] and check again. The public-field structs keep
-//! working as before for existing code (unchecked beyond the per-step O(n) checks).
+//! A filter step checks the noise it is given (shape, finiteness, positive
+//! semi-definiteness, see the table). For constant matrices the full check can be done once
+//! instead, with an error at construction rather than at some later step:
+//! [`LinearProcess::try_new`] and [`LinearMeasurement::try_new`] verify that Q (resp. R) is
+//! finite, symmetric (within √ε of its largest entry) and positive **semi**-definite, by one
+//! factorisation, and return the model wrapped in [`Checked`], which implements every model
+//! trait of the inner model and gives read-only access to it (`Deref`, no `DerefMut`): a
+//! checked model cannot be mutated into an unchecked one; to change it, take it apart with
+//! [`Checked::into_inner`] and check again. The public-field structs keep working as before
+//! (checked per step only).
 //!
 //! **Why semi-definite.** The factorisation is [`psd_factor`] (a Cholesky
 //! factorisation that accepts zero pivots within 16 n ε max Qᵢᵢ, with diagonal pivoting as a
@@ -21,15 +22,18 @@
 //!
 //! | noise | at construction | at every step |
 //! |---|---|---|
-//! | [`Checked`] linear models | shape, NaN/∞, asymmetry, any negative eigenvalue (one factorisation) | the O(n) checks below, which cannot fail |
-//! | any other model (Q(x, u, Δt), R(x) evaluated per step) | — | shape; NaN/∞; a negative diagonal entry ([`NotPositiveSemiDefinite`](crate::Error::NotPositiveSemiDefinite)), O(n); for R, also S = cov(ẑ) + R not positive definite ([`NotPositiveDefinite`](crate::Error::NotPositiveDefinite), from the Cholesky factorisation the update does anyway) |
+//! | [`Checked`] linear models | shape, NaN/∞, asymmetry, any negative eigenvalue (one factorisation) | the checks below, which cannot fail |
+//! | any model (Q(x, u, Δt), R(x) evaluated per step) | — | shape; NaN/∞ ([`NonFinite`](crate::Error::NonFinite)); any eigenvalue of (Q + Qᵀ)/2 below −16 n ε max Qᵢᵢ, a positive diagonal notwithstanding ([`NotPositiveSemiDefinite`](crate::Error::NotPositiveSemiDefinite) naming the noise); for R, also S = cov(ẑ) + R not positive definite ([`NotPositiveDefinite`](crate::Error::NotPositiveDefinite), from the Cholesky factorisation the update does anyway) |
 //!
-//! Not caught per step, by design (each would cost a factorisation per step): a Q(x) or R(x)
-//! that is indefinite with a non-negative diagonal (e.g. [[1, 2], [2, 1]]) while P⁻ (resp. S)
-//! keeps a non-negative diagonal (resp. stays positive definite) — then the step returns `Ok`
-//! and P may be indefinite; and an asymmetric Q or R, of which the filters use the symmetric
-//! part (Q + Qᵀ)/2. Every error leaves the filter unchanged. A model with state-dependent noise
-//! that may be badly conditioned can check it itself with [`check_noise`] (one factorisation).
+//! **Policy for state-dependent noise**: an indefinite Q(x) or R(x) is an error of the step
+//! (typed as above), never a silently indefinite P, and like every error it leaves the filter
+//! unchanged. The per-step test costs O(n²)
+//! comparisons when the matrix is diagonally dominant (Gershgorin; every diagonal noise)
+//! and one factorisation otherwise (e.g. a rank-one Γ W Γᵀ), in a buffer the step has free
+//! at that point (nothing allocated). Not refused per step: an asymmetric Q or R, of which
+//! the filters use the symmetric part (Q + Qᵀ)/2 (the checked models refuse it when built).
+//! The square-root filters factorise Q and R every step anyway ([`psd_factor`]) and refuse an
+//! indefinite one there.
 //!
 //! ```
 //! use estim_core::nalgebra::{Matrix2, Matrix2x1};

@@ -538,6 +538,98 @@ where
     }
 }
 
+/// `Ok(())` if the noise covariance `m` (a Q(x, u, Δt) or R(x) evaluated at a step) is
+/// positive semi-definite within [`psd_tolerance`], else [`Error::NotPositiveSemiDefinite`]
+/// naming `quantity`. Non-finite entries pass, as in [`ensure_nonnegative_diagonal`]: the
+/// filters check finiteness where it costs nothing extra and name the culprit then. The
+/// filters use the symmetric part S = (M + Mᵀ)/2, so that is what is checked. Cheapest test
+/// first:
+///
+/// 1. **Diagonally dominant** (Gershgorin: every eigenvalue of S lies in some disc
+///    [sᵢᵢ − rᵢ, sᵢᵢ + rᵢ], rᵢ = Σⱼ≠ᵢ |sᵢⱼ|, so sᵢᵢ ≥ rᵢ for all i gives λ ≥ 0): O(n²) additions
+///    and comparisons, no factorisation. Every diagonal noise passes here.
+/// 2. Otherwise [`psd_factor`]'s factorisation without pivoting, in `work` (its shape is made
+///    m's, allocating only if it differs): accepts zero pivots within [`psd_tolerance`] when
+///    their column vanishes (|sᵢⱼ|² ≤ sᵢᵢ sⱼⱼ), so a rank-deficient Γ W Γᵀ passes here too.
+/// 3. Only if that fails, [`psd_factor`] with diagonal pivoting decides (it allocates for
+///    runtime sizes: the failing, rare case).
+///
+/// Semi-definite noise is legitimate (a bias without process noise, a component measured
+/// exactly); the filters check S = cov ẑ + R positive definite separately. `work` is
+/// unspecified afterwards.
+///
+/// ```
+/// use estim_core::linalg::ensure_semidefinite_noise;
+/// use estim_core::nalgebra::Matrix2;
+/// use estim_core::{Error, Quantity, Stage};
+///
+/// let mut work = Matrix2::zeros();
+/// let stage = Stage::Prediction;
+/// let q = Quantity::ProcessNoise;
+/// // Rank one: x₂ = 2 x₁ exactly. Semi-definite, accepted.
+/// assert!(ensure_semidefinite_noise(&Matrix2::new(1.0, 2.0, 2.0, 4.0), &mut work, stage, q).is_ok());
+/// // A positive diagonal but an eigenvalue of −1: refused.
+/// assert_eq!(
+///     ensure_semidefinite_noise(&Matrix2::new(1.0, 2.0, 2.0, 1.0), &mut work, stage, q),
+///     Err(Error::NotPositiveSemiDefinite { stage, quantity: q })
+/// );
+/// ```
+#[inline]
+pub fn ensure_semidefinite_noise<T: Real, D: Dim>(
+    m: &OMatrix<T, D, D>,
+    work: &mut OMatrix<T, D, D>,
+    stage: Stage,
+    quantity: Quantity,
+) -> Result<()>
+where
+    DefaultAllocator: Allocator<D> + Allocator<D, D>,
+{
+    let n = m.nrows();
+    let half = real::<T>(0.5);
+    let dominant = (0..n).all(|i| {
+        let radius = (0..n)
+            .filter(|&j| j != i)
+            .fold(T::zero(), |r, j| r + ((m[(i, j)] + m[(j, i)]) * half).abs());
+        m[(i, i)] >= radius
+    });
+    if dominant {
+        return Ok(());
+    }
+    factored_noise_check(m, work, stage, quantity)
+}
+
+/// Tiers 2 and 3 of [`ensure_semidefinite_noise`], out of line: the dominant case is the
+/// common one and stays small.
+#[inline(never)]
+fn factored_noise_check<T: Real, D: Dim>(
+    m: &OMatrix<T, D, D>,
+    work: &mut OMatrix<T, D, D>,
+    stage: Stage,
+    quantity: Quantity,
+) -> Result<()>
+where
+    DefaultAllocator: Allocator<D> + Allocator<D, D>,
+{
+    if !all_finite(m) {
+        return Ok(());
+    }
+    if work.shape() == m.shape() {
+        copy(work, m);
+    } else {
+        *work = m.clone_owned();
+    }
+    symmetrize(work);
+    let bounds = zero_pivot_bounds(m);
+    if lower_factor_in_place(work, bounds, None).is_ok() {
+        return Ok(());
+    }
+    copy(work, m);
+    symmetrize(work);
+    psd_factor(work, stage)
+        .map(|_| ())
+        .map_err(|_| Error::NotPositiveSemiDefinite { stage, quantity })
+}
+
 /// `Ok(())` if the symmetric `m` is positive semi-definite within [`psd_tolerance`].
 pub fn ensure_psd<T: Real, D: Dim>(
     m: &OMatrix<T, D, D>,
@@ -555,7 +647,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::DMatrix;
+    use nalgebra::{DMatrix, DVector};
 
     /// Deterministic, distinct, non-symmetric entries.
     fn matrix(n: usize, salt: f64) -> DMatrix<f64> {
@@ -733,6 +825,74 @@ mod tests {
         assert_eq!(check(&[1.0, 2.0, -1e-17]), Ok(()));
         assert_eq!(check(&[1.0, 0.0, f64::NAN]), Ok(()));
         assert_eq!(check(&[]), Ok(()));
+    }
+
+    /// The per-step noise check against the eigenvalues of the symmetric part, through each
+    /// tier: diagonally dominant (with an asymmetric matrix), rank-deficient Γ Γᵀ (the
+    /// factorisation tier), a rank-deficient matrix whose unpivoted factorisation stops at a
+    /// zero pivot, indefinite with a positive diagonal, and a negative variance beyond
+    /// round-off; runtime and static sizes, f64 and f32, and a `work` of the wrong size.
+    #[test]
+    fn ensure_semidefinite_noise_agrees_with_the_eigenvalues() {
+        let (stage, q) = (Stage::Prediction, Quantity::ProcessNoise);
+        let refused = Err(Error::NotPositiveSemiDefinite { stage, quantity: q });
+        let g = DMatrix::from_row_slice(3, 1, &[0.3, -1.2, 0.7]);
+        let cases: Vec<(DMatrix<f64>, bool)> = vec![
+            (DMatrix::from_diagonal_element(3, 3, 0.0), true),
+            (
+                DMatrix::from_row_slice(3, 3, &[2.0, 0.5, -1.0, 0.3, 1.0, 0.2, -1.0, 0.4, 1.5]),
+                true,
+            ),
+            (&g * g.transpose(), true),
+            // Zero first pivot with a vanishing column, then a rank-one block.
+            (
+                DMatrix::from_row_slice(3, 3, &[0.0, 0.0, 0.0, 0.0, 1.0, 2.0, 0.0, 2.0, 4.0]),
+                true,
+            ),
+            (
+                DMatrix::from_row_slice(3, 3, &[1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
+                false,
+            ),
+            // Zero pivot whose column does not vanish: indefinite.
+            (
+                DMatrix::from_row_slice(3, 3, &[0.0, 0.1, 0.0, 0.1, 1.0, 0.0, 0.0, 0.0, 1.0]),
+                false,
+            ),
+            (
+                DMatrix::from_diagonal(&DVector::from_row_slice(&[1.0, -1e-3, 1.0])),
+                false,
+            ),
+        ];
+        for (m, psd) in cases {
+            let sym = (&m + m.transpose()) * 0.5;
+            let lambda = sym.clone().symmetric_eigenvalues().min();
+            assert_eq!(lambda >= -1e-12, psd, "{m}: λ_min {lambda}");
+            let expected = if psd { Ok(()) } else { refused };
+            assert_eq!(
+                ensure_semidefinite_noise(&m, &mut m.clone(), stage, q),
+                expected
+            );
+            assert_eq!(
+                ensure_semidefinite_noise(&m, &mut DMatrix::zeros(1, 1), stage, q),
+                expected
+            );
+            let fixed = nalgebra::Matrix3::from_iterator(m.iter().copied());
+            assert_eq!(
+                ensure_semidefinite_noise(&fixed, &mut nalgebra::Matrix3::zeros(), stage, q),
+                expected
+            );
+            let single = m.map(|v| v as f32);
+            assert_eq!(
+                ensure_semidefinite_noise(&single, &mut single.clone(), stage, q),
+                expected
+            );
+        }
+        // Non-finite entries are left to the finiteness checks.
+        let nan = DMatrix::from_row_slice(2, 2, &[1.0, f64::NAN, f64::NAN, 1.0]);
+        assert_eq!(
+            ensure_semidefinite_noise(&nan, &mut nan.clone(), stage, q),
+            Ok(())
+        );
     }
 
     /// A NaN or an infinite entry makes a pair asymmetric unless both entries are the same

@@ -1,7 +1,9 @@
 //! The Kalman family as one filter parameterised by its moment propagator.
 
 use estim_core::kernel;
-use estim_core::linalg::{all_finite, ensure_nonnegative_diagonal, ensure_shape};
+use estim_core::linalg::{
+    all_finite, ensure_nonnegative_diagonal, ensure_semidefinite_noise, ensure_shape,
+};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{
     Affine, Linearized, MomentPropagator, Outputs, PropagatorWorkspace, SecondOrder,
@@ -347,7 +349,7 @@ where
         covariance: p,
         noise: q,
     } = scratch;
-    ensure_process_noise(q, n)?;
+    ensure_process_noise(q, p, n)?;
     // The propagator checks its own outputs; Q is checked through P⁻ = cov f + Q, and only on
     // failure is it examined to name the culprit.
     let out = Outputs::mean_covariance(mean, p).with_noise(q);
@@ -366,16 +368,22 @@ where
     ensure_predicted_covariance(p)
 }
 
-/// Q before a prediction: its shape, and a non-negative diagonal (a negative variance in Q would
-/// make P⁻ indefinite without any other check failing; checking all of Q's definiteness would
-/// cost a factorisation per step, its diagonal O(n)).
+/// Q before a prediction: its shape, and positive semi-definite (an indefinite Q, even with a
+/// positive diagonal, can make P⁻ indefinite without any other check failing):
+/// [`ensure_semidefinite_noise`], O(n²) without a factorisation when Q is diagonally dominant
+/// (every diagonal Q), else one factorisation in `work` (an n × n buffer free at this point).
 #[inline(always)]
-fn ensure_process_noise<T: Real, N: Dim>(q: &OMatrix<T, N, N>, n: usize) -> Result<()>
+fn ensure_process_noise<T: Real, N: Dim>(
+    q: &OMatrix<T, N, N>,
+    work: &mut OMatrix<T, N, N>,
+    n: usize,
+) -> Result<()>
 where
     DefaultAllocator: Alloc<N>,
 {
-    ensure_shape(q, n, n, Stage::Prediction, Quantity::ProcessNoise)?;
-    ensure_nonnegative_diagonal(q, Stage::Prediction, Quantity::ProcessNoise)
+    let (stage, quantity) = (Stage::Prediction, Quantity::ProcessNoise);
+    ensure_shape(q, n, n, stage, quantity)?;
+    ensure_semidefinite_noise(q, work, stage, quantity)
 }
 
 /// P⁻ after a prediction: a prior accepted as PSD within its rounding tolerance (a variance of
@@ -499,7 +507,7 @@ where
         let n = self.state.shape_generic().0;
         let mut q = OMatrix::zeros_generic(n, n);
         model.process_noise_into(&self.state, input, dt, &mut q);
-        ensure_process_noise(&q, n.value())?;
+        ensure_process_noise(&q, &mut OMatrix::zeros_generic(n, n), n.value())?;
         let map = Transition::on(&self.space, model, input, dt);
         let mut moments = estim_core::Moments::zeros(n, n);
         let mut workspace = Default::default();

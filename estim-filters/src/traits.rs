@@ -69,10 +69,10 @@ where
     ///
     /// On error the filter is left exactly as it was. Δt must be finite and ≥ 0
     /// ([`Parameter::TimeStep`](estim_core::Parameter::TimeStep): a negative step is refused
-    /// even when Q ignores Δt). Q must be finite and have no negative variance on its diagonal
-    /// (checked each step, O(n); its full positive semi-definiteness is not, which would cost
-    /// a factorisation per step: check constant noise once instead, with
-    /// [`estim_core::checked`], which also lists what is and is not caught per step).
+    /// even when Q ignores Δt). Q must be finite and positive semi-definite (checked each step:
+    /// O(n²) for a diagonally dominant Q, one factorisation otherwise; constant noise can be
+    /// checked once when the model is built, see [`estim_core::checked`], which also gives the
+    /// policy for a state-dependent Q).
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()>;
 
     /// Sizes ahead of time every buffer that [`predict`](Self::predict) with this model needs,
@@ -100,9 +100,8 @@ where
     /// Returns the update report (innovation, its covariance, NIS, log-likelihood); if a gate
     /// is set and the NIS exceeds it, the report says [`Gated`](crate::UpdateOutcome::Gated)
     /// and the estimate is unchanged. On error the filter is left exactly as it was. R must
-    /// be finite with no negative variance on its diagonal and S = cov ẑ + R positive
-    /// definite (checked each step; R's full positive semi-definiteness is not, which would
-    /// cost a factorisation per step: see [`estim_core::checked`]).
+    /// be finite and positive semi-definite, and S = cov ẑ + R positive definite (checked each
+    /// step; see [`estim_core::checked`] for the cost and the policy for a state-dependent R).
     ///
     /// The report is a new value each call; with runtime sizes that is the one allocation of
     /// the step, which [`update_into`](Self::update_into) avoids.

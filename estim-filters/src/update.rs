@@ -37,8 +37,9 @@
 
 use estim_core::kernel::{self, Accum};
 use estim_core::linalg::{
-    all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_shape, finite_or_error,
-    symmetric_map, symmetric_sum_into_checked, symmetrize_add_checked,
+    all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_semidefinite_noise,
+    ensure_shape, finite_or_error, symmetric_map, symmetric_sum_into_checked,
+    symmetrize_add_checked,
 };
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::scalar::real;
@@ -251,10 +252,10 @@ where
     let m = predicted.mean.nrows();
     ensure_shape(noise, m, m, stage, Quantity::MeasurementNoise)?;
     ensure_shape(&report.innovation, m, 1, stage, Quantity::Measurement)?;
-    // A negative variance in R can leave S positive definite and give a posterior with
-    // negative variances. Checking all of R's definiteness would cost a factorisation per
-    // step; its diagonal, O(m).
-    ensure_nonnegative_diagonal(noise, stage, Quantity::MeasurementNoise)?;
+    // An indefinite R (even with a positive diagonal) can leave S positive definite and give
+    // a posterior with negative variances: R must be semi-definite. O(m²) when R is
+    // diagonally dominant, else one factorisation in `factor` (free until S is formed).
+    ensure_semidefinite_noise(noise, factor, stage, Quantity::MeasurementNoise)?;
     // Inputs are not scanned up front: a non-finite z or R makes the factorisation, the NIS or
     // the committed results non-finite, and only then are they examined to name the culprit.
     let bad_input = |innovation: &OVector<T, M>, noise: &OMatrix<T, M, M>| {

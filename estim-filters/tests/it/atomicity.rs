@@ -117,16 +117,16 @@ where
         },
         |f| f.update(&m.measurement, &Vector2::new(0.0, f64::NEG_INFINITY)),
     );
-    // R indefinite with a positive diagonal ⇒ S = H P Hᵀ + R not positive definite.
+    // R indefinite with a positive diagonal: refused by the update's check of R.
     let negative_r = LinearMeasurement {
         observation: m.measurement.observation,
         noise: Matrix2::new(1.0, 1e3, 1e3, 1.0),
     };
     assert_fails_atomically(
         &mut filter,
-        Error::NotPositiveDefinite {
+        Error::NotPositiveSemiDefinite {
             stage: Stage::Update,
-            quantity: Quantity::InnovationCovariance,
+            quantity: Quantity::MeasurementNoise,
         },
         |f| f.update(&negative_r, &Vector2::new(0.0, 0.0)),
     );
@@ -504,9 +504,9 @@ fn failed_rls_updates_leave_it_unchanged() {
     };
     assert_fails_atomically(
         &mut rls,
-        Error::NotPositiveDefinite {
+        Error::NotPositiveSemiDefinite {
             stage: Stage::Update,
-            quantity: Quantity::InnovationCovariance,
+            quantity: Quantity::MeasurementNoise,
         },
         |f| f.update(&negative_r, &Vector2::zeros()),
     );

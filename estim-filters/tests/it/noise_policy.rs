@@ -1,10 +1,9 @@
 //! The per-step policy for noise computed by the model at each step (Q(x, u, Δt), R(x)),
 //! case by case as documented in `estim_core::checked`: caught with a typed error that
-//! leaves the filter bit for bit unchanged (negative variance, non-finite entry, an R that
-//! makes S = H P Hᵀ + R not positive definite), and not caught (an indefinite matrix with a
-//! non-negative diagonal that leaves P⁻'s diagonal non-negative or S positive definite; an
-//! asymmetric matrix, used through its symmetric part), which the checked models refuse
-//! when built instead.
+//! leaves the filter bit for bit unchanged (negative variance, non-finite entry, an
+//! indefinite matrix even with a positive diagonal, an S = H P Hᵀ + R not positive
+//! definite); accepted (a semi-definite matrix; an asymmetric one, used through its
+//! symmetric part, which the checked models refuse when built).
 
 use crate::common::assert_bitwise_eq;
 
@@ -100,53 +99,84 @@ fn caught_per_step_with_a_typed_error_and_no_change() {
             quantity: Quantity::MeasurementNoise,
         },
     );
-    // Indefinite with a positive diagonal, large enough that S = P + R (P = 0.1 I) is not
-    // positive definite (eigenvalues of R: 1.01, −0.99; of S: 1.11, −0.89): the update's
-    // Cholesky factorisation, which it does anyway, refuses it.
+    // Indefinite with a positive diagonal (eigenvalues of R: 1.01, −0.99): the
+    // semi-definiteness check of R, before S is formed.
     let indefinite = Matrix2::new(0.01, 1.0, 1.0, 0.01);
     fails_unchanged(
         |f| f.update(&NoisySensor(indefinite), &z),
+        Error::NotPositiveSemiDefinite {
+            stage: Stage::Update,
+            quantity: Quantity::MeasurementNoise,
+        },
+    );
+    // Q with eigenvalues 0.06 and −0.04 and a positive diagonal: from P = 0.1 I, P⁻ = P + Q
+    // would be positive definite, so only the check of Q sees it.
+    let q = Matrix2::new(0.01, 0.05, 0.05, 0.01);
+    fails_unchanged(
+        |f| f.predict(&NoisyProcess(q), &(), 1.0),
+        Error::NotPositiveSemiDefinite {
+            stage: Stage::Prediction,
+            quantity: Quantity::ProcessNoise,
+        },
+    );
+    // R with eigenvalues 0.09, −0.01 and S = P + R positive definite (eigenvalues 0.19,
+    // 0.09): without the check of R, P⁺ = P − P S⁻¹ P would have come back with an eigenvalue
+    // 0.1 − 0.01/0.09 ≈ −0.011 and a positive diagonal, as `Ok`.
+    let r = Matrix2::new(0.04, 0.05, 0.05, 0.04);
+    fails_unchanged(
+        |f| f.update(&NoisySensor(r), &z),
+        Error::NotPositiveSemiDefinite {
+            stage: Stage::Update,
+            quantity: Quantity::MeasurementNoise,
+        },
+    );
+    assert!(LinearMeasurement::try_new(Matrix2::identity(), r).is_err());
+    assert!(LinearProcess::try_new(Matrix2::identity(), Matrix2x1::zeros(), q).is_err());
+
+    // A semi-definite R whose S = P + R is singular (P = 0: the state is known): the
+    // update's Cholesky factorisation of S refuses it.
+    let mut known = Ekf::new(Gaussian::new(Vector2::new(0.5, -0.2), Matrix2::zeros()).unwrap());
+    let before = known.clone();
+    assert_eq!(
+        known
+            .update(&NoisySensor(Matrix2::zeros()), &z)
+            .unwrap_err(),
         Error::NotPositiveDefinite {
             stage: Stage::Update,
             quantity: Quantity::InnovationCovariance,
-        },
+        }
     );
+    assert!(known == before);
 }
 
-/// Documented limits of the per-step checks (each would cost a factorisation per step): an
-/// indefinite Q(x) or R(x) whose diagonal is non-negative, while P⁻'s diagonal stays
-/// non-negative (resp. S stays positive definite), returns `Ok`, and P can come back
-/// indefinite; an asymmetric R is used through its symmetric part. The checked models refuse
-/// all of these when built.
+/// Accepted per step: semi-definite noise (rank one, a zero row: Γ W Γᵀ and a bias without
+/// noise), which the factorisation tier of the check passes, and an asymmetric R, used
+/// through its symmetric part (the checked models refuse that one when built).
 #[test]
-fn not_caught_per_step_but_refused_by_the_checked_models() {
-    // Q with eigenvalues 0.06 and −0.04 and a positive diagonal; from P = 0.01 I,
-    // P⁻ = P + Q has eigenvalues 0.07 and −0.03 but a positive diagonal: returned as Ok.
-    let q = Matrix2::new(0.01, 0.05, 0.05, 0.01);
-    let mut f = Ekf::new(Gaussian::new(Vector2::zeros(), Matrix2::identity() * 0.01).unwrap());
-    f.predict(&NoisyProcess(q), &(), 1.0).unwrap();
-    let eig = f.covariance().symmetric_eigenvalues();
-    assert!(
-        eig.min() < 0.0,
-        "P⁻ eigenvalues {eig}: indefinite, returned as Ok"
-    );
-    assert!(
-        LinearProcess::try_new(Matrix2::identity(), Matrix2x1::zeros(), q).is_err(),
-        "the checked model refuses this Q"
-    );
-
-    // R with eigenvalues 0.09, −0.01 and S = P + R positive definite (P = 0.1 I; eigenvalues
-    // 0.19, 0.09): accepted, and P⁺ = P − P S⁻¹ P has eigenvalues 0.1 − 0.01/0.19 ≈ 0.047 and
-    // 0.1 − 0.01/0.09 ≈ −0.011 with a positive diagonal (≈ 0.018).
-    let r = Matrix2::new(0.04, 0.05, 0.05, 0.04);
-    let mut f = filter();
-    assert!(f.update(&NoisySensor(r), &Vector2::new(0.4, 0.0)).is_ok());
-    let eig = f.covariance().symmetric_eigenvalues();
-    assert!(
-        eig.min() < 0.0,
-        "P⁺ eigenvalues {eig}: indefinite, returned as Ok"
-    );
-    assert!(LinearMeasurement::try_new(Matrix2::identity(), r).is_err());
+fn semi_definite_and_asymmetric_noise_are_accepted() {
+    // Rank one, not diagonally dominant (the Gershgorin tier cannot pass it): Γ Γᵀ with
+    // Γ = (0.1, 0.2)ᵀ; and a zero variance with a positive one.
+    for q in [
+        Matrix2::new(0.01, 0.02, 0.02, 0.04),
+        Matrix2::new(0.01, 0.0, 0.0, 0.0),
+    ] {
+        let mut f = filter();
+        f.predict(&NoisyProcess(q), &(), 1.0).unwrap();
+        assert!(
+            (f.covariance() - (Matrix2::identity() * 0.1 + q))
+                .abs()
+                .max()
+                < 1e-16
+        );
+        // R singular: the direction it measures exactly gets a zero posterior variance, to
+        // rounding (a few ε of ‖P‖ ≈ 0.1).
+        f.update(&NoisySensor(q), &Vector2::new(0.4, 0.0)).unwrap();
+        let eig = f.covariance().symmetric_eigenvalues();
+        assert!(
+            eig.min() > -1e-16 && eig.min() < 1e-16 && eig.max() > 1e-3,
+            "{eig}"
+        );
+    }
 
     // An asymmetric R: the update equals the one with (R + Rᵀ)/2 to rounding (S is formed as
     // the average of the two triangles of cov(ẑ) + R; the two orders of summation differ by

@@ -171,17 +171,15 @@ fn an_indefinite_predicted_covariance_fails_the_backward_pass() {
     );
     assert_eq!(g, kf);
 
-    // An indefinite Q (eigenvalues 0.11 and −0.09; its diagonal is non-negative, all that a
-    // prediction checks of Q per step, see `Predict::predict`) makes P⁻ = Q indefinite. Since
-    // issue 18 the forward pass already refuses it: the update after it gives a posterior
-    // with a negative variance (the O(n) check of P⁺'s diagonal), at step 1, before the
+    // An indefinite Q (eigenvalues 0.11 and −0.09, with a positive diagonal) is refused by
+    // the first prediction's semi-definiteness check of Q (`Predict::predict`), before the
     // backward pass could fail at step 4.
     process.noise = Matrix2::new(0.01, 0.1, 0.1, 0.01);
     let forward_error = SmootherError {
-        step: 1,
+        step: 0,
         error: Error::NotPositiveSemiDefinite {
-            stage: Stage::Update,
-            quantity: Quantity::Covariance,
+            stage: Stage::Prediction,
+            quantity: Quantity::ProcessNoise,
         },
     };
     let forward = filter_sequence(&mut g, &process, &inputs, 0.5, &sensor, &zs);
