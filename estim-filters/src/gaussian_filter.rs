@@ -68,6 +68,9 @@ where
     space: S,
     settings: UpdateSettings<T>,
     scratch: ScratchCache<T, Pr>,
+    /// The last process noise Q a committed prediction found positive semi-definite (zero at
+    /// first, which is): a prediction whose Q equals it entry for entry skips the check.
+    accepted_noise: OMatrix<T, N, N>,
 }
 
 /// A copy of the estimate, the state space and the settings; the runtime-size buffers are not
@@ -85,12 +88,13 @@ where
             space: self.space.clone(),
             settings: self.settings,
             scratch: ScratchCache::default(),
+            accepted_noise: self.accepted_noise.clone(),
         }
     }
 }
 
-/// Equal estimates, propagators, state spaces and settings (the runtime-size buffers are not
-/// compared).
+/// Equal estimates, propagators, state spaces and settings (the runtime-size buffers and the
+/// remembered process noise are not compared).
 impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T> + PartialEq, S: PartialEq> PartialEq
     for GaussianFilter<T, N, Pr, S>
 where
@@ -153,6 +157,7 @@ where
     /// A filter starting from `prior` that propagates moments with `propagator`.
     pub fn with_propagator(prior: Gaussian<T, N>, propagator: Pr) -> Self {
         let (state, covariance) = prior.into_parts();
+        let (rows, cols) = covariance.shape_generic();
         Self {
             state,
             covariance,
@@ -160,6 +165,7 @@ where
             space: Euclidean,
             settings: UpdateSettings::new(),
             scratch: ScratchCache::default(),
+            accepted_noise: OMatrix::zeros_generic(rows, cols),
         }
     }
 }
@@ -203,6 +209,7 @@ where
             space,
             settings: self.settings,
             scratch: self.scratch,
+            accepted_noise: self.accepted_noise,
         }
     }
 
@@ -273,13 +280,16 @@ where
 
 /// One prediction through `g` plus additive noise (`fill_noise` writes Q(x̂) into its buffer),
 /// computed in the step's scratch (a local for static sizes, the filter's cached one for `Dyn`)
-/// and committed only if every check passes.
+/// and committed only if every check passes. Q is checked positive semi-definite unless it
+/// equals `accepted`, the last Q a committed prediction checked (which it then becomes).
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn predict_step<T, N, Pr, G>(
     propagator: &Pr,
     cache: &mut ScratchCache<T, Pr>,
     state: &mut OVector<T, N>,
     covariance: &mut OMatrix<T, N, N>,
+    accepted: &mut OMatrix<T, N, N>,
     g: &G,
     fill_noise: impl FnOnce(&OVector<T, N>, &mut OMatrix<T, N, N>),
     step: Step,
@@ -303,9 +313,13 @@ where
         }
     };
     fill_noise(state, &mut work.noise);
-    let result = predicted(propagator, state, covariance, g, work);
+    let known = same_entries(accepted, &work.noise);
+    let result = predicted(propagator, state, covariance, g, work, known);
     match result {
         Ok(()) if step == Step::Apply => {
+            if !known {
+                kernel::copy(accepted, &work.noise);
+            }
             commit(state, covariance, &mut work.state, &mut work.covariance)
         }
         Ok(()) => {}
@@ -313,6 +327,19 @@ where
         Err(_) => {}
     }
     result
+}
+
+/// Whether `a` and `b` have the same shape and equal entries (−0 = +0; NaN equals nothing),
+/// without early exit: a branch-free pass the compiler vectorises.
+#[inline(always)]
+fn same_entries<T: Real, N: Dim>(a: &OMatrix<T, N, N>, b: &OMatrix<T, N, N>) -> bool
+where
+    DefaultAllocator: Alloc<N>,
+{
+    a.shape() == b.shape()
+        && (a.as_slice().iter())
+            .zip(b.as_slice())
+            .fold(true, |same, (x, y)| same & (x == y))
 }
 
 /// Whether a step commits its result or only sizes the buffers it works in (`prepare_*`).
@@ -325,7 +352,7 @@ pub(crate) enum Step {
 }
 
 /// The predicted estimate into `scratch.state` and `scratch.covariance`, with Q already in
-/// `scratch.noise`.
+/// `scratch.noise` (and `known` if it equals a Q already checked).
 #[inline(always)]
 fn predicted<T, N, Pr, G>(
     propagator: &Pr,
@@ -333,6 +360,7 @@ fn predicted<T, N, Pr, G>(
     covariance: &OMatrix<T, N, N>,
     g: &G,
     scratch: &mut PredictScratch<T, N, Pr>,
+    known: bool,
 ) -> Result<()>
 where
     T: Real,
@@ -349,7 +377,9 @@ where
         covariance: p,
         noise: q,
     } = scratch;
-    ensure_process_noise(q, p, n)?;
+    if !known {
+        ensure_process_noise(q, p, n)?;
+    }
     // The propagator checks its own outputs; Q is checked through P⁻ = cov f + Q, and only on
     // failure is it examined to name the culprit.
     let out = Outputs::mean_covariance(mean, p).with_noise(q);
@@ -468,12 +498,22 @@ where
             propagator,
             space,
             scratch,
+            accepted_noise,
             ..
         } = self;
         let map = Transition::on(&*space, model, input, dt);
         let noise =
             |x: &OVector<T, N>, q: &mut OMatrix<T, N, N>| model.process_noise_into(x, input, dt, q);
-        predict_step(propagator, scratch, state, covariance, &map, noise, step)
+        predict_step(
+            propagator,
+            scratch,
+            state,
+            covariance,
+            accepted_noise,
+            &map,
+            noise,
+            step,
+        )
     }
 
     /// [`Predict::predict`] that also returns C = cov(xₖ, xₖ₊₁), the covariance of the state
@@ -550,6 +590,7 @@ where
             covariance,
             propagator,
             scratch,
+            accepted_noise,
             ..
         } = self;
         let (map, q_star) = Decorrelated::new(process, input, dt, measurement, z, cross, state)?;
@@ -559,6 +600,7 @@ where
             scratch,
             state,
             covariance,
+            accepted_noise,
             &map,
             noise,
             Step::Apply,
@@ -686,6 +728,7 @@ where
             space,
             settings,
             scratch,
+            ..
         } = self;
         update_step(
             propagator, space, scratch, state, covariance, forgetting, model, z, *settings, report,

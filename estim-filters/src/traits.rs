@@ -70,9 +70,10 @@ where
     /// On error the filter is left exactly as it was. Δt must be finite and ≥ 0
     /// ([`Parameter::TimeStep`](estim_core::Parameter::TimeStep): a negative step is refused
     /// even when Q ignores Δt). Q must be finite and positive semi-definite (checked each step:
-    /// O(n²) for a diagonally dominant Q, one factorisation otherwise; constant noise can be
-    /// checked once when the model is built, see [`estim_core::checked`], which also gives the
-    /// policy for a state-dependent Q).
+    /// O(n²) for a diagonally dominant Q, one factorisation otherwise, skipped by the Gaussian
+    /// filters for a Q equal to the last one they accepted; constant noise can be checked once
+    /// when the model is built, see [`estim_core::checked`], which also gives the policy for a
+    /// state-dependent Q).
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()>;
 
     /// Sizes ahead of time every buffer that [`predict`](Self::predict) with this model needs,

@@ -7,7 +7,7 @@
 
 use crate::common::assert_bitwise_eq;
 
-use estim_core::nalgebra::{Matrix2, Matrix2x1, U2, Vector1, Vector2};
+use estim_core::nalgebra::{DMatrix, DVector, Dyn, Matrix2, Matrix2x1, U2, Vector1, Vector2};
 use estim_core::{
     Error, Gaussian, LinearMeasurement, LinearProcess, MeasurementModel, ProcessModel, Quantity,
     Stage,
@@ -225,4 +225,77 @@ fn checked_models_filter_bit_for_bit() {
     }
     assert_bitwise_eq(x.state(), y.state(), "state");
     assert_bitwise_eq(x.covariance(), y.covariance(), "covariance");
+}
+
+/// x⁺ = x on runtime sizes, with Q(x) = the matrix it carries.
+struct NoisyDynProcess(DMatrix<f64>);
+impl ProcessModel<f64, Dyn> for NoisyDynProcess {
+    type Input = ();
+    fn transition(&self, x: &DVector<f64>, _: &(), _: f64) -> DVector<f64> {
+        x.clone()
+    }
+    fn process_noise(&self, _: &DVector<f64>, _: &(), _: f64) -> DMatrix<f64> {
+        self.0.clone()
+    }
+}
+impl estim_core::ProcessJacobian<f64, Dyn> for NoisyDynProcess {
+    fn transition_jacobian(&self, x: &DVector<f64>, _: &(), _: f64) -> DMatrix<f64> {
+        DMatrix::identity(x.len(), x.len())
+    }
+}
+
+/// The filter remembers the last Q a committed prediction checked and skips the check when
+/// the next Q equals it entry for entry: any other Q is checked as before. An indefinite Q
+/// after accepted ones, one entry away from the remembered Q, or of the wrong shape (runtime
+/// sizes) is refused and leaves the filter unchanged; the remembered Q passes again after.
+#[test]
+fn a_remembered_noise_does_not_hide_a_changed_one() {
+    let prediction = Stage::Prediction;
+    let refused = Error::NotPositiveSemiDefinite {
+        stage: prediction,
+        quantity: Quantity::ProcessNoise,
+    };
+    // Rank one (the factorisation tier passes it); with its covariance 1 % larger, the
+    // determinant 0.0004 − 1.0201 · 0.0004 < 0: an eigenvalue of about −1.6e-4.
+    let good = Matrix2::new(0.01, 0.02, 0.02, 0.04);
+    let near = Matrix2::new(0.01, 0.0202, 0.0202, 0.04);
+    let mut f = filter();
+    for _ in 0..3 {
+        f.predict(&NoisyProcess(good), &(), 1.0).unwrap();
+    }
+    for bad in [near, Matrix2::new(0.01, 0.05, 0.05, 0.01)] {
+        let before = f.clone();
+        assert_eq!(
+            f.predict(&NoisyProcess(bad), &(), 1.0).unwrap_err(),
+            refused
+        );
+        assert!(f == before);
+        assert_bitwise_eq(f.covariance(), before.covariance(), "covariance");
+        f.predict(&NoisyProcess(good), &(), 1.0).unwrap();
+    }
+    // The remembered Q gives the same prediction as a fresh filter's checked one.
+    let (mut a, mut b) = (f.clone(), filter());
+    b.reset(Gaussian::new(*f.state(), *f.covariance()).unwrap());
+    a.predict(&NoisyProcess(good), &(), 1.0).unwrap();
+    b.predict(&NoisyProcess(good), &(), 1.0).unwrap();
+    assert_bitwise_eq(a.covariance(), b.covariance(), "covariance");
+
+    // Runtime sizes: a Q of another shape after an accepted one is a shape error.
+    let prior = Gaussian::new(DVector::zeros(2), DMatrix::identity(2, 2) * 0.1).unwrap();
+    let mut d = Ekf::<f64, Dyn>::new(prior);
+    let q = DMatrix::from_row_slice(2, 2, &[0.01, 0.02, 0.02, 0.04]);
+    d.predict(&NoisyDynProcess(q.clone()), &(), 1.0).unwrap();
+    let before = d.clone();
+    assert!(matches!(
+        d.predict(&NoisyDynProcess(DMatrix::zeros(3, 3)), &(), 1.0),
+        Err(Error::DimensionMismatch { .. })
+    ));
+    assert!(d == before);
+    let bad = DMatrix::from_row_slice(2, 2, &[0.01, 0.05, 0.05, 0.01]);
+    assert_eq!(
+        d.predict(&NoisyDynProcess(bad), &(), 1.0).unwrap_err(),
+        refused
+    );
+    assert!(d == before);
+    d.predict(&NoisyDynProcess(q), &(), 1.0).unwrap();
 }
