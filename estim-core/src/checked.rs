@@ -16,14 +16,15 @@
 //! fallback), not a plain Cholesky: a singular Q is common and legitimate (a constant bias
 //! with no process noise, a position driven only through its velocity), and so is a zero
 //! variance in R for a component that is measured exactly, as long as S = H P Hᵀ + R stays
-//! positive definite (checked at every update). An eigenvalue below −16 n ε max Qᵢᵢ is refused.
+//! positive definite (checked at every update). A pivot below −16 n ε max Qᵢᵢ is refused, and so
+//! is a zero-variance direction whose covariances exceed √(16 n ε) max Qᵢᵢ (about).
 //!
 //! # What is caught, and when
 //!
 //! | noise | at construction | at every step |
 //! |---|---|---|
 //! | [`Checked`] linear models | shape, NaN/∞, asymmetry, any negative eigenvalue (one factorisation) | the checks below, which cannot fail |
-//! | any model (Q(x, u, Δt), R(x) evaluated per step) | — | shape; NaN/∞ ([`NonFinite`](crate::Error::NonFinite)); any eigenvalue of (Q + Qᵀ)/2 below −16 n ε max Qᵢᵢ, a positive diagonal notwithstanding ([`NotPositiveSemiDefinite`](crate::Error::NotPositiveSemiDefinite) naming the noise); for R, also S = cov(ẑ) + R not positive definite ([`NotPositiveDefinite`](crate::Error::NotPositiveDefinite), from the Cholesky factorisation the update does anyway) |
+//! | any model (Q(x, u, Δt), R(x) evaluated per step) | — | shape; NaN/∞ ([`NonFinite`](crate::Error::NonFinite)); (Q + Qᵀ)/2 not semi-definite by [`psd_factor`]'s rule (a pivot below −τ = −16 n ε max Qᵢᵢ, or a zero-variance direction whose covariances exceed √(τ max Qᵢᵢ) + τ: [`ensure_semidefinite_noise`](crate::linalg::ensure_semidefinite_noise)), a positive diagonal notwithstanding ([`NotPositiveSemiDefinite`](crate::Error::NotPositiveSemiDefinite) naming the noise); for R, also S = cov(ẑ) + R not positive definite ([`NotPositiveDefinite`](crate::Error::NotPositiveDefinite), from the Cholesky factorisation the update does anyway) |
 //!
 //! **Policy for state-dependent noise**: an indefinite Q(x) or R(x) is an error of the step
 //! (typed as above), never a silently indefinite P, and like every error it leaves the filter

@@ -670,9 +670,11 @@ impl CholeskyScratch {
 }
 
 /// Replaces the lower triangle of the symmetric positive definite `a` by its Cholesky factor L
-/// (a = L Lᵀ): faer's for runtime sizes, our left-looking loop for static sizes of any size
-/// (`left_looking_cholesky`): faer's needs scratch memory, which a static-size step, whose
-/// buffers are locals, would allocate at every call. The strict upper
+/// (a = L Lᵀ): faer's for runtime sizes (scratch from `scratch`) and for static sizes above 16
+/// with `std` (scratch on the stack: a static-size step's buffers are locals, and allocating
+/// there at every call is what static sizes promise not to do); our inlined left-looking loop
+/// for static sizes up to 16 (`left_looking_cholesky`, the same factor to round-off). The
+/// strict upper
 /// triangle is left unspecified. `false` if `a` is not (numerically) positive definite or not
 /// finite, and then `a` is unspecified. (A covariance that may be only semi-definite goes to
 /// [`crate::linalg::psd_factor`] instead.)
@@ -692,7 +694,40 @@ where
         // faer leaves NaN pivots unreported on some paths; a factor must be finite.
         return ok && (0..n).all(|i| a[(i, i)].is_finite());
     }
+    #[cfg(feature = "std")]
+    if a.nrows() > FAER_STATIC_CHOLESKY_MIN
+        && let Some(ok) = static_faer_cholesky(a)
+    {
+        return ok;
+    }
     left_looking_cholesky(a)
+}
+
+/// Static sizes above this factorise by faer's blocked Cholesky (with the `std` feature),
+/// up to it by the register-resident [`left_looking_cholesky`].
+const FAER_STATIC_CHOLESKY_MIN: usize = 16;
+
+/// Bytes of stack a static-size factorisation lends faer's Cholesky (which needs n floats):
+/// enough up to n ≈ 500 in f64.
+#[cfg(feature = "std")]
+const STATIC_CHOLESKY_STACK: usize = 4096;
+
+/// faer's blocked Cholesky for a static size, its scratch on the stack (so nothing is
+/// allocated); `None` if the scratch would not fit in [`STATIC_CHOLESKY_STACK`].
+#[cfg(feature = "std")]
+#[inline(never)]
+fn static_faer_cholesky<T: Real, D: Dim>(a: &mut OMatrix<T, D, D>) -> Option<bool>
+where
+    DefaultAllocator: Allocator<D, D>,
+{
+    let n = a.nrows();
+    let req = T::cholesky_scratch(n);
+    if req.size_bytes() + req.align_bytes() > STATIC_CHOLESKY_STACK {
+        return None;
+    }
+    let mut buffer = [core::mem::MaybeUninit::<u8>::uninit(); STATIC_CHOLESKY_STACK];
+    let ok = T::cholesky(view_mut(a), MemStack::new(&mut buffer));
+    Some(ok && (0..n).all(|i| a[(i, i)].is_finite()))
 }
 
 /// [`cholesky_in_place`] for static sizes: column j of L from the finished columns, lᵢⱼ = (aᵢⱼ − Σₖ₍ⱼ lᵢₖ lⱼₖ) /
@@ -1192,5 +1227,48 @@ mod tests {
         assert!(!cholesky_in_place(&mut a, &mut scratch));
         let mut a = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, f64::NAN]);
         assert!(!cholesky_in_place(&mut a, &mut scratch));
+    }
+
+    /// Static sizes above 16 factorise by faer's Cholesky (scratch on the stack): the same
+    /// factor as the inlined loop to round-off, with the same refusals; at 16 the loop's bits.
+    #[test]
+    fn large_static_cholesky_is_faers_and_agrees_with_the_loop() {
+        use nalgebra::{Const, SMatrix};
+        fn at<const N: usize>() {
+            let g = SMatrix::<f64, N, N>::from_fn(|i, j| {
+                (((i * 7 + j * 3) % 11) as f64 - 5.0) / 3.0 + 0.01 * (i * j) as f64
+            });
+            let spd = g * g.transpose() + SMatrix::<f64, N, N>::identity() * 1e-3;
+            let mut scratch = CholeskyScratch::default();
+            let (mut library, mut rows) = (spd, spd);
+            assert!(cholesky_in_place(&mut library, &mut scratch));
+            assert!(left_looking_cholesky::<f64, Const<N>>(&mut rows));
+            let (library, rows) = (library.lower_triangle(), rows.lower_triangle());
+            if N <= FAER_STATIC_CHOLESKY_MIN {
+                assert_eq!(library, rows, "{N}");
+            }
+            // Backward stable: L Lᵀ = A + E with |E| ≲ n ε |L| |L|ᵀ; ‖A‖ ≈ 25 n here.
+            let bound = 4.0 * N as f64 * f64::EPSILON * (rows.abs() * rows.abs().transpose()).max();
+            assert!(
+                (library * library.transpose() - spd).abs().max() < bound,
+                "{N}"
+            );
+            assert!((rows * rows.transpose() - spd).abs().max() < bound, "{N}");
+            // Indefinite (a large negative shift) and NaN: refused by both.
+            for bad in [spd - SMatrix::<f64, N, N>::identity() * 1e3, {
+                let mut m = spd;
+                m[(N - 1, N - 1)] = f64::NAN;
+                m
+            }] {
+                let (mut l, mut r) = (bad, bad);
+                assert!(!cholesky_in_place(&mut l, &mut scratch), "{N}");
+                assert!(!left_looking_cholesky::<f64, Const<N>>(&mut r), "{N}");
+            }
+        }
+        at::<3>();
+        at::<16>();
+        at::<17>();
+        at::<24>();
+        at::<50>();
     }
 }

@@ -539,11 +539,17 @@ where
 }
 
 /// `Ok(())` if the noise covariance `m` (a Q(x, u, Δt) or R(x) evaluated at a step) is
-/// positive semi-definite within [`psd_tolerance`], else [`Error::NotPositiveSemiDefinite`]
-/// naming `quantity`. Non-finite entries pass, as in [`ensure_nonnegative_diagonal`]: the
-/// filters check finiteness where it costs nothing extra and name the culprit then. The
-/// filters use the symmetric part S = (M + Mᵀ)/2, so that is what is checked. Cheapest test
-/// first:
+/// positive semi-definite by [`psd_factor`]'s rule, else [`Error::NotPositiveSemiDefinite`]
+/// naming `quantity`. The rule, with τ = 16 n ε max|sᵢᵢ| ([`psd_tolerance`]): every pivot of
+/// S = L D Lᵀ is ≥ −τ, and where a pivot is within τ of zero (a direction without variance)
+/// its remaining covariances are within √(τ max|sᵢᵢ|) + τ. That second bound is of order
+/// √ε max|sᵢᵢ|, so where the diagonal has zeros an eigenvalue about that negative can pass
+/// (S with s₁₂ = s₂₁ = 10⁻⁸, s₃₃ = 1 and zeros elsewhere, eigenvalue −10⁻⁸ against
+/// √(τ · 1) ≈ 10⁻⁷); the filters' own covariance factorisations use the same rule.
+/// Non-finite entries pass, as in [`ensure_nonnegative_diagonal`]: the filters check
+/// finiteness where it costs nothing extra and name the culprit then. The filters use the
+/// symmetric part S = (M + Mᵀ)/2, so that is what is checked (formed as M/2 + Mᵀ/2, which
+/// does not overflow). Cheapest test first:
 ///
 /// 1. **Diagonally dominant** (Gershgorin: every eigenvalue of S lies in some disc
 ///    [sᵢᵢ − rᵢ, sᵢᵢ + rᵢ], rᵢ = Σⱼ≠ᵢ |sᵢⱼ|, so sᵢᵢ ≥ rᵢ for all i gives λ ≥ 0): O(n²) additions
@@ -594,7 +600,7 @@ where
         let mut radius = T::zero();
         for j in 0..n {
             if j != i {
-                radius += ((m[(i, j)] + m[(j, i)]) * half).abs();
+                radius += (m[(i, j)] * half + m[(j, i)] * half).abs();
             }
         }
         dominant &= m[(i, i)] >= radius;
@@ -642,7 +648,7 @@ where
         let scale = if zero { T::zero() } else { T::one() / d };
         work[(j, j)] = if zero { T::zero() } else { d };
         for i in (j + 1)..n {
-            let s = (m[(i, j)] + m[(j, i)]) * half;
+            let s = m[(i, j)] * half + m[(j, i)] * half;
             let w = (0..j).fold(s, |w, k| w - work[(i, k)] * work[(j, k)] * work[(k, k)]);
             // A zero-variance direction: its covariances must vanish (negated: NaN fails).
             if zero && !(w.abs() <= off_tol) {
@@ -670,8 +676,13 @@ where
     if !all_finite(m) {
         return Ok(());
     }
-    copy(work, m);
-    symmetrize(work);
+    let half = real::<T>(0.5);
+    let n = m.nrows();
+    for j in 0..n {
+        for i in 0..n {
+            work[(i, j)] = m[(i, j)] * half + m[(j, i)] * half;
+        }
+    }
     psd_factor(work, stage)
         .map(|_| ())
         .map_err(|_| Error::NotPositiveSemiDefinite { stage, quantity })
@@ -934,6 +945,19 @@ mod tests {
                 expected
             );
         }
+        // Rank one with entries near the largest finite value (2 × 2 and 3 × 3: tiers 2 and 3
+        // after Gershgorin fails on the asymmetric one): the symmetric part is formed as
+        // M/2 + Mᵀ/2, so it does not overflow into a refusal.
+        let huge = DMatrix::from_element(2, 2, 1e308);
+        assert_eq!(
+            ensure_semidefinite_noise(&huge, &mut huge.clone(), stage, q),
+            Ok(())
+        );
+        let huge = nalgebra::Matrix3::new(1e308, 1e308, 0.0, 1e308, 1e308, 0.0, 0.0, 0.0, 1.0);
+        assert_eq!(
+            ensure_semidefinite_noise(&huge, &mut nalgebra::Matrix3::zeros(), stage, q),
+            Ok(())
+        );
         // Non-finite entries are left to the finiteness checks.
         let nan = DMatrix::from_row_slice(2, 2, &[1.0, f64::NAN, f64::NAN, 1.0]);
         assert_eq!(

@@ -20,7 +20,7 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use crate::alloc::Alloc;
 use crate::error::Result;
 use crate::function::{SigmaScratch, sigma_points_one_by_one};
-use crate::kernel::{self, Accum, is_static};
+use crate::kernel::{self, Accum};
 use crate::manifold::add_into;
 use crate::model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
@@ -67,12 +67,12 @@ where
     ) {
         let (f, b) = (&self.transition, &self.input);
         let fits = f.shape() == (out.nrows(), x.nrows()) && b.shape() == (out.nrows(), u.nrows());
-        // Static sizes: the operator form unrolls and allocates nothing anyway.
-        let dynamic = !(is_static::<N>() && is_static::<U>());
-        if dynamic && fits {
-            // kernel::mul, not nalgebra's gemv: for runtime sizes its matrix–vector kernel is
-            // compiled for the CPU's vector width (chosen at run time), where nalgebra's gemv
-            // is compiled for the baseline target.
+        if fits {
+            // kernel::mul, not nalgebra's gemv: for runtime sizes (and static ones above
+            // kernel::STATIC_NALGEBRA_MAX) its matrix–vector kernel is compiled for the CPU's
+            // vector width (chosen at run time), where nalgebra's gemv is compiled for the
+            // baseline target and its fixed-size product is not blocked; small static sizes
+            // get the operator form, which unrolls (the same bits as `f * x + b * u`).
             kernel::mul(out, Accum::Replace, T::one(), f, x);
             kernel::mul(out, Accum::Add, T::one(), b, u);
         } else {
@@ -240,8 +240,7 @@ where
     #[inline(always)]
     fn measure_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
         let h = &self.observation;
-        let dynamic = !(is_static::<N>() && is_static::<M>());
-        if dynamic && h.shape() == (out.nrows(), x.nrows()) {
+        if h.shape() == (out.nrows(), x.nrows()) {
             kernel::mul(out, Accum::Replace, T::one(), h, x);
         } else {
             *out = h * x;

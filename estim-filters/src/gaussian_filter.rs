@@ -54,9 +54,8 @@ use crate::update::{self, CovarianceUpdate, Gate, UpdateSettings};
 /// [`LinearMeasurement`](estim_core::LinearMeasurement) do) and
 /// [`update_into`](Update::update_into) with a reused report. Which to pick, measured
 /// (BENCHMARKS.md, "Static or dynamic"): static sizes for the small states of the papers
-/// (n ≤ 6; no heap); runtime sizes from n ≈ 12 (there the KF and EKF are already 1.2–1.3×
-/// faster and the UKF breaks even); at n = 24 static steps are 1.2–2.7× slower (nalgebra's
-/// fixed-size products are not blocked).
+/// (n ≤ 6; no heap; 1.45–1.9× faster there); from n = 12 both run the same kernels and are
+/// within 10 % of each other (static ahead at 12–16, runtime sizes up to 10 % ahead at 50).
 #[derive(Debug)]
 pub struct GaussianFilter<T: Real, N: Dim, Pr: PropagatorWorkspace<T>, S = Euclidean>
 where
@@ -73,8 +72,8 @@ where
     accepted_noise: OMatrix<T, N, N>,
 }
 
-/// A copy of the estimate, the state space and the settings; the runtime-size buffers are not
-/// copied (the clone sizes its own on first use).
+/// A copy of the estimate, the state space, the settings and the remembered Q; the
+/// runtime-size buffers are not copied (the clone sizes its own on first use).
 impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T> + Clone, S: Clone> Clone
     for GaussianFilter<T, N, Pr, S>
 where
@@ -274,6 +273,8 @@ where
         (self.state, self.covariance) = prior.into_parts();
         if self.state.nrows() != n {
             self.scratch.clear();
+            let (rows, cols) = self.covariance.shape_generic();
+            self.accepted_noise = OMatrix::zeros_generic(rows, cols);
         }
     }
 }
@@ -547,7 +548,10 @@ where
         let n = self.state.shape_generic().0;
         let mut q = OMatrix::zeros_generic(n, n);
         model.process_noise_into(&self.state, input, dt, &mut q);
-        ensure_process_noise(&q, &mut OMatrix::zeros_generic(n, n), n.value())?;
+        let known = same_entries(&self.accepted_noise, &q);
+        if !known {
+            ensure_process_noise(&q, &mut OMatrix::zeros_generic(n, n), n.value())?;
+        }
         let map = Transition::on(&self.space, model, input, dt);
         let mut moments = estim_core::Moments::zeros(n, n);
         let mut workspace = Default::default();
@@ -555,6 +559,9 @@ where
         self.propagator
             .propagate_into(&self.state, &self.covariance, &map, out, &mut workspace)?;
         ensure_predicted_covariance(&moments.covariance)?;
+        if !known {
+            kernel::copy(&mut self.accepted_noise, &q);
+        }
         self.state = moments.mean;
         self.covariance = moments.covariance;
         Ok(moments.cross_covariance)

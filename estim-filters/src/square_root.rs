@@ -69,9 +69,9 @@
 //!
 //! # What every step checks
 //!
-//! Q and R are factorised each step ([`psd_factor`]: semi-definite allowed), so unlike the
-//! full-P forms their whole positive semi-definiteness is checked, not only their diagonal:
-//! an indefinite Q or R is [`Error::NotPositiveSemiDefinite`] (quantity `ProcessNoise` or
+//! Q and R are factorised each step ([`psd_factor`]: semi-definite allowed), which is also
+//! the check of their positive semi-definiteness (the full-P forms run the same rule as a
+//! separate test, `estim_core::checked`): an indefinite Q or R is [`Error::NotPositiveSemiDefinite`] (quantity `ProcessNoise` or
 //! `MeasurementNoise`), a non-finite one [`Error::NonFinite`]. A non-finite measurement, a
 //! negative or non-finite Δt, a singular innovation covariance, a non-finite result: the
 //! same typed errors as [`GaussianFilter`](crate::GaussianFilter). Every step computes its result aside and

@@ -297,5 +297,16 @@ fn a_remembered_noise_does_not_hide_a_changed_one() {
         refused
     );
     assert!(d == before);
-    d.predict(&NoisyDynProcess(q), &(), 1.0).unwrap();
+    d.predict(&NoisyDynProcess(q.clone()), &(), 1.0).unwrap();
+    // Reset to another size: the remembered Q goes with the old size, so the old Q is a
+    // shape error of the prediction, as for a fresh filter.
+    d.reset(Gaussian::new(DVector::zeros(3), DMatrix::identity(3, 3)).unwrap());
+    assert!(matches!(
+        d.predict(&NoisyDynProcess(q), &(), 1.0),
+        Err(Error::DimensionMismatch {
+            stage: Stage::Prediction,
+            quantity: Quantity::ProcessNoise,
+            ..
+        })
+    ));
 }
