@@ -661,7 +661,8 @@ where
 }
 
 /// Tier 3 of [`ensure_semidefinite_noise`], out of line (the rare case): non-finite entries
-/// pass (left to the finiteness checks); otherwise [`psd_factor`] with pivoting decides.
+/// pass (left to the finiteness checks); otherwise [`psd_factor`] decides (its Cholesky with
+/// zero pivots, then, if that fails, with diagonal pivoting).
 #[cold]
 #[inline(never)]
 fn pivoted_noise_check<T: Real, D: Dim>(
@@ -956,6 +957,36 @@ mod tests {
         let huge = nalgebra::Matrix3::new(1e308, 1e308, 0.0, 1e308, 1e308, 0.0, 0.0, 0.0, 1.0);
         assert_eq!(
             ensure_semidefinite_noise(&huge, &mut nalgebra::Matrix3::zeros(), stage, q),
+            Ok(())
+        );
+        // A A ᵀ of rank 2 with columns of very different scales (found by a random search):
+        // round-off in the unpivoted L D Lᵀ leaves a non-vanishing zero-variance column, so
+        // tier 2 fails it and the pivoted factorisation (tier 3) accepts it.
+        let singular = DMatrix::<f64>::from_column_slice(
+            3,
+            3,
+            &[
+                916.5783855043492,
+                -641611.052442303,
+                -0.7516908505295964,
+                -641611.052442303,
+                449132098.4113805,
+                0.1123807364296523,
+                -0.7516908505295964,
+                0.1123807364296523,
+                8176.54452238597,
+            ],
+        );
+        let lambda = singular.clone().symmetric_eigenvalues();
+        assert!(lambda.min().abs() < 1e-6 * lambda.max(), "{lambda}");
+        let max_diag = 449132098.4113805;
+        assert!(!semidefinite_ldl(
+            &singular,
+            &mut singular.clone(),
+            max_diag
+        ));
+        assert_eq!(
+            ensure_semidefinite_noise(&singular, &mut singular.clone(), stage, q),
             Ok(())
         );
         // Non-finite entries are left to the finiteness checks.
