@@ -705,6 +705,7 @@ where
 
 /// Static sizes above this factorise by faer's blocked Cholesky (with the `std` feature),
 /// up to it by the register-resident [`left_looking_cholesky`].
+#[cfg(feature = "std")]
 const FAER_STATIC_CHOLESKY_MIN: usize = 16;
 
 /// Bytes of stack a static-size factorisation lends faer's Cholesky (which needs n floats):
