@@ -594,13 +594,12 @@ where
     DefaultAllocator: Allocator<D> + Allocator<D, D>,
 {
     let n = m.nrows();
-    let half = real::<T>(0.5);
     let (mut dominant, mut max_diag) = (true, T::zero());
     for i in 0..n {
         let mut radius = T::zero();
         for j in 0..n {
             if j != i {
-                radius += (m[(i, j)] * half + m[(j, i)] * half).abs();
+                radius += symmetric_entry(m, i, j).abs();
             }
         }
         dominant &= m[(i, i)] >= radius;
@@ -616,6 +615,16 @@ where
         return Ok(());
     }
     pivoted_noise_check(m, work, stage, quantity)
+}
+
+/// sᵢⱼ = (mᵢⱼ + mⱼᵢ)/2, formed as mᵢⱼ/2 + mⱼᵢ/2 so that finite entries cannot overflow.
+#[inline(always)]
+fn symmetric_entry<T: Real, D: Dim>(m: &OMatrix<T, D, D>, i: usize, j: usize) -> T
+where
+    DefaultAllocator: Allocator<D, D>,
+{
+    let half = real::<T>(0.5);
+    m[(i, j)] * half + m[(j, i)] * half
 }
 
 /// Tier 2 of [`ensure_semidefinite_noise`]: S = (M + Mᵀ)/2 = L D Lᵀ, dⱼ = sⱼⱼ − Σₖ₍ⱼ lⱼₖ² dₖ
@@ -635,7 +644,6 @@ where
     let n = m.nrows();
     let tol = tolerance_for(n, max_diag);
     let off_tol = (tol * max_diag).sqrt() + tol;
-    let half = real::<T>(0.5);
     for j in 0..n {
         let d = (0..j).fold(m[(j, j)], |d, k| {
             let l = work[(j, k)];
@@ -648,7 +656,7 @@ where
         let scale = if zero { T::zero() } else { T::one() / d };
         work[(j, j)] = if zero { T::zero() } else { d };
         for i in (j + 1)..n {
-            let s = m[(i, j)] * half + m[(j, i)] * half;
+            let s = symmetric_entry(m, i, j);
             let w = (0..j).fold(s, |w, k| w - work[(i, k)] * work[(j, k)] * work[(k, k)]);
             // A zero-variance direction: its covariances must vanish (negated: NaN fails).
             if zero && !(w.abs() <= off_tol) {
@@ -677,11 +685,10 @@ where
     if !all_finite(m) {
         return Ok(());
     }
-    let half = real::<T>(0.5);
     let n = m.nrows();
     for j in 0..n {
         for i in 0..n {
-            work[(i, j)] = m[(i, j)] * half + m[(j, i)] * half;
+            work[(i, j)] = symmetric_entry(m, i, j);
         }
     }
     psd_factor(work, stage)

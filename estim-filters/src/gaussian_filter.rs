@@ -67,9 +67,7 @@ where
     space: S,
     settings: UpdateSettings<T>,
     scratch: ScratchCache<T, Pr>,
-    /// The last process noise Q a committed prediction found positive semi-definite (zero at
-    /// first, which is): a prediction whose Q equals it entry for entry skips the check.
-    accepted_noise: OMatrix<T, N, N>,
+    accepted_noise: AcceptedNoise<T, N>,
 }
 
 /// A copy of the estimate, the state space, the settings and the remembered Q; the
@@ -156,15 +154,14 @@ where
     /// A filter starting from `prior` that propagates moments with `propagator`.
     pub fn with_propagator(prior: Gaussian<T, N>, propagator: Pr) -> Self {
         let (state, covariance) = prior.into_parts();
-        let (rows, cols) = covariance.shape_generic();
         Self {
+            accepted_noise: AcceptedNoise::like(&covariance),
             state,
             covariance,
             propagator,
             space: Euclidean,
             settings: UpdateSettings::new(),
             scratch: ScratchCache::default(),
-            accepted_noise: OMatrix::zeros_generic(rows, cols),
         }
     }
 }
@@ -273,8 +270,7 @@ where
         (self.state, self.covariance) = prior.into_parts();
         if self.state.nrows() != n {
             self.scratch.clear();
-            let (rows, cols) = self.covariance.shape_generic();
-            self.accepted_noise = OMatrix::zeros_generic(rows, cols);
+            self.accepted_noise = AcceptedNoise::like(&self.covariance);
         }
     }
 }
@@ -290,7 +286,7 @@ fn predict_step<T, N, Pr, G>(
     cache: &mut ScratchCache<T, Pr>,
     state: &mut OVector<T, N>,
     covariance: &mut OMatrix<T, N, N>,
-    accepted: &mut OMatrix<T, N, N>,
+    accepted: &mut AcceptedNoise<T, N>,
     g: &G,
     fill_noise: impl FnOnce(&OVector<T, N>, &mut OMatrix<T, N, N>),
     step: Step,
@@ -314,12 +310,12 @@ where
         }
     };
     fill_noise(state, &mut work.noise);
-    let known = same_entries(accepted, &work.noise);
+    let known = accepted.holds(&work.noise);
     let result = predicted(propagator, state, covariance, g, work, known);
     match result {
         Ok(()) if step == Step::Apply => {
             if !known {
-                kernel::copy(accepted, &work.noise);
+                accepted.remember(&work.noise);
             }
             commit(state, covariance, &mut work.state, &mut work.covariance)
         }
@@ -330,17 +326,38 @@ where
     result
 }
 
-/// Whether `a` and `b` have the same shape and equal entries (−0 = +0; NaN equals nothing),
-/// without early exit: a branch-free pass the compiler vectorises.
-#[inline(always)]
-fn same_entries<T: Real, N: Dim>(a: &OMatrix<T, N, N>, b: &OMatrix<T, N, N>) -> bool
+/// The last process noise Q a committed prediction found positive semi-definite (n × n zeros
+/// at first, which are): a prediction whose Q equals it entry for entry skips the check.
+#[derive(Clone, Debug)]
+struct AcceptedNoise<T: Real, N: Dim>(OMatrix<T, N, N>)
+where
+    DefaultAllocator: Alloc<N>;
+
+impl<T: Real, N: Dim> AcceptedNoise<T, N>
 where
     DefaultAllocator: Alloc<N>,
 {
-    a.shape() == b.shape()
-        && (a.as_slice().iter())
-            .zip(b.as_slice())
-            .fold(true, |same, (x, y)| same & (x == y))
+    /// Zeros of `covariance`'s shape.
+    fn like(covariance: &OMatrix<T, N, N>) -> Self {
+        let (rows, cols) = covariance.shape_generic();
+        Self(OMatrix::zeros_generic(rows, cols))
+    }
+
+    /// Whether `q` is the accepted Q: the same shape and equal entries (−0 = +0; NaN equals
+    /// nothing), without early exit (a branch-free pass the compiler vectorises).
+    #[inline(always)]
+    fn holds(&self, q: &OMatrix<T, N, N>) -> bool {
+        self.0.shape() == q.shape()
+            && (self.0.as_slice().iter())
+                .zip(q.as_slice())
+                .fold(true, |same, (x, y)| same & (x == y))
+    }
+
+    /// Remembers `q`, of the accepted Q's shape, which a committed prediction has just checked.
+    #[inline(always)]
+    fn remember(&mut self, q: &OMatrix<T, N, N>) {
+        kernel::copy(&mut self.0, q);
+    }
 }
 
 /// Whether a step commits its result or only sizes the buffers it works in (`prepare_*`).
@@ -548,7 +565,7 @@ where
         let n = self.state.shape_generic().0;
         let mut q = OMatrix::zeros_generic(n, n);
         model.process_noise_into(&self.state, input, dt, &mut q);
-        let known = same_entries(&self.accepted_noise, &q);
+        let known = self.accepted_noise.holds(&q);
         if !known {
             ensure_process_noise(&q, &mut OMatrix::zeros_generic(n, n), n.value())?;
         }
@@ -560,7 +577,7 @@ where
             .propagate_into(&self.state, &self.covariance, &map, out, &mut workspace)?;
         ensure_predicted_covariance(&moments.covariance)?;
         if !known {
-            kernel::copy(&mut self.accepted_noise, &q);
+            self.accepted_noise.remember(&q);
         }
         self.state = moments.mean;
         self.covariance = moments.covariance;
