@@ -737,7 +737,7 @@ where
 /// loop, so a positive definite matrix gets the same bits from both, without its tolerance,
 /// pivoting and closures. Inlined, it replaced nalgebra's out-of-line `Cholesky::new` (with
 /// its copies in and out): the KF 3/2 step 933 → 908 instructions, the UKF 6/4 step 14,671 →
-/// 14,600 (BENCHMARKS.md, "Static filter steps"). `false` at a pivot that is not finite and
+/// 14,600 (commit `b1972b9`). `false` at a pivot that is not finite and
 /// > 0.
 #[inline(always)]
 fn left_looking_cholesky<T: Real, D: Dim>(a: &mut OMatrix<T, D, D>) -> bool
