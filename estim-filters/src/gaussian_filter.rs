@@ -57,7 +57,7 @@ use crate::update::{self, CovarianceUpdate, Gate, UpdateSettings};
 /// [`LinearMeasurement`](estim_core::LinearMeasurement) do) and
 /// [`update_into`](Update::update_into) with a reused report. Which to pick, measured
 /// (BENCHMARKS.md, "Static or dynamic"): static sizes for the small states of the papers
-/// (n ≤ 6; no heap; 1.45–1.9× faster there); from n = 12 both run the same kernels and are
+/// (n ≤ 6; no heap; 1.6–1.9× faster there); from n = 12 both run the same kernels and are
 /// within 10 % of each other (static ahead at 12–16, runtime sizes up to 10 % ahead at 50).
 #[derive(Debug)]
 pub struct GaussianFilter<T: Real, N: Dim, Pr: PropagatorWorkspace<T>, S = Euclidean>
