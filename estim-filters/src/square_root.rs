@@ -74,8 +74,11 @@
 //! separate test, `estim_core::checked`): an indefinite Q or R is [`Error::NotPositiveSemiDefinite`] (quantity `ProcessNoise` or
 //! `MeasurementNoise`), a non-finite one [`Error::NonFinite`]. A non-finite measurement, a
 //! negative or non-finite Δt, a singular innovation covariance, a non-finite result: the
-//! same typed errors as [`GaussianFilter`](crate::GaussianFilter). Every step computes its result aside and
-//! commits it only when all checks pass, so on an error the filter is bit-identical to before.
+//! same typed errors as [`GaussianFilter`](crate::GaussianFilter). The new P = S Sᵀ is checked
+//! as the full-P forms check theirs: a finite factor whose P overflows (S = 10²⁰⁰ I, P = ∞ in
+//! `f64`) is [`Error::NonFinite`] (quantity `Covariance`), never an `Ok` with an infinite P.
+//! Every step computes its result aside and commits it only when all checks pass, so on an
+//! error the filter is bit-identical to before.
 //!
 //! # Cost and allocation
 //!
@@ -115,8 +118,8 @@ mod triangular;
 
 use estim_core::kernel::{self, Accum};
 use estim_core::linalg::{
-    all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_shape, mirror_lower_checked,
-    psd_factor,
+    all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_shape, finite_or_error,
+    mirror_lower_checked, psd_factor,
 };
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::{Affine, Linearized, Unscented};
@@ -307,11 +310,26 @@ where
         }
     }
 
-    /// Makes (x̂, S) the estimate, with P = S Sᵀ.
-    fn commit(&mut self, state: OVector<T, N>, factor: OMatrix<T, N, N>) {
-        self.covariance = outer(&factor);
+    /// Makes (x̂, S) the estimate, with P = S Sᵀ, if P passes the checks the full-P filters
+    /// make of theirs: finite (a finite S can still overflow in P: S = 10²⁰⁰ I gives
+    /// P = 10⁴⁰⁰ I = ∞ in f64; issue 41) and, as there, no negative variance (which
+    /// Pᵢᵢ = Σₖ Sᵢₖ² cannot have once finite, but the rule is the same for every filter).
+    /// Otherwise `NonFinite` (`NotPositiveSemiDefinite`) for `stage`'s `Covariance`, and the
+    /// filter is unchanged.
+    fn commit(
+        &mut self,
+        stage: Stage,
+        state: OVector<T, N>,
+        factor: OMatrix<T, N, N>,
+    ) -> Result<()> {
+        let quantity = Quantity::Covariance;
+        let (covariance, finite) = outer_checked(&factor);
+        finite_or_error(finite, stage, quantity)?;
+        ensure_nonnegative_diagonal(&covariance, stage, quantity)?;
+        self.covariance = covariance;
         self.state = state;
         self.factor = factor;
+        Ok(())
     }
 }
 
@@ -343,11 +361,19 @@ fn outer<T: Real, N: Dim>(s: &OMatrix<T, N, N>) -> OMatrix<T, N, N>
 where
     DefaultAllocator: Alloc<N>,
 {
+    outer_checked(s).0
+}
+
+/// S Sᵀ as [`outer`], and whether it is finite.
+fn outer_checked<T: Real, N: Dim>(s: &OMatrix<T, N, N>) -> (OMatrix<T, N, N>, bool)
+where
+    DefaultAllocator: Alloc<N>,
+{
     let n = s.shape_generic().0;
     let mut p = OMatrix::zeros_generic(n, n);
     kernel::mul_tr_lower(&mut p, Accum::Replace, T::one(), s, s);
-    mirror_lower_checked(&mut p);
-    p
+    let finite = mirror_lower_checked(&mut p);
+    (p, finite)
 }
 
 /// A lower-triangular factor of the covariance `c` and whether it exists: [`psd_factor`]
@@ -841,8 +867,7 @@ where
         let q = self.process_noise(model, input, dt)?;
         let f = Transition::new(model, input, dt);
         let (x, s) = linearized_predict(&self.state, &self.factor, &f, &q)?;
-        self.commit(x, s);
-        Ok(())
+        self.commit(Stage::Prediction, x, s)
     }
 
     /// An update through a differentiable h (KF, EKF).
@@ -858,10 +883,10 @@ where
         self.ensure_factored(Stage::Update)?;
         let result =
             linearized_update(&self.state, &self.factor, model, z, &self.settings, report)?;
-        if let Some((x, s)) = result {
-            self.commit(x, s);
+        match result {
+            Some((x, s)) => self.commit(Stage::Update, x, s),
+            None => Ok(()),
         }
-        Ok(())
     }
 }
 
@@ -891,8 +916,7 @@ where
         let q = self.process_noise(model, input, dt)?;
         let f = Transition::new(model, input, dt);
         let (x, s) = unscented_predict(&self.propagator, &self.state, &self.factor, &f, &q)?;
-        self.commit(x, s);
-        Ok(())
+        self.commit(Stage::Prediction, x, s)
     }
 }
 
@@ -956,9 +980,9 @@ where
             &self.settings,
             report,
         )?;
-        if let Some((x, s)) = result {
-            self.commit(x, s);
+        match result {
+            Some((x, s)) => self.commit(Stage::Update, x, s),
+            None => Ok(()),
         }
-        Ok(())
     }
 }
