@@ -134,14 +134,14 @@ impl<'de> Deserialize<'de> for Sampled {
 /// matrix through it; use it for a field of yours the same way.
 ///
 /// ```
-/// use estim_core::nalgebra::DMatrix;
+/// use estim_core::nalgebra::{DMatrix, Dyn};
 /// use estim_core::serialize::ShapeChecked;
 ///
-/// let m: ShapeChecked<f64, _, _> = serde_json::from_str("[[1.0, 2.0, 3.0, 4.0], 2, 2]")?;
+/// let m: ShapeChecked<f64, Dyn, Dyn> = serde_json::from_str("[[1.0, 2.0, 3.0, 4.0], 2, 2]")?;
 /// assert_eq!(m.0, DMatrix::from_column_slice(2, 2, &[1.0, 2.0, 3.0, 4.0]));
 /// // 2⁶³ − 1 rows: an error, not a panic or a matrix larger than its entries.
 /// let corrupted = "[[1.0, 2.0, 3.0, 4.0], 9223372036854775807, 2]";
-/// assert!(serde_json::from_str::<ShapeChecked<f64, estim_core::nalgebra::Dyn, estim_core::nalgebra::Dyn>>(corrupted).is_err());
+/// assert!(serde_json::from_str::<ShapeChecked<f64, Dyn, Dyn>>(corrupted).is_err());
 /// # Ok::<(), serde_json::Error>(())
 /// ```
 #[derive(Clone, Debug, PartialEq)]
