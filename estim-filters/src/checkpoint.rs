@@ -6,7 +6,9 @@
 //! `float_roundtrip` feature: without it, its parser may be one ulp off), the propagator's settings,
 //! the state space, the covariance update form and the gate. What is not: the runtime-size
 //! buffers (the resumed filter sizes its own at its first step; they hold no state). On the
-//! way in, the shapes must agree and every entry be finite (an error otherwise); P is not
+//! way in, the shapes must agree (a runtime size is checked against its entries before
+//! nalgebra builds the matrix: [`ShapeChecked`]) and every entry be finite (an error
+//! otherwise); P is not
 //! re-checked for definiteness, because a filter may legitimately carry a covariance that the
 //! stricter [`Gaussian::new`] tolerance would refuse.
 //!
@@ -32,8 +34,9 @@
 //! ```
 
 use estim_core::linalg::{ensure_finite, ensure_shape};
-use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::PropagatorWorkspace;
+use estim_core::serialize::ShapeChecked;
 use estim_core::{Alloc, Gaussian, Quantity, Real, Stage, StateSpace};
 use serde::de::Error as _;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -87,15 +90,20 @@ where
     T: Deserialize<'de>,
 {
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        // Both through `ShapeChecked`: a corrupted runtime shape is an error before nalgebra
+        // sees it (issue 41).
         let f =
-            Fields::<OVector<T, N>, OMatrix<T, N, N>, Pr, S, Gate<T>>::deserialize(deserializer)?;
-        let n = f.state.nrows();
+            Fields::<ShapeChecked<T, N, U1>, ShapeChecked<T, N, N>, Pr, S, Gate<T>>::deserialize(
+                deserializer,
+            )?;
+        let (state, covariance) = (f.state.0, f.covariance.0);
+        let n = state.nrows();
         let stage = Stage::Construction;
-        ensure_shape(&f.covariance, n, n, stage, Quantity::Covariance)
-            .and_then(|()| ensure_finite(&f.state, stage, Quantity::Mean))
-            .and_then(|()| ensure_finite(&f.covariance, stage, Quantity::Covariance))
+        ensure_shape(&covariance, n, n, stage, Quantity::Covariance)
+            .and_then(|()| ensure_finite(&state, stage, Quantity::Mean))
+            .and_then(|()| ensure_finite(&covariance, stage, Quantity::Covariance))
             .map_err(D::Error::custom)?;
-        let prior = Gaussian::new_unchecked(f.state, f.covariance);
+        let prior = Gaussian::new_unchecked(state, covariance);
         let filter = GaussianFilter::with_propagator(prior, f.propagator)
             .with_state_space(f.state_space)
             .with_covariance_update(f.covariance_update);

@@ -24,8 +24,11 @@
 //!
 //! - [`Rts::predict`]: one record per prediction (two n-vectors and three n × n matrices; on
 //!   the heap for runtime sizes), in a `VecDeque` that grows with the pass; with
-//!   [`Rts::with_lag`] its capacity is `lag`, reserved at construction, and the oldest record
-//!   is dropped, so memory stays fixed.
+//!   [`Rts::with_lag`] it grows the same way until it holds `lag` records, then the oldest
+//!   record is dropped for each new one, so memory stays fixed from there on. Nothing is
+//!   reserved at construction, so any lag is accepted (no bound to document, no error to
+//!   handle) and costs only what the pass records: a lag longer than the pass is the
+//!   whole-pass smoother.
 //! - [`Rts::smooth`]: the `len() + 1` returned Gaussians; for runtime sizes also the factor,
 //!   gain and two vectors once per call, and two n × n temporaries per step (the covariance
 //!   expression). [`Rts::smooth_with_cross_covariances`] adds the `len()` returned matrices.
@@ -135,7 +138,9 @@ where
     /// `lag` are recorded), and [`smooth`](Self::smooth)'s first estimate is x̂ₖ₋ₗ given the
     /// data up to k: exact, because the backward recursion from k down to k − lag needs only
     /// the filtered estimates and predictions in between. `lag = 0` keeps nothing (the
-    /// smoothed estimate is the filtered one).
+    /// smoothed estimate is the filtered one). The record grows with the pass rather than
+    /// being reserved here (module docs, "What it allocates"), so any `lag` is accepted,
+    /// `usize::MAX` included: one longer than the pass is [`new`](Self::new)'s smoother.
     ///
     /// ```
     /// use estim_filters::{KalmanFilter, Update};
@@ -162,7 +167,9 @@ where
     /// ```
     pub fn with_lag(lag: usize) -> Self {
         Self {
-            records: VecDeque::with_capacity(lag),
+            // Not `with_capacity(lag)`: a huge lag would panic (capacity overflow) or abort
+            // (allocation failure) here for records that may never come (issue 41).
+            records: VecDeque::new(),
             lag: Some(lag),
         }
     }

@@ -67,8 +67,9 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use estim_core::linalg::{all_finite, ensure_finite, ensure_symmetric, symmetrize};
+use estim_core::linalg::{all_finite, ensure_finite, ensure_symmetric, symmetric_map};
 use estim_core::nalgebra::{DMatrix, DefaultAllocator, Dim, OMatrix, OVector};
+use estim_core::scalar::real;
 use estim_core::{
     Alloc, Error, LinearMeasurementModel, MeasurementHessian, MeasurementJacobian,
     MeasurementModel, Quantity, Real, Stage, function::SigmaScratch,
@@ -99,8 +100,22 @@ where
     /// the first update), with forgetting window `window` = L updates (finite, ≥ 1) and
     /// eigenvalue floor `floor` (finite, > 0; the smallest variance R̂ may have).
     ///
+    /// `initial` needs to be symmetric only within `ensure_symmetric`'s tolerance; the start
+    /// statistic is its symmetric part (R₀ + R₀ᵀ)/2, formed entry pair by entry pair, so R̂ is
+    /// exactly symmetric from the start.
+    ///
     /// Errors: [`NoiseIdError::InvalidSetting`] for the window or floor; [`NoiseIdError::Model`]
-    /// if `initial` is not finite or not symmetric.
+    /// if `initial` is not finite or not symmetric, or with [`Error::NonFinite`] (quantity
+    /// `MeasurementNoise`) if R̂ would overflow although `initial` is finite (entries near the
+    /// largest finite number, whose eigenvalues exceed it: the projection could not be formed).
+    ///
+    /// ```
+    /// use estim_core::nalgebra::Matrix2;
+    /// use estim_filters::noise_id::MeasurementNoiseMatching;
+    ///
+    /// let m = f64::MAX; // eigenvalues 2·MAX = ∞ and 0
+    /// assert!(MeasurementNoiseMatching::new(Matrix2::new(m, -m, -m, m), 10.0, 1e-6).is_err());
+    /// ```
     pub fn new(initial: OMatrix<T, M, M>, window: T, floor: T) -> Result<Self, NoiseIdError> {
         let as_f64 = |v: T| v.to_subset().unwrap_or(f64::NAN);
         if !(window >= T::one() && window.is_finite()) {
@@ -120,16 +135,28 @@ where
                 ensure_symmetric(&initial, Stage::Construction, Quantity::MeasurementNoise)
             })
             .map_err(NoiseIdError::Model)?;
-        let mut this = Self {
+        let mut statistic = initial;
+        let half = real::<T>(0.5);
+        // Halves of finite numbers cannot overflow (a sum could); an exactly symmetric pair
+        // is kept as it is.
+        symmetric_map(
+            statistic.nrows(),
+            statistic.as_mut_slice(),
+            [],
+            |a, [], b, []| {
+                if a == b { a } else { a * half + b * half }
+            },
+        );
+        let (estimate, clipped) =
+            projected(&statistic, floor).ok_or_else(|| overflow(Stage::Construction))?;
+        Ok(Self {
             window,
             floor,
-            statistic: initial.clone(),
-            estimate: initial,
+            statistic,
+            estimate,
             samples: 0,
-            clipped: 0,
-        };
-        this.project();
-        Ok(this)
+            clipped,
+        })
     }
 
     /// The current estimate R̂ (symmetric, eigenvalues ≥ floor).
@@ -164,7 +191,9 @@ where
     /// Uses the report of an update made with [`model`](Self::model) (so with R̂ as the
     /// noise). Returns whether it was used (`false` for a gated update).
     ///
-    /// Errors: [`NoiseIdError::Model`] with [`Error::NonFinite`] for a non-finite report, or
+    /// Errors: [`NoiseIdError::Model`] with [`Error::NonFinite`] for a non-finite report
+    /// (quantity `Innovation`) or a finite one that would make R̂ overflow (quantity
+    /// `MeasurementNoise`: e.g. ν = (10¹⁵⁴, −10¹⁵⁴), whose ν νᵀ has eigenvalue 2·10³⁰⁸), or
     /// [`Error::DimensionMismatch`] for a report of another size; the estimator is then
     /// unchanged.
     pub fn observe(&mut self, report: &UpdateReport<T, M>) -> Result<bool, NoiseIdError> {
@@ -217,37 +246,82 @@ where
         }
         let k = T::from_usize(self.samples + 1).unwrap_or(self.window);
         let alpha = (T::one() / k).max(T::one() / self.window);
-        self.statistic = &self.statistic * (T::one() - alpha) + sample * alpha;
-        symmetrize(&mut self.statistic);
+        // C ← (1 − α) C + α sym(d), each entry pair formed once (C is exactly symmetric, and
+        // so stays; sym(d) = (d + dᵀ)/2 as halves, which cannot overflow), aside until R̂ is.
+        let (keep, half) = (T::one() - alpha, real::<T>(0.5));
+        let mut statistic = self.statistic.clone();
+        let finite = symmetric_map(
+            statistic.nrows(),
+            statistic.as_mut_slice(),
+            [sample.as_slice()],
+            |c, [d], _, [dt]| {
+                let d = if d == dt { d } else { d * half + dt * half };
+                keep * c + alpha * d
+            },
+        );
+        if !finite {
+            return Err(overflow(Stage::Update));
+        }
+        let (estimate, clipped) =
+            projected(&statistic, self.floor).ok_or_else(|| overflow(Stage::Update))?;
+        self.statistic = statistic;
+        self.estimate = estimate;
+        self.clipped = clipped;
         self.samples += 1;
-        self.project();
         Ok(true)
     }
+}
 
-    /// R̂ ← C with its eigenvalues raised to at least the floor.
-    fn project(&mut self) {
-        let m = self.statistic.nrows();
-        let dynamic = DMatrix::from_iterator(m, m, self.statistic.iter().copied());
-        let mut eigen = dynamic.symmetric_eigen();
-        self.clipped = 0;
-        for v in eigen.eigenvalues.iter_mut() {
-            if *v < self.floor {
-                *v = self.floor;
-                self.clipped += 1;
-            }
-        }
-        if self.clipped == 0 {
-            self.estimate.copy_from(&self.statistic);
-            return;
-        }
-        let projected = eigen.recompose();
-        self.estimate = OMatrix::from_iterator_generic(
-            self.statistic.shape_generic().0,
-            self.statistic.shape_generic().1,
-            projected.iter().copied(),
-        );
-        symmetrize(&mut self.estimate);
+/// The error of an R̂ that would overflow.
+fn overflow(stage: Stage) -> NoiseIdError {
+    NoiseIdError::Model(Error::NonFinite {
+        stage,
+        quantity: Quantity::MeasurementNoise,
+    })
+}
+
+/// R̂ = C with its eigenvalues raised to at least `floor`, and how many were raised; `None`
+/// if C's eigenvalues or R̂ are not finite (C exactly symmetric and finite, but with entries
+/// so large that its spectrum overflows). With nothing raised R̂ is C itself; otherwise
+/// R̂ = V Λ Vᵀ is formed entry pair by entry pair, R̂ᵢⱼ = R̂ⱼᵢ = Σₖ vᵢₖ λₖ vⱼₖ, so it is
+/// exactly symmetric by construction.
+fn projected<T: Real, M: Dim>(
+    statistic: &OMatrix<T, M, M>,
+    floor: T,
+) -> Option<(OMatrix<T, M, M>, usize)>
+where
+    DefaultAllocator: Alloc<M>,
+{
+    let m = statistic.nrows();
+    let dynamic = DMatrix::from_iterator(m, m, statistic.iter().copied());
+    let mut eigen = dynamic.symmetric_eigen();
+    if !all_finite(&eigen.eigenvalues) {
+        return None;
     }
+    let mut clipped = 0;
+    for v in eigen.eigenvalues.iter_mut() {
+        if *v < floor {
+            *v = floor;
+            clipped += 1;
+        }
+    }
+    let mut estimate = statistic.clone();
+    if clipped == 0 {
+        return Some((estimate, 0));
+    }
+    let (vectors, values) = (&eigen.eigenvectors, &eigen.eigenvalues);
+    let mut finite = true;
+    for j in 0..m {
+        for i in j..m {
+            let v = (0..m).fold(T::zero(), |sum, k| {
+                sum + vectors[(i, k)] * values[k] * vectors[(j, k)]
+            });
+            estimate[(i, j)] = v;
+            estimate[(j, i)] = v;
+            finite &= v.is_finite();
+        }
+    }
+    finite.then_some((estimate, clipped))
 }
 
 /// A measurement model with its noise replaced by a given matrix (the adaptive estimate):

@@ -204,3 +204,81 @@ fn bad_settings_and_reports_are_typed_errors_that_change_nothing() {
     assert!(!adaptive.observe(&gated).unwrap());
     assert_eq!(adaptive, before);
 }
+
+/// Issue 41, defect 3: finite input whose R̂ overflows was accepted. `new` with entries
+/// ±f64::MAX gave R̂ = ±∞ (C's eigenvalues 2·MAX = ∞ and 0, raised to the floor, recomposed),
+/// and from 10³⁰⁰ I one report with ν = (10¹⁵⁴, −10¹⁵⁴), S = I gave `Ok(true)` and −∞
+/// off-diagonals, after which every `observe` failed. Both are typed errors now, the
+/// estimator unchanged.
+#[test]
+fn input_whose_estimate_would_overflow_is_refused() {
+    let overflow = |e: Result<(), &NoiseIdError>| {
+        matches!(
+            e,
+            Err(NoiseIdError::Model(Error::NonFinite {
+                quantity: Quantity::MeasurementNoise,
+                ..
+            }))
+        )
+    };
+    let max = f64::MAX;
+    let huge = MeasurementNoiseMatching::new(Matrix2::new(max, -max, -max, max), 10.0, 1e-6);
+    assert!(overflow(huge.as_ref().map(|_| ())), "{huge:?}");
+    let mut adaptive =
+        MeasurementNoiseMatching::new(Matrix2::identity() * 1e300, 10.0, 1e-6).unwrap();
+    let before = adaptive.clone();
+    let report = UpdateReport {
+        innovation: Vector2::new(1e154, -1e154),
+        innovation_covariance: Matrix2::identity(),
+        nis: 0.0,
+        log_likelihood: 0.0,
+        outcome: UpdateOutcome::Applied,
+        iterations: None,
+    };
+    let result = adaptive.observe(&report);
+    assert!(overflow(result.as_ref().map(|_| ())), "{result:?}");
+    assert_eq!(adaptive, before);
+    // Still usable: an ordinary report is taken.
+    let ordinary = UpdateReport {
+        innovation: Vector2::new(1.0, -1.0),
+        ..report
+    };
+    assert!(adaptive.observe(&ordinary).unwrap());
+    assert!(adaptive.noise().iter().all(|v: &f64| v.is_finite()));
+}
+
+/// Issue 41, defect 3: R̂ is exactly symmetric, as documented, also when the initial R is
+/// symmetric only within `new`'s tolerance (√ε relative), and after clipped updates with
+/// reports whose S is not exactly symmetric (seeded random 3 × 3 reports).
+#[test]
+fn the_estimate_is_exactly_symmetric() {
+    use estim_core::nalgebra::{Matrix3, Vector3};
+    let exactly_symmetric =
+        |r: &Matrix3<f64>| (0..3).all(|i| (0..3).all(|j| r[(i, j)] == r[(j, i)]));
+    let mut initial = Matrix3::new(2.0, 0.5, 0.1, 0.5, 1.0, 0.2, 0.1, 0.2, 3.0);
+    initial[(1, 0)] += 1e-12; // within √ε · 3 ≈ 4.5·10⁻⁸
+    let mut adaptive = MeasurementNoiseMatching::new(initial, 5.0, 1e-3).unwrap();
+    assert!(exactly_symmetric(adaptive.noise()), "{}", adaptive.noise());
+    let mut r = rng(41);
+    let mut clipped_steps = 0;
+    for _ in 0..200 {
+        let nu = Vector3::from_fn(|_, _| normal(&mut r));
+        let a = Matrix3::from_fn(|_, _| normal(&mut r));
+        let mut s = a * a.transpose() * 4.0;
+        s[(2, 0)] *= 1.0 + 1e-14;
+        let report = UpdateReport {
+            innovation: nu,
+            innovation_covariance: s,
+            nis: 0.0,
+            log_likelihood: 0.0,
+            outcome: UpdateOutcome::Applied,
+            iterations: None,
+        };
+        adaptive.observe(&report).unwrap();
+        assert!(exactly_symmetric(adaptive.noise()), "{}", adaptive.noise());
+        assert!(exactly_symmetric(adaptive.statistic()));
+        clipped_steps += usize::from(adaptive.clipped() > 0);
+    }
+    // S ≫ ν νᵀ makes the statistic indefinite: the recomposed (clipped) R̂ is exercised.
+    assert!(clipped_steps > 0);
+}

@@ -142,6 +142,66 @@ fn bad_checkpoints_are_refused() {
     assert!(e.to_string().contains("covariance"), "{e}");
 }
 
+/// Issue 41, defect 5: a runtime-size covariance claiming 2⁶³ − 1 rows made nalgebra's
+/// storage check multiply rows × columns unchecked: a panic ("attempt to multiply with
+/// overflow") where overflow checks are on, and where they are off 2⁶³ × 2 wraps to 0 and an
+/// empty matrix claiming 2⁶³ rows got through. Every corrupted shape is a serde error now, for
+/// a filter checkpoint and for a `Gaussian`, whatever the build.
+#[test]
+fn a_corrupted_runtime_shape_is_an_error_not_a_panic() {
+    let prior = Gaussian::new(DVector::<f64>::zeros(2), DMatrix::identity(2, 2)).unwrap();
+    let filter = serde_json::to_value(KalmanFilter::new(prior.clone())).unwrap();
+    let gaussian = serde_json::to_value(&prior).unwrap();
+    let huge = i64::MAX as u64;
+    // The error is ours, naming the claim (the shape check) or the quantity (the
+    // comparison with the state), not nalgebra's count of a wrapped product.
+    let names_the_fault = |e: &serde_json::Error| {
+        let text = e.to_string();
+        text.contains("claims") || text.contains("covariance")
+    };
+    // (The shape, and whether the error must name it: a tuple of the wrong length is
+    // serde_json's own error.)
+    let shapes = [
+        (serde_json::json!([[1.0, 0.0, 0.0, 1.0], huge, 2]), true),
+        (serde_json::json!([[1.0, 0.0, 0.0, 1.0], 2, huge]), true),
+        (serde_json::json!([[], huge + 1, 2]), true),
+        (serde_json::json!([[], 0, 2]), true),
+        (serde_json::json!([[1.0, 0.0, 0.0, 1.0], 4, 1]), true),
+        (serde_json::json!([[1.0, 0.0, 0.0, 1.0], 1, 4]), true),
+        (serde_json::json!([[1.0, 0.0, 0.0, 1.0], 2, 2, 2]), false),
+        (serde_json::json!([[1.0, 0.0, 0.0, 1.0], 2]), false),
+    ];
+    for (shape, named) in shapes {
+        let mut f = filter.clone();
+        f["covariance"] = shape.clone();
+        let text = f.to_string();
+        let result = std::panic::catch_unwind(|| {
+            serde_json::from_str::<GaussianFilter<f64, Dyn, estim_core::Affine>>(&text)
+        });
+        let e = result
+            .unwrap_or_else(|_| panic!("panic restoring a checkpoint with covariance {shape}"))
+            .unwrap_err();
+        assert!(!named || names_the_fault(&e), "{shape}: {e}");
+        let mut g = gaussian.clone();
+        g["covariance"] = shape.clone();
+        let text = g.to_string();
+        let result = std::panic::catch_unwind(|| serde_json::from_str::<Gaussian<f64, Dyn>>(&text));
+        let e = result
+            .unwrap_or_else(|_| panic!("panic restoring a Gaussian with covariance {shape}"))
+            .unwrap_err();
+        assert!(!named || names_the_fault(&e), "{shape}: {e}");
+    }
+    // The state vector claims its length the same way.
+    let mut f = filter.clone();
+    f["state"] = serde_json::json!([[0.0, 0.0], huge, null]);
+    let text = f.to_string();
+    assert!(serde_json::from_str::<GaussianFilter<f64, Dyn, estim_core::Affine>>(&text).is_err());
+    // The good checkpoint still restores.
+    let back: GaussianFilter<f64, Dyn, estim_core::Affine> =
+        serde_json::from_value(filter).unwrap();
+    assert_eq!(back.covariance(), prior.covariance());
+}
+
 #[test]
 fn update_reports_round_trip() {
     let lu = Lu::new();

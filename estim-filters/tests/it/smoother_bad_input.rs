@@ -189,3 +189,36 @@ fn an_indefinite_predicted_covariance_fails_the_backward_pass() {
     assert_eq!(error, forward_error);
     assert_eq!(g, kf);
 }
+
+/// Issue 41, defect 4: `Rts::with_lag` reserved the whole lag up front, so
+/// `with_lag(usize::MAX)` panicked ("capacity overflow") and `with_lag(10⁹)` aborted
+/// allocating 264 GB. The record now grows with the pass: a lag longer than the pass is the
+/// whole-pass smoother, to the bit, and a short lag still keeps only `lag` records.
+#[test]
+fn a_huge_lag_is_the_whole_pass_smoother() {
+    use estim_filters::smoother::Rts;
+    let (process, sensor, kf) = system(0.01);
+    let (inputs, zs) = data(20);
+    let mut whole = Rts::new();
+    let mut huge = Rts::with_lag(usize::MAX);
+    let mut short = Rts::with_lag(3);
+    let (mut a, mut b, mut c) = (kf.clone(), kf.clone(), kf);
+    for (u, z) in inputs.iter().zip(&zs) {
+        whole.predict(&mut a, &process, u, 0.5).unwrap();
+        huge.predict(&mut b, &process, u, 0.5).unwrap();
+        short.predict(&mut c, &process, u, 0.5).unwrap();
+        if let Some(z) = z {
+            for f in [&mut a, &mut b, &mut c] {
+                f.update(&sensor, z).unwrap();
+            }
+        }
+    }
+    assert_eq!(huge.len(), inputs.len());
+    assert_eq!(short.len(), 3);
+    let (expected, found) = (whole.smooth(&a).unwrap(), huge.smooth(&b).unwrap());
+    assert_eq!(expected, found);
+    // The fixed-lag smoother's estimates are the last four of the whole pass's, to the bit:
+    // the backward recursion over the last three steps runs on the same records.
+    let lagged = short.smooth(&c).unwrap();
+    assert_eq!(lagged[..], expected[expected.len() - 4..]);
+}

@@ -613,3 +613,52 @@ fn f32_square_root_forms_stay_consistent_on_lu_calibration() {
         );
     }
 }
+
+/// Issue 41, defect 1: a step whose factor is finite but whose P = S Sᵀ overflows (from
+/// N(0, I₂), F = 10²⁰⁰ I with Q = 0 gives S⁻ = 10²⁰⁰ I, P⁻ = 10⁴⁰⁰ I = ∞ in f64) returned `Ok`
+/// with an infinite covariance. It is a typed error now, the filter unchanged, for the KF, EKF
+/// and UKF forms.
+#[test]
+fn a_step_whose_covariance_overflows_is_refused() {
+    fn check<Pr: Clone + PartialEq + std::fmt::Debug + Default>()
+    where
+        SquareRootFilter<f64, estim_core::nalgebra::U2, Pr>: Predict<f64, estim_core::nalgebra::U2, LinearProcess<f64, estim_core::nalgebra::U2, U1>>
+            + Update<
+                f64,
+                estim_core::nalgebra::U2,
+                U1,
+                LinearMeasurement<f64, estim_core::nalgebra::U2, U1>,
+            >,
+    {
+        let expected = |stage| Error::NonFinite {
+            stage,
+            quantity: Quantity::Covariance,
+        };
+        let prior = Gaussian::new(Vector2::zeros(), Matrix2::identity()).unwrap();
+        let huge = LinearProcess {
+            transition: Matrix2::identity() * 1e200,
+            input: estim_core::nalgebra::Matrix2x1::zeros(),
+            noise: Matrix2::zeros(),
+        };
+        let mut f: SquareRootFilter<f64, _, Pr> = SquareRootFilter::new(prior);
+        let u = Vector1::zeros();
+        assert_refused(&mut f, expected(Stage::Prediction), |f| {
+            f.predict(&huge, &u, 1.0)
+        });
+        // A factor of 10¹⁵⁴ I is finite and so is its P (10³⁰⁸ I); one more factor of 10 in S
+        // through F = 10 I is still a finite S (10¹⁵⁵ I) but P = 10³¹⁰ I = ∞.
+        let tenfold = LinearProcess {
+            transition: Matrix2::identity() * 10.0,
+            ..huge.clone()
+        };
+        let big = Gaussian::new(Vector2::zeros(), Matrix2::identity() * 1e308).unwrap();
+        let mut g: SquareRootFilter<f64, _, Pr> = SquareRootFilter::new(big);
+        assert!(g.covariance().iter().all(|v| v.is_finite()));
+        assert_refused(&mut g, expected(Stage::Prediction), |g| {
+            g.predict(&tenfold, &u, 1.0)
+        });
+    }
+    check::<estim_core::Affine>();
+    check::<estim_core::Linearized>();
+    check::<Unscented<f64>>();
+}
