@@ -76,6 +76,19 @@ where
     pub fn forgetting_factor(&self) -> T {
         self.forgetting
     }
+
+    /// The EKF that carries the estimate and the settings (its updates start from γ⁻¹P).
+    pub fn ekf(&self) -> &Ekf<T, N> {
+        &self.filter
+    }
+
+    /// The estimator around `filter`'s estimate and settings with forgetting factor γ
+    /// (0 < γ ≤ 1, as [`new`](Self::new) checks): how a checkpoint resumes.
+    pub fn from_ekf(filter: Ekf<T, N>, forgetting: T) -> Result<Self> {
+        let mut rls = Self::new(filter.estimate(), forgetting)?;
+        rls.filter = filter;
+        Ok(rls)
+    }
 }
 
 impl<T: Real, N: Dim> Estimator<T, N> for FadingMemoryRls<T, N>

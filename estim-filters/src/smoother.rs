@@ -1,12 +1,17 @@
 //! Rauch–Tung–Striebel smoothing of a recorded forward pass, for every Gaussian filter.
 //!
-//! The forward pass is the user's own loop over a [`GaussianFilter`], with [`Rts::predict`]
-//! in place of `predict` (so time-varying models, inputs, Δt, state-dependent Q, several
-//! sensors and steps without a measurement all work as in filtering). Each prediction records
-//! the filtered estimate (x̂ₖ, Pₖ), the prediction (x̂⁻ₖ₊₁, P⁻ₖ₊₁) and the cross-covariance
-//! Cₖ = cov(xₖ, xₖ₊₁) that the filter's moment propagator computes: C = P Fᵀ for the
-//! (extended) Kalman filter, the sigma-point sum for the UKF (unscented RTS), the linearised
-//! one for the second-order filters. The backward pass ([`Rts::smooth`]) is then, from the
+//! The forward pass is the user's own loop over any filter that can be smoothed
+//! ([`PredictCross`]: every Gaussian filter of the family, full-covariance or square-root,
+//! and the IEKF), with [`Rts::predict`] in place of `predict` (so time-varying models,
+//! inputs, Δt, state-dependent Q, several sensors and steps without a measurement all work as
+//! in filtering). Each prediction records the filtered estimate (x̂ₖ, Pₖ), the prediction
+//! (x̂⁻ₖ₊₁, P⁻ₖ₊₁) and the cross-covariance Cₖ = cov(xₖ, xₖ₊₁) that the filter's propagator
+//! computes: C = P Fᵀ for the (extended) Kalman filter (S (F S)ᵀ in the square-root form),
+//! the sigma-point sum for the UKF (unscented RTS; w γ S (Dₚ − Dₘ)ᵀ in the square-root
+//! form), the linearised one for the second-order filters. The square-root filters are
+//! smoothed in this same covariance form (P = S Sᵀ): a square-root backward pass would keep
+//! the factor, but the RTS form is what every filter shares, and the tests hold both forms
+//! to the same batch posterior. The backward pass ([`Rts::smooth`]) is then, from the
 //! last estimate back (Särkkä, *Bayesian Filtering and Smoothing*, 2013, §8.2 and Thm 9.1):
 //!
 //! ```text

@@ -321,6 +321,38 @@ where
         Ok(())
     }
 
+    /// A filter whose estimate is x̂ = `state` and S = `factor` exactly as given (no
+    /// refactorisation; how a checkpoint resumes bit for bit). S must be square of x̂'s
+    /// length, finite, lower triangular with a non-negative diagonal, and S Sᵀ finite.
+    pub(crate) fn from_factor(
+        state: OVector<T, N>,
+        factor: OMatrix<T, N, N>,
+        propagator: Pr,
+    ) -> Result<Self> {
+        let (stage, n) = (Stage::Construction, state.nrows());
+        ensure_shape(&factor, n, n, stage, Quantity::Covariance)?;
+        ensure_finite(&state, stage, Quantity::Mean)?;
+        ensure_finite(&factor, stage, Quantity::Covariance)?;
+        let triangular = (0..n).all(|j| factor[(j, j)] >= T::zero())
+            && (0..n).all(|j| (0..j).all(|i| factor[(i, j)] == T::zero()));
+        if !triangular {
+            return Err(Error::NotPositiveSemiDefinite {
+                stage,
+                quantity: Quantity::Covariance,
+            });
+        }
+        let (covariance, finite) = outer_checked(&factor);
+        finite_or_error(finite, stage, Quantity::Covariance)?;
+        Ok(Self {
+            state,
+            factor,
+            covariance,
+            factored: true,
+            propagator,
+            settings: UpdateSettings::new(),
+        })
+    }
+
     fn ensure_factored(&self, stage: Stage) -> Result<()> {
         if self.factored {
             Ok(())

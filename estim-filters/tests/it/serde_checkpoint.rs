@@ -8,8 +8,8 @@ use estim_core::propagate::Unscented;
 use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
 use estim_filters::monte_carlo::{MonteCarlo, MonteCarloError, Shard};
 use estim_filters::{
-    CovarianceUpdate, Ekf, Estimator, Gate, GaussianFilter, KalmanFilter, Predict, SecondOrderEkf,
-    Ukf, Update, UpdateReport,
+    CovarianceUpdate, Ekf, Estimator, FadingMemoryRls, Gate, GaussianFilter, Iekf, KalmanFilter,
+    Predict, SecondOrderEkf, SrEkf, SrKalmanFilter, SrUkf, Ukf, Update, UpdateReport,
 };
 
 /// Runs `filter` over Lu's recorded inputs and measurements for steps `range`.
@@ -71,6 +71,62 @@ fn resumed_filters_are_bit_identical() {
             .with_gate(50.0)
             .unwrap(),
         Ukf<f64, U3>
+    );
+    // Every filter of the family: the square-root forms (their factor compared too, by `==`),
+    // the IEKF and the fading-memory RLS (its updates only).
+    check!(SrKalmanFilter::new(lu.prior.clone()), SrKalmanFilter<f64, U3>);
+    check!(
+        SrEkf::new(lu.prior.clone()).with_gate(50.0).unwrap(),
+        SrEkf<f64, U3>
+    );
+    check!(SrUkf::new(lu.prior.clone()), SrUkf<f64, U3>);
+    check!(
+        Iekf::new(lu.prior.clone()).with_iterations(4, 1e-10).unwrap(),
+        Iekf<f64, U3>
+    );
+    let mut rls = FadingMemoryRls::new(lu.prior.clone(), 0.97).unwrap();
+    for z in &zs[..30] {
+        rls.update(&lu.sensor, z).unwrap();
+    }
+    let mut resumed: FadingMemoryRls<f64, U3> =
+        serde_json::from_str(&serde_json::to_string(&rls).unwrap()).unwrap();
+    for z in &zs[30..] {
+        rls.update(&lu.sensor, z).unwrap();
+        resumed.update(&lu.sensor, z).unwrap();
+    }
+    assert_eq!(resumed, rls);
+}
+
+/// A square-root checkpoint holds S, which must be lower triangular with a non-negative
+/// diagonal (the filter's invariant) and whose S Sᵀ must be finite: anything else is refused.
+#[test]
+fn bad_square_root_checkpoints_are_refused() {
+    let lu = Lu::new();
+    let good = serde_json::to_value(SrUkf::new(lu.prior.clone())).unwrap();
+    let with_factor = |factor: serde_json::Value| {
+        let mut v = good.clone();
+        v["factor"] = factor;
+        serde_json::from_value::<SrUkf<f64, U3>>(v)
+    };
+    assert!(with_factor(good["factor"].clone()).is_ok());
+    // Column-major: an entry above the diagonal, a negative pivot, an overflowing S Sᵀ.
+    assert!(
+        with_factor(serde_json::json!([
+            1.0, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 1.0
+        ]))
+        .is_err()
+    );
+    assert!(
+        with_factor(serde_json::json!([
+            -1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        ]))
+        .is_err()
+    );
+    assert!(
+        with_factor(serde_json::json!([
+            1e200, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        ]))
+        .is_err()
     );
 }
 
