@@ -29,7 +29,7 @@
 //! square-root factor included (the filter's own gate is not needed; leave it unset). Only a
 //! covariance reset ([`ResetSettings`]) re-initialises the filter from a new Gaussian, through
 //! [`Estimator::reset`](crate::Estimator::reset). Any estimator implementing [`Predict`],
-//! the sensors' updates and [`Rollback`] goes in: a multiple-model estimator's "process" is
+//! the sensors' updates and [`Rollback`](crate::Rollback) goes in: a multiple-model estimator's "process" is
 //! whatever its `Predict` takes (its set of per-mode models).
 //!
 //! [`Predict`]: crate::Predict

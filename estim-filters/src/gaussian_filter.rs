@@ -18,7 +18,7 @@ use estim_core::{
 use crate::correlated::Decorrelated;
 use crate::report::UpdateReport;
 use crate::scratch::{PredictScratch, ScratchCache, UpdateScratch};
-use crate::snapshot::EstimateSnapshot;
+use crate::snapshot::{EstimateSnapshot, copy_matrix};
 use crate::traits::{
     Estimator, OnStateSpace, Predict, PredictCorrelated, PredictCross, Rollback, Update,
 };
@@ -297,8 +297,8 @@ where
 
     fn restore(&mut self, snapshot: &EstimateSnapshot<T, N>) {
         let n = self.state.nrows();
-        self.state.clone_from(&snapshot.state);
-        self.covariance.clone_from(&snapshot.covariance);
+        copy_matrix(&mut self.state, &snapshot.state);
+        copy_matrix(&mut self.covariance, &snapshot.covariance);
         if self.state.nrows() != n {
             self.scratch.clear();
             self.accepted_noise = AcceptedNoise::like(&self.covariance);
@@ -758,12 +758,12 @@ where
         z: &OVector<T, M>,
         report: &mut UpdateReport<T, M>,
     ) -> Result<()> {
-        self.measurement_step(model, z, None, report, Step::Apply)
+        self.measurement_step(model, z, report, Step::Apply)
     }
 
     fn prepare_update(&mut self, model: &H, report: &mut UpdateReport<T, M>) -> Result<()> {
         let z = model.measure(&self.state);
-        self.measurement_step(model, &z, None, report, Step::Prepare)
+        self.measurement_step(model, &z, report, Step::Prepare)
     }
 }
 
@@ -771,14 +771,19 @@ impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>, S: StateSpace<T, N>> GaussianF
 where
     DefaultAllocator: Alloc<N>,
 {
-    /// An update with `model` and `z` (or its preparation); with `forgetting` = Some(γ) from
-    /// the prior γ⁻¹P (the fading-memory filter).
+    /// P ← γ⁻¹P: the fading-memory filter's inflation before its update, each entry divided
+    /// (the caller keeps a snapshot to undo it).
     #[inline(always)]
-    pub(crate) fn measurement_step<M, H>(
+    pub(crate) fn inflate_covariance(&mut self, gamma: T) {
+        self.covariance /= gamma;
+    }
+
+    /// An update with `model` and `z` (or its preparation).
+    #[inline(always)]
+    fn measurement_step<M, H>(
         &mut self,
         model: &H,
         z: &OVector<T, M>,
-        forgetting: Option<T>,
         report: &mut UpdateReport<T, M>,
         step: Step,
     ) -> Result<()>
@@ -798,15 +803,13 @@ where
             ..
         } = self;
         update_step(
-            propagator, space, scratch, state, covariance, forgetting, model, z, *settings, report,
-            step,
+            propagator, space, scratch, state, covariance, model, z, *settings, report, step,
         )
     }
 }
 
 /// One measurement update, computed in the step's scratch (a local for static sizes, the
-/// filter's cached one for `Dyn`) and committed only if applied. With `forgetting` = Some(γ)
-/// the prior covariance is γ⁻¹P (the fading-memory filter).
+/// filter's cached one for `Dyn`) and committed only if applied.
 #[inline(always)]
 pub(crate) fn update_step<T, N, M, Pr, H, S>(
     propagator: &Pr,
@@ -814,7 +817,6 @@ pub(crate) fn update_step<T, N, M, Pr, H, S>(
     cache: &mut ScratchCache<T, Pr>,
     state: &mut OVector<T, N>,
     covariance: &mut OMatrix<T, N, N>,
-    forgetting: Option<T>,
     model: &H,
     z: &OVector<T, M>,
     settings: UpdateSettings<T>,
@@ -839,27 +841,9 @@ where
             (&mut local, None)
         }
     };
-    let result = match forgetting {
-        None => measurement_update(
-            propagator, space, state, covariance, model, z, settings, work, report,
-        ),
-        Some(gamma) => {
-            // γ⁻¹P in its own buffer, taken out of the scratch while the update borrows it.
-            let mut inflated = match work.inflated.take() {
-                Some(mut p) if p.shape() == covariance.shape() => {
-                    kernel::copy(&mut p, covariance);
-                    p
-                }
-                _ => covariance.clone(),
-            };
-            inflated /= gamma;
-            let result = measurement_update(
-                propagator, space, state, &inflated, model, z, settings, work, report,
-            );
-            work.inflated = Some(inflated);
-            result
-        }
-    };
+    let result = measurement_update(
+        propagator, space, state, covariance, model, z, settings, work, report,
+    );
     match result {
         Ok(true) if step == Step::Apply => {
             commit(state, covariance, &mut work.state, &mut work.covariance)

@@ -3,8 +3,8 @@
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Error, Gaussian, MeasurementJacobian, Parameter, Real, error::Result};
 
-use crate::gaussian_filter::{Ekf, Step};
-use crate::report::UpdateReport;
+use crate::gaussian_filter::Ekf;
+use crate::report::{UpdateOutcome, UpdateReport};
 use crate::snapshot::EstimateSnapshot;
 use crate::traits::{Estimator, Rollback, Update};
 use crate::update::{CovarianceUpdate, Gate};
@@ -31,7 +31,11 @@ use crate::update::{CovarianceUpdate, Gate};
 /// Requirements on the model: [`MeasurementJacobian`]. It implements [`Update`] and
 /// [`Estimator`] (no [`Predict`](crate::Predict): the parameters are constant but for the
 /// forgetting), so it swaps with the Kalman filters on parameter-estimation problems.
-#[derive(Clone, Debug, PartialEq)]
+///
+/// An update inflates the EKF's P to γ⁻¹P in place, then runs the EKF's own update; if that
+/// fails or is gated, the estimate saved before the inflation is put back ([`Rollback`]), so
+/// a failed or gated update leaves the estimator exactly as it was.
+#[derive(Clone, Debug)]
 pub struct FadingMemoryRls<T: Real, N: Dim>
 where
     DefaultAllocator: Alloc<N>,
@@ -39,6 +43,18 @@ where
     /// The estimate, settings and buffers: an EKF whose updates start from γ⁻¹P.
     filter: Ekf<T, N>,
     forgetting: T,
+    /// The estimate before the update in progress (a buffer, sized once; not state).
+    before: EstimateSnapshot<T, N>,
+}
+
+/// Equal estimates, settings and γ (the buffer of the update in progress is not compared).
+impl<T: Real, N: Dim> PartialEq for FadingMemoryRls<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    fn eq(&self, other: &Self) -> bool {
+        self.filter == other.filter && self.forgetting == other.forgetting
+    }
 }
 
 impl<T: Real, N: Dim> FadingMemoryRls<T, N>
@@ -54,9 +70,12 @@ where
                 value: estim_core::nalgebra::try_convert::<T, f64>(forgetting).unwrap_or(f64::NAN),
             });
         }
+        let filter = Ekf::new(prior);
+        let before = filter.snapshot();
         Ok(Self {
-            filter: Ekf::new(prior),
+            filter,
             forgetting,
+            before,
         })
     }
 
@@ -143,15 +162,20 @@ where
         z: &OVector<T, M>,
         report: &mut UpdateReport<T, M>,
     ) -> Result<()> {
-        let forgetting = Some(self.forgetting);
-        self.filter
-            .measurement_step(model, z, forgetting, report, Step::Apply)
+        self.filter.snapshot_into(&mut self.before);
+        self.filter.inflate_covariance(self.forgetting);
+        let result = self.filter.update_into(model, z, report);
+        if result.is_err() || report.outcome != UpdateOutcome::Applied {
+            self.filter.restore(&self.before);
+        }
+        result
     }
 
     fn prepare_update(&mut self, model: &H, report: &mut UpdateReport<T, M>) -> Result<()> {
-        let z = model.measure(self.filter.state());
-        let forgetting = Some(self.forgetting);
-        self.filter
-            .measurement_step(model, &z, forgetting, report, Step::Prepare)
+        self.filter.snapshot_into(&mut self.before);
+        self.filter.inflate_covariance(self.forgetting);
+        let result = self.filter.prepare_update(model, report);
+        self.filter.restore(&self.before);
+        result
     }
 }

@@ -69,8 +69,6 @@ where
     pub(crate) state: OVector<T, N>,
     /// K ν for a state space other than ℝⁿ (created on first use).
     pub(crate) step: Option<OVector<T, N>>,
-    /// P/γ for the fading-memory filter (created on first use).
-    pub(crate) inflated: Option<OMatrix<T, N, N>>,
     pub(crate) cholesky: estim_core::kernel::CholeskyScratch,
 }
 
@@ -92,7 +90,6 @@ where
             covariance: OMatrix::zeros_generic(n, n),
             state: OVector::zeros_generic(n, U1),
             step: None,
-            inflated: None,
             cholesky: Default::default(),
         }
     }

@@ -1,7 +1,23 @@
 //! What the Gaussian filters' [`Rollback`](crate::Rollback) snapshots hold.
 
+use estim_core::nalgebra::allocator::Allocator;
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Real};
+
+/// `destination` ← `source`, in `destination`'s buffer when the shapes agree (nalgebra's
+/// `clone_from` is a fresh clone, which would allocate every runtime-size snapshot).
+pub(crate) fn copy_matrix<T: Real, R: Dim, C: Dim>(
+    destination: &mut OMatrix<T, R, C>,
+    source: &OMatrix<T, R, C>,
+) where
+    DefaultAllocator: Allocator<R, C>,
+{
+    if destination.shape() == source.shape() {
+        destination.copy_from(source);
+    } else {
+        *destination = source.clone();
+    }
+}
 
 /// A full-covariance filter's snapshot: the estimate x̂ and P exactly as the filter holds
 /// them. Taken by [`GaussianFilter`](crate::GaussianFilter) and the filters built on it
@@ -31,8 +47,8 @@ where
 
     /// Overwrites this snapshot with (x̂, P), reusing its buffers when the sizes agree.
     pub(crate) fn copy_from(&mut self, state: &OVector<T, N>, covariance: &OMatrix<T, N, N>) {
-        self.state.clone_from(state);
-        self.covariance.clone_from(covariance);
+        copy_matrix(&mut self.state, state);
+        copy_matrix(&mut self.covariance, covariance);
     }
 }
 

@@ -136,7 +136,7 @@ mod propagator;
 mod triangular;
 mod unscented;
 
-pub use propagator::{FactorPredict, FactorUpdate};
+pub use propagator::{FactorEstimate, FactorPredict, FactorUpdate};
 
 use estim_core::kernel::{self, Accum};
 use estim_core::linalg::{
@@ -145,17 +145,16 @@ use estim_core::linalg::{
 };
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{Affine, Linearized, Unscented};
-use estim_core::scalar::real;
 use estim_core::{
     Alloc, Error, Euclidean, Gaussian, MeasurementModel, ProcessModel, Quantity, Real, Stage,
     error::Result,
 };
 
 use crate::gaussian_filter::ensure_time_step;
-use crate::report::{UpdateOutcome, UpdateReport};
-use crate::snapshot::{EstimateSnapshot, FactorSnapshot};
+use crate::report::UpdateReport;
+use crate::snapshot::{EstimateSnapshot, FactorSnapshot, copy_matrix};
 use crate::traits::{Estimator, OnStateSpace, Predict, PredictCross, Rollback, Update};
-use crate::update::{Gate, UpdateSettings, log_det_from_cholesky};
+use crate::update::{Gate, UpdateSettings, report_statistics};
 use triangular::{Block, lower_triangularize};
 
 /// A Gaussian filter that carries the covariance as a lower-triangular factor S, P = S Sᵀ
@@ -182,11 +181,13 @@ where
 
 /// The square-root linear Kalman filter: [`KalmanFilter`](crate::KalmanFilter)'s equations,
 /// propagated as S (array form, module docs). Requirements on the model:
-/// [`LinearProcessModel`], [`LinearMeasurementModel`].
+/// [`LinearProcessModel`](estim_core::LinearProcessModel),
+/// [`LinearMeasurementModel`](estim_core::LinearMeasurementModel).
 pub type SrKalmanFilter<T, N> = SquareRootFilter<T, N, Affine>;
 
 /// The square-root extended Kalman filter: [`Ekf`](crate::Ekf) with the array form.
-/// Requirements on the model: Jacobians ([`ProcessJacobian`], [`MeasurementJacobian`]).
+/// Requirements on the model: Jacobians ([`ProcessJacobian`](estim_core::ProcessJacobian),
+/// [`MeasurementJacobian`](estim_core::MeasurementJacobian)).
 pub type SrEkf<T, N> = SquareRootFilter<T, N, Linearized>;
 
 /// The square-root unscented Kalman filter (Van der Merwe & Wan 2001) with the scaled sigma
@@ -407,14 +408,14 @@ where
 
     fn snapshot_into(&self, snapshot: &mut FactorSnapshot<T, N>) {
         snapshot.estimate.copy_from(&self.state, &self.covariance);
-        snapshot.factor.clone_from(&self.factor);
+        copy_matrix(&mut snapshot.factor, &self.factor);
         snapshot.factored = self.factored;
     }
 
     fn restore(&mut self, snapshot: &FactorSnapshot<T, N>) {
-        self.state.clone_from(&snapshot.estimate.state);
-        self.covariance.clone_from(&snapshot.estimate.covariance);
-        self.factor.clone_from(&snapshot.factor);
+        copy_matrix(&mut self.state, &snapshot.estimate.state);
+        copy_matrix(&mut self.covariance, &snapshot.estimate.covariance);
+        copy_matrix(&mut self.factor, &snapshot.factor);
         self.factored = snapshot.factored;
     }
 }
@@ -516,7 +517,7 @@ where
 }
 
 /// A new estimate (x̂, S), not yet committed.
-type Estimate<T, N> = (OVector<T, N>, OMatrix<T, N, N>);
+use propagator::FactorEstimate as Estimate;
 
 /// ν = z ⊖ ẑ into the report, checked finite (a non-finite z is `NonFinite`, `Measurement`).
 fn innovation_into<T, N, M, H>(
@@ -575,15 +576,7 @@ where
     let mut whitened = report.innovation.clone();
     kernel::solve_lower_in_place(l, &mut whitened);
     let nis = whitened.norm_squared();
-    report.nis = nis;
-    report.log_likelihood = -real::<T>(0.5)
-        * (nis + log_det_from_cholesky(l) + real::<T>(m as f64 * crate::update::LN_TWO_PI));
-    if threshold.is_some_and(|g| !(nis <= g)) {
-        report.outcome = UpdateOutcome::Gated;
-        return Ok(None);
-    }
-    report.outcome = UpdateOutcome::Applied;
-    Ok(Some(whitened))
+    Ok(report_statistics(l, nis, threshold, report).then_some(whitened))
 }
 
 // ---------------------------------------------------------------------------------------

@@ -175,6 +175,33 @@ impl<T: Real> UpdateSettings<T> {
     }
 }
 
+/// The tail every update shares (full-covariance and square-root): from the Cholesky factor L
+/// of S = L Lᵀ and NIS = |L⁻¹ν|², the report's NIS, its log-likelihood
+/// ln p = −½ (NIS + 2 Σ ln Lᵢᵢ + m ln 2π) and its outcome: [`Gated`](UpdateOutcome::Gated)
+/// if the NIS exceeds `threshold` (returns `false`: the update does not apply), else
+/// [`Applied`](UpdateOutcome::Applied).
+#[inline(always)]
+pub(crate) fn report_statistics<T: Real, M: Dim>(
+    l: &OMatrix<T, M, M>,
+    nis: T,
+    threshold: Option<T>,
+    report: &mut UpdateReport<T, M>,
+) -> bool
+where
+    DefaultAllocator: Alloc<M>,
+{
+    let m = l.nrows();
+    let log_det = log_det_from_cholesky(l);
+    report.nis = nis;
+    report.log_likelihood = -real::<T>(0.5) * (nis + log_det + real::<T>(m as f64 * LN_TWO_PI));
+    if threshold.is_some_and(|g| !(nis <= g)) {
+        report.outcome = UpdateOutcome::Gated;
+        return false;
+    }
+    report.outcome = UpdateOutcome::Applied;
+    true
+}
+
 /// ln 2π, the f64 nearest (`(2π).ln()` needs std's or libm's logarithm; a test checks the
 /// two agree to the bit).
 pub(crate) const LN_TWO_PI: f64 = 1.837_877_066_409_345_3;
@@ -298,14 +325,9 @@ where
             return Err(e);
         }
     }
-    let log_det = log_det_from_cholesky(factor);
-    report.nis = nis;
-    report.log_likelihood = -real::<T>(0.5) * (nis + log_det + real::<T>(m as f64 * LN_TWO_PI));
-    if settings.threshold(m).is_some_and(|g| !(nis <= g)) {
-        report.outcome = UpdateOutcome::Gated;
+    if !report_statistics(factor, nis, settings.threshold(m), report) {
         return Ok(false);
     }
-    report.outcome = UpdateOutcome::Applied;
 
     // K = Pₓᵤ L⁻ᵀ L⁻¹, solved from the right in K's own storage.
     let cross = &predicted.cross_covariance;

@@ -17,6 +17,9 @@ use super::linearized::{linearized_predict, linearized_update};
 use super::unscented::{unscented_predict, unscented_update};
 use crate::report::UpdateReport;
 
+/// A new estimate (x̂, S) computed by a factor propagator, not yet committed.
+pub type FactorEstimate<T, N> = (OVector<T, N>, OMatrix<T, N, N>);
+
 /// The prediction of a square-root filter through process models `P`.
 pub trait FactorPredict<T: Real, N: Dim, P: ProcessModel<T, N>>
 where
@@ -34,7 +37,7 @@ where
         dt: T,
         noise: &OMatrix<T, N, N>,
         cross: Option<&mut OMatrix<T, N, N>>,
-    ) -> Result<(OVector<T, N>, OMatrix<T, N, N>)>;
+    ) -> Result<FactorEstimate<T, N>>;
 }
 
 /// The update of a square-root filter with measurement models `H` of `M` components.
@@ -52,7 +55,7 @@ where
         z: &OVector<T, M>,
         threshold: Option<T>,
         report: &mut UpdateReport<T, M>,
-    ) -> Result<Option<(OVector<T, N>, OMatrix<T, N, N>)>>;
+    ) -> Result<Option<FactorEstimate<T, N>>>;
 }
 
 /// Writes the two impls of a derivative-based propagator (`Affine`, `Linearized`), which
@@ -72,7 +75,7 @@ macro_rules! linear_factor_propagator {
                 dt: T,
                 noise: &OMatrix<T, N, N>,
                 cross: Option<&mut OMatrix<T, N, N>>,
-            ) -> Result<(OVector<T, N>, OMatrix<T, N, N>)> {
+            ) -> Result<FactorEstimate<T, N>> {
                 let f = Transition::new(model, input, dt);
                 linearized_predict(state, factor, &f, noise, cross)
             }
@@ -91,7 +94,7 @@ macro_rules! linear_factor_propagator {
                 z: &OVector<T, M>,
                 threshold: Option<T>,
                 report: &mut UpdateReport<T, M>,
-            ) -> Result<Option<(OVector<T, N>, OMatrix<T, N, N>)>> {
+            ) -> Result<Option<FactorEstimate<T, N>>> {
                 linearized_update(state, factor, model, z, threshold, report)
             }
         }
@@ -114,7 +117,7 @@ where
         dt: T,
         noise: &OMatrix<T, N, N>,
         cross: Option<&mut OMatrix<T, N, N>>,
-    ) -> Result<(OVector<T, N>, OMatrix<T, N, N>)> {
+    ) -> Result<FactorEstimate<T, N>> {
         let f = Transition::new(model, input, dt);
         unscented_predict(self, state, factor, &f, noise, cross)
     }
@@ -133,7 +136,7 @@ where
         z: &OVector<T, M>,
         threshold: Option<T>,
         report: &mut UpdateReport<T, M>,
-    ) -> Result<Option<(OVector<T, N>, OMatrix<T, N, N>)>> {
+    ) -> Result<Option<FactorEstimate<T, N>>> {
         unscented_update(self, state, factor, model, z, threshold, report)
     }
 }
