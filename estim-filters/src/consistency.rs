@@ -71,6 +71,8 @@ pub(crate) mod dist {
     use super::{Result, Setting, ValidationError};
     use statrs::distribution::{ChiSquared, ContinuousCDF, Normal, StudentsT};
 
+    use crate::chi_square;
+
     fn dof_error(dof: f64) -> ValidationError {
         ValidationError::InvalidSetting {
             setting: Setting::DegreesOfFreedom,
@@ -79,10 +81,7 @@ pub(crate) mod dist {
     }
 
     fn chi2(dof: usize) -> Result<ChiSquared> {
-        if dof == 0 {
-            return Err(dof_error(0.0));
-        }
-        ChiSquared::new(dof as f64).map_err(|_| dof_error(dof as f64))
+        chi_square::distribution(dof).ok_or_else(|| dof_error(dof as f64))
     }
 
     fn student(dof: usize) -> Result<StudentsT> {

@@ -182,9 +182,7 @@ pub(crate) const LN_TWO_PI: f64 = 1.837_877_066_409_345_3;
 /// χ²_dof's `p` quantile, if finite.
 #[cfg(feature = "std")]
 fn chi2_quantile(dof: usize, p: f64) -> Option<f64> {
-    crate::consistency::dist::chi2_quantile(dof, p)
-        .ok()
-        .filter(|q| q.is_finite())
+    crate::chi_square::quantile(dof, p)
 }
 
 /// Without std (no statrs) there are no χ² quantiles: a probability gate is refused.
