@@ -87,6 +87,7 @@ pub mod angle;
 #[cfg(feature = "autodiff")]
 pub mod autodiff;
 pub mod checked;
+mod dense;
 #[cfg(feature = "std")]
 pub mod derivative;
 pub mod error;
