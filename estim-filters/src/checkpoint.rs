@@ -31,7 +31,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use estim_core::linalg::{ensure_finite, ensure_shape};
+use estim_core::checks::{ensure_finite, ensure_shape};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::PropagatorWorkspace;
 use estim_core::{Alloc, Gaussian, Quantity, Real, Stage, StateSpace};

@@ -33,7 +33,8 @@
 //! # Ok::<(), estim_filters::ValidationError>(())
 //! ```
 
-use estim_core::linalg::{ensure_shape, inverse_quadratic_form};
+use estim_core::checks::ensure_shape;
+use estim_core::linalg::inverse_quadratic_form;
 use estim_core::nalgebra::{self, DefaultAllocator, Dim, OMatrix, OVector, allocator::Allocator};
 use estim_core::{Error, Quantity, Real, Stage};
 

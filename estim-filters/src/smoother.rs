@@ -66,8 +66,8 @@
 
 use std::collections::VecDeque;
 
+use estim_core::checks::{all_finite, symmetrize};
 use estim_core::kernel::{self, CholeskyScratch};
-use estim_core::linalg::{all_finite, symmetrize};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::{MomentPropagator, PropagatorWorkspace};
 use estim_core::{

@@ -113,11 +113,9 @@
 
 mod triangular;
 
+use estim_core::checks::{all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_shape};
 use estim_core::kernel::{self, Accum};
-use estim_core::linalg::{
-    all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_shape, mirror_lower_checked,
-    psd_factor,
-};
+use estim_core::linalg::{mirror_lower_checked, psd_factor};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::{Affine, Linearized, Unscented};
 use estim_core::scalar::real;

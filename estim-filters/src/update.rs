@@ -35,12 +35,12 @@
 //! 10⁻¹²) is the guard: it fails before timing anything if this recurs. The reproduction is
 //! `docs/errata/slp_joseph_repro.rs`.
 
-use estim_core::kernel::{self, Accum};
-use estim_core::linalg::{
+use estim_core::checks::{
     all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_semidefinite_noise,
-    ensure_shape, finite_or_error, symmetric_map, symmetric_sum_into_checked,
-    symmetrize_add_checked,
+    ensure_shape, finite_or_error,
 };
+use estim_core::kernel::{self, Accum};
+use estim_core::linalg::{symmetric_map, symmetric_sum_into_checked, symmetrize_add_checked};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::scalar::real;
 use estim_core::{Alloc, Error, Parameter, Quantity, Real, Stage, StateSpace, error::Result};

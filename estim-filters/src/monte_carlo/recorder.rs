@@ -1,7 +1,7 @@
 //! What a realization records into: estimates, innovations and residuals, checked and
 //! converted to f64 before they enter the accumulators.
 
-use estim_core::linalg::ensure_shape;
+use estim_core::checks::ensure_shape;
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Error, Quantity, Real};
 
