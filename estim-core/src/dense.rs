@@ -45,6 +45,15 @@ pub const PARALLEL_THRESHOLD: usize = 256;
 #[cfg(feature = "std")]
 pub(crate) const LOWER_TRIANGLE_MIN: usize = 32;
 
+/// How an operand enters a product or a triangular solve: as it is, or transposed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Operand {
+    /// As it is.
+    AsIs,
+    /// Transposed.
+    Transposed,
+}
+
 /// Which part of the destination a product writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Part {
@@ -106,8 +115,8 @@ mod sealed {
         /// The scratch [`cholesky`](Self::cholesky) needs at order `dim`.
         fn cholesky_scratch(dim: usize) -> StackReq;
 
-        /// rhs ← L⁻¹ rhs, or L⁻ᵀ rhs with `transpose` (L the lower triangle of `l`).
-        fn solve_lower(l: MatRef<'_, Self>, rhs: MatMut<'_, Self>, transpose: bool);
+        /// rhs ← L⁻¹ rhs, or L⁻ᵀ rhs for [`Operand::Transposed`] (L the lower triangle of `l`).
+        fn solve_lower(l: MatRef<'_, Self>, rhs: MatMut<'_, Self>, l_as: Operand);
     }
 
     #[cfg(feature = "std")]
@@ -158,12 +167,13 @@ mod sealed {
                     cholesky_in_place_scratch::<$t>(dim, par(dim), Default::default())
                 }
 
-                fn solve_lower(l: MatRef<'_, $t>, rhs: MatMut<'_, $t>, transpose: bool) {
+                fn solve_lower(l: MatRef<'_, $t>, rhs: MatMut<'_, $t>, l_as: Operand) {
                     let par = par(l.nrows().min(rhs.ncols()));
-                    if transpose {
-                        solve_upper_triangular_in_place(l.transpose(), rhs, par);
-                    } else {
-                        solve_lower_triangular_in_place(l, rhs, par);
+                    match l_as {
+                        Operand::Transposed => {
+                            solve_upper_triangular_in_place(l.transpose(), rhs, par)
+                        }
+                        Operand::AsIs => solve_lower_triangular_in_place(l, rhs, par),
                     }
                 }
             }

@@ -7,6 +7,8 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, allocator::Allocator};
 
 #[cfg(feature = "std")]
 use super::{fixed_route, is_static, view, view_mut};
+#[cfg(feature = "std")]
+use crate::dense::Operand;
 use crate::scalar::Real;
 
 /// Scratch memory for [`cholesky_in_place`]'s faer route (runtime sizes), grown on first use
@@ -142,7 +144,7 @@ where
     {
         let size = b.nrows().max(b.ncols());
         if !fixed_route(is_static::<D>() && is_static::<C>(), size) {
-            return T::solve_lower(view(l), view_mut(b), false);
+            return T::solve_lower(view(l), view_mut(b), Operand::AsIs);
         }
     }
     l.solve_lower_triangular_unchecked_mut(b);
@@ -162,7 +164,7 @@ pub fn solve_right_lower_transpose_in_place<T: Real, R: Dim, D: Dim>(
     {
         let size = b.nrows().max(b.ncols());
         if !fixed_route(is_static::<D>() && is_static::<R>(), size) {
-            return T::solve_lower(view(l), view_mut(b).transpose_mut(), false);
+            return T::solve_lower(view(l), view_mut(b).transpose_mut(), Operand::AsIs);
         }
     }
     // Column j of X Lᵀ = B: Σₖ≤ⱼ Lⱼₖ X[:, k] = B[:, j], forward over the columns.
@@ -191,7 +193,7 @@ pub fn solve_right_lower_in_place<T: Real, R: Dim, D: Dim>(
     {
         let size = b.nrows().max(b.ncols());
         if !fixed_route(is_static::<D>() && is_static::<R>(), size) {
-            return T::solve_lower(view(l), view_mut(b).transpose_mut(), true);
+            return T::solve_lower(view(l), view_mut(b).transpose_mut(), Operand::Transposed);
         }
     }
     // Column j of X L = B: Σₖ≥ⱼ Lₖⱼ X[:, k] = B[:, j], backward over the columns.

@@ -7,7 +7,7 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, allocator::Allocator};
 use super::{fixed_route, is_static};
 #[cfg(feature = "std")]
 use super::{view, view_mut};
-use crate::dense::{Accum, Part};
+use crate::dense::{Accum, Operand, Part};
 use crate::scalar::Real;
 
 /// The form of a runtime-size product dst (+)= α a op(b): whether b enters transposed, and
@@ -18,15 +18,6 @@ struct Form {
     b: Operand,
     /// All of dst, or its lower triangle.
     part: Part,
-}
-
-/// How an operand enters a product.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Operand {
-    /// As it is.
-    AsIs,
-    /// Transposed.
-    Transposed,
 }
 
 impl Form {
