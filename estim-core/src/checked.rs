@@ -24,7 +24,7 @@
 //! | noise | at construction | at every step |
 //! |---|---|---|
 //! | [`Checked`] linear models | shape, NaN/∞, asymmetry, any negative eigenvalue (one factorisation) | the checks below, which cannot fail |
-//! | any model (Q(x, u, Δt), R(x) evaluated per step) | — | shape; NaN/∞ ([`NonFinite`](crate::Error::NonFinite)); (Q + Qᵀ)/2 not semi-definite by [`psd_factor`]'s rule (a pivot below −τ = −16 n ε max Qᵢᵢ, or a zero-variance direction whose covariances exceed √(τ max Qᵢᵢ) + τ: [`ensure_semidefinite_noise`](crate::linalg::ensure_semidefinite_noise)), a positive diagonal notwithstanding ([`NotPositiveSemiDefinite`](crate::Error::NotPositiveSemiDefinite) naming the noise); for R, also S = cov(ẑ) + R not positive definite ([`NotPositiveDefinite`](crate::Error::NotPositiveDefinite), from the Cholesky factorisation the update does anyway) |
+//! | any model (Q(x, u, Δt), R(x) evaluated per step) | — | shape; NaN/∞ ([`NonFinite`](crate::Error::NonFinite)); (Q + Qᵀ)/2 not semi-definite by [`psd_factor`]'s rule (a pivot below −τ = −16 n ε max Qᵢᵢ, or a zero-variance direction whose covariances exceed √(τ max Qᵢᵢ) + τ: [`ensure_semidefinite_noise`](crate::checks::ensure_semidefinite_noise)), a positive diagonal notwithstanding ([`NotPositiveSemiDefinite`](crate::Error::NotPositiveSemiDefinite) naming the noise); for R, also S = cov(ẑ) + R not positive definite ([`NotPositiveDefinite`](crate::Error::NotPositiveDefinite), from the Cholesky factorisation the update does anyway) |
 //!
 //! **Policy for state-dependent noise**: an indefinite Q(x) or R(x) is an error of the step
 //! (typed as above), never a silently indefinite P, and like every error it leaves the filter
@@ -77,9 +77,10 @@ use core::ops::Deref;
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
+use crate::checks::{ensure_finite, ensure_shape, ensure_symmetric};
 use crate::error::{Error, Quantity, Result, Stage};
 use crate::function::SigmaScratch;
-use crate::linalg::{ensure_finite, ensure_shape, ensure_symmetric, psd_factor};
+use crate::linalg::psd_factor;
 use crate::linear::{LinearMeasurement, LinearProcess};
 use crate::model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,

@@ -41,9 +41,9 @@ use core::fmt;
 use nalgebra::{DefaultAllocator, Dim, OVector};
 
 use crate::alloc::Alloc;
+use crate::checks::{ensure_finite, ensure_shape};
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
 use crate::function::{Differentiable, TwiceDifferentiable};
-use crate::linalg::{ensure_finite, ensure_shape};
 use crate::model::{
     MeasurementHessian, MeasurementJacobian, Observation, ProcessHessian, ProcessJacobian,
     Transition,

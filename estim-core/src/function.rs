@@ -19,8 +19,8 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 
 use crate::alloc::Alloc;
+use crate::checks::ensure_shape;
 use crate::error::{Quantity, Result, Stage};
-use crate::linalg::ensure_shape;
 use crate::manifold::add_into;
 use crate::scalar::Real;
 

@@ -9,10 +9,10 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::alloc::Alloc;
+use crate::checks::{ensure_finite, ensure_psd, ensure_shape, ensure_symmetric};
 use crate::error::{Quantity, Result, Stage};
 #[cfg(feature = "std")]
 use crate::linalg::psd_factor;
-use crate::linalg::{ensure_finite, ensure_psd, ensure_shape, ensure_symmetric};
 use crate::scalar::Real;
 
 /// A mean μ and covariance C, checked at construction.

@@ -18,6 +18,8 @@
 //!   against a reference model (such as its automatic derivatives).
 //! - `autodiff` (feature `autodiff`): models written once over a dual-number scalar, with
 //!   their Jacobians and Hessians derived automatically (num-dual).
+//! - [`checks`]: the checks the filters run on what they are handed (finite, shape,
+//!   symmetric, positive semi-definite), each with a typed [`Error`], for models to use too.
 //! - [`psd_factor`]: the square root of a positive semi-definite covariance.
 //! - [`manifold`]: the state's ⊞ and ⊟ ([`StateSpace`]; [`Euclidean`] by default,
 //!   [`WrappedAngles`] for headings, a unit-quaternion attitude error block).
@@ -87,6 +89,8 @@ pub mod angle;
 #[cfg(feature = "autodiff")]
 pub mod autodiff;
 pub mod checked;
+pub mod checks;
+mod dense;
 #[cfg(feature = "std")]
 pub mod derivative;
 pub mod error;

@@ -254,7 +254,7 @@ where
 
     #[inline(always)]
     fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
-        crate::model::subtract_into(a, b, out);
+        crate::manifold::subtract_into(a, b, out);
     }
 
     /// H μ ± H Lⱼ: one matrix product H L for all 2n sigma points.

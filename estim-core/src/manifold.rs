@@ -100,7 +100,7 @@ where
 
     #[inline(always)]
     fn minus_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
-        crate::model::subtract_into(a, b, out);
+        subtract_into(a, b, out);
     }
 }
 
@@ -120,4 +120,21 @@ pub(crate) fn add_into<T: Real, D: Dim>(
         *out = x.clone();
     }
     *out += delta;
+}
+
+/// out ← a − b without allocating (`out` takes a's shape if it differs).
+#[inline(always)]
+pub(crate) fn subtract_into<T: Real, D: Dim>(
+    a: &OVector<T, D>,
+    b: &OVector<T, D>,
+    out: &mut OVector<T, D>,
+) where
+    DefaultAllocator: Alloc<D>,
+{
+    if out.shape() == a.shape() {
+        crate::kernel::copy(out, a);
+    } else {
+        *out = a.clone();
+    }
+    *out -= b;
 }

@@ -369,23 +369,6 @@ where
     }
 }
 
-/// out ← a − b without allocating (`out` takes a's shape if it differs).
-#[inline(always)]
-pub(crate) fn subtract_into<T: Real, D: Dim>(
-    a: &OVector<T, D>,
-    b: &OVector<T, D>,
-    out: &mut OVector<T, D>,
-) where
-    DefaultAllocator: Alloc<D>,
-{
-    if out.shape() == a.shape() {
-        crate::kernel::copy(out, a);
-    } else {
-        *out = a.clone();
-    }
-    *out -= b;
-}
-
 impl<P, U, T, N, S> Differentiable<T, N, N> for Transition<'_, P, U, T, S>
 where
     T: Real,

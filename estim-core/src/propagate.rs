@@ -22,12 +22,11 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
+use crate::checks::{ensure_finite, ensure_shape, finite_or_error};
 use crate::error::{Quantity, Result, Stage};
 use crate::function::VectorFunction;
 use crate::gaussian::Gaussian;
-use crate::linalg::{
-    ensure_finite, ensure_shape, finite_or_error, mirror_lower_checked, symmetric_map,
-};
+use crate::linalg::{mirror_lower_checked, symmetric_map};
 use crate::scalar::Real;
 
 mod affine;

@@ -10,7 +10,7 @@ use nalgebra::RealField;
 /// slower generic fallback that every crate compiles again. Other number types a model may
 /// need (dual numbers for automatic derivatives, say) live inside the model's evaluation, not
 /// in a filter's state.
-pub trait Real: RealField + Copy + crate::kernel::Dense {}
+pub trait Real: RealField + Copy + crate::dense::Dense {}
 
 impl Real for f32 {}
 impl Real for f64 {}

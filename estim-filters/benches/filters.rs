@@ -991,7 +991,7 @@ fn nonlinear_6x4(c: &mut Criterion) {
     let (x6, p6) = (hand_prior.x, hand_prior.p);
     let (z4, r4, k64) = (zs[0], beacons.noise, SMatrix::<f64, 6, 4>::repeat(0.5));
     group.bench("ensure_finite_x13", &(), |_, _| {
-        use estim_core::linalg::ensure_finite;
+        use estim_core::checks::ensure_finite;
         use estim_core::{Quantity::Mean, Stage::Update};
         let ok = ensure_finite(black_box(&p6), Update, Mean).is_ok()
             & ensure_finite(black_box(&x6), Update, Mean).is_ok()

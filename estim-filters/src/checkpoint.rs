@@ -36,7 +36,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use estim_core::linalg::{ensure_finite, ensure_shape};
+use estim_core::checks::{ensure_finite, ensure_shape};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::PropagatorWorkspace;
 use estim_core::serialize::ShapeChecked;

@@ -33,7 +33,8 @@
 //! # Ok::<(), estim_filters::ValidationError>(())
 //! ```
 
-use estim_core::linalg::{ensure_shape, inverse_quadratic_form};
+use estim_core::checks::ensure_shape;
+use estim_core::linalg::inverse_quadratic_form;
 use estim_core::nalgebra::{self, DefaultAllocator, Dim, OMatrix, OVector, allocator::Allocator};
 use estim_core::{Error, Quantity, Real, Stage};
 
@@ -71,6 +72,8 @@ pub(crate) mod dist {
     use super::{Result, Setting, ValidationError};
     use statrs::distribution::{ChiSquared, ContinuousCDF, Normal, StudentsT};
 
+    use crate::chi_square;
+
     fn dof_error(dof: f64) -> ValidationError {
         ValidationError::InvalidSetting {
             setting: Setting::DegreesOfFreedom,
@@ -79,10 +82,7 @@ pub(crate) mod dist {
     }
 
     fn chi2(dof: usize) -> Result<ChiSquared> {
-        if dof == 0 {
-            return Err(dof_error(0.0));
-        }
-        ChiSquared::new(dof as f64).map_err(|_| dof_error(dof as f64))
+        chi_square::distribution(dof).ok_or_else(|| dof_error(dof as f64))
     }
 
     fn student(dof: usize) -> Result<StudentsT> {

@@ -1,7 +1,8 @@
 //! The decorrelated process used when process and measurement noise are correlated.
 
+use estim_core::checks::{ensure_finite, ensure_shape, symmetrize};
 use estim_core::kernel::is_static;
-use estim_core::linalg::{ensure_finite, ensure_shape, psd_factor, symmetrize};
+use estim_core::linalg::psd_factor;
 use estim_core::nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{
     Alloc, Differentiable, Error, MeasurementHessian, MeasurementJacobian, MeasurementModel,

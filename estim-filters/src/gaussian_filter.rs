@@ -1,9 +1,9 @@
 //! The Kalman family as one filter parameterised by its moment propagator.
 
-use estim_core::kernel;
-use estim_core::linalg::{
+use estim_core::checks::{
     all_finite, ensure_nonnegative_diagonal, ensure_semidefinite_noise, ensure_shape,
 };
+use estim_core::kernel;
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{
     Affine, Linearized, MomentPropagator, Outputs, PropagatorWorkspace, SecondOrder,

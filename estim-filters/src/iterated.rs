@@ -1,7 +1,7 @@
 //! The iterated extended Kalman filter: Gauss–Newton iterations on the measurement update.
 
+use estim_core::checks::ensure_shape;
 use estim_core::kernel::{self, CholeskyScratch};
-use estim_core::linalg::ensure_shape;
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::scalar::real;
 use estim_core::{

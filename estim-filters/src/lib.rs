@@ -68,6 +68,8 @@
 #[cfg(feature = "serde")]
 pub mod checkpoint;
 #[cfg(feature = "std")]
+mod chi_square;
+#[cfg(feature = "std")]
 pub mod consistency;
 mod correlated;
 #[cfg(feature = "std")]

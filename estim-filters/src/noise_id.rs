@@ -30,7 +30,7 @@
 
 use core::fmt;
 
-use estim_core::linalg::all_finite;
+use estim_core::checks::all_finite;
 use estim_core::nalgebra::{DefaultAllocator, Dim, OVector};
 use estim_core::{Alloc, Error, Quantity, Real};
 

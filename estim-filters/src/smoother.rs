@@ -74,8 +74,8 @@
 
 use std::collections::VecDeque;
 
+use estim_core::checks::{all_finite, symmetrize};
 use estim_core::kernel::{self, CholeskyScratch};
-use estim_core::linalg::{all_finite, symmetrize};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, StateSpace, error::Result};
 

@@ -138,11 +138,11 @@ mod unscented;
 
 pub use propagator::{FactorEstimate, FactorPredict, FactorUpdate};
 
-use estim_core::kernel::{self, Accum};
-use estim_core::linalg::{
+use estim_core::checks::{
     all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_shape, finite_or_error,
-    mirror_lower_checked, psd_factor,
 };
+use estim_core::kernel::{self, Accum};
+use estim_core::linalg::{mirror_lower_checked, psd_factor};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{Affine, Linearized, Unscented};
 use estim_core::{

@@ -35,12 +35,12 @@
 //! 10⁻¹²) is the guard: it fails before timing anything if this recurs. The reproduction is
 //! `docs/errata/slp_joseph_repro.rs`.
 
-use estim_core::kernel::{self, Accum};
-use estim_core::linalg::{
+use estim_core::checks::{
     all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_semidefinite_noise,
-    ensure_shape, finite_or_error, symmetric_map, symmetric_sum_into_checked,
-    symmetrize_add_checked,
+    ensure_shape, finite_or_error,
 };
+use estim_core::kernel::{self, Accum};
+use estim_core::linalg::{symmetric_map, symmetric_sum_into_checked, symmetrize_add_checked};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::scalar::real;
 use estim_core::{Alloc, Error, Parameter, Quantity, Real, Stage, StateSpace, error::Result};
@@ -209,9 +209,7 @@ pub(crate) const LN_TWO_PI: f64 = 1.837_877_066_409_345_3;
 /// χ²_dof's `p` quantile, if finite.
 #[cfg(feature = "std")]
 fn chi2_quantile(dof: usize, p: f64) -> Option<f64> {
-    crate::consistency::dist::chi2_quantile(dof, p)
-        .ok()
-        .filter(|q| q.is_finite())
+    crate::chi_square::quantile(dof, p)
 }
 
 /// Without std (no statrs) there are no χ² quantiles: a probability gate is refused.

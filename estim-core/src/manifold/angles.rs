@@ -2,10 +2,9 @@
 
 use nalgebra::{DefaultAllocator, Dim, OVector};
 
-use super::{StateSpace, add_into};
+use super::{StateSpace, add_into, subtract_into};
 use crate::alloc::Alloc;
 use crate::angle::wrap_components;
-use crate::model::subtract_into;
 use crate::scalar::Real;
 
 /// ℝⁿ with the components at `indices` on the circle (−π, π]: x ⊞ δ = wrap(x + δ) and

@@ -24,9 +24,8 @@
 
 use nalgebra::{DefaultAllocator, Dim, OVector, Quaternion, UnitQuaternion, Vector3};
 
-use super::{StateSpace, add_into};
+use super::{StateSpace, add_into, subtract_into};
 use crate::alloc::Alloc;
-use crate::model::subtract_into;
 use crate::scalar::{Real, real};
 
 /// Exp: the unit quaternion of the rotation vector v (angle |v| about v/|v|).

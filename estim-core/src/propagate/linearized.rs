@@ -5,10 +5,10 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use super::workspace::buffer;
 use super::{MomentPropagator, Outputs, PropagatorWorkspace, check_inputs};
 use crate::alloc::Alloc;
+use crate::checks::ensure_shape;
 use crate::error::{Quantity, Result, Stage};
 use crate::function::Differentiable;
 use crate::kernel::{Accum, mul, mul_lower, mul_tr, mul_tr_lower};
-use crate::linalg::ensure_shape;
 use crate::scalar::Real;
 
 /// Linearisation at the mean: ȳ = g(μ), cov(y) = J C Jᵀ, cov(x, y) = C Jᵀ, with J = ∂g/∂x(μ).

@@ -7,9 +7,10 @@ use rand_distr::{Distribution, StandardNormal};
 
 use super::{MomentPropagator, Outputs, PropagatorWorkspace, check_inputs};
 use crate::alloc::Alloc;
+use crate::checks::{ensure_shape, symmetrize};
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
 use crate::function::VectorFunction;
-use crate::linalg::{ensure_shape, psd_factor, symmetrize};
+use crate::linalg::psd_factor;
 use crate::scalar::{Real, real};
 
 /// Seeded Monte Carlo: draws `samples` points xᵢ = μ + L zᵢ (L Lᵀ = C, zᵢ ~ N(0, I)) and

@@ -7,10 +7,10 @@ use super::linearized::linear_moments_into;
 use super::workspace::buffer;
 use super::{LinearizedWorkspace, MomentPropagator, Outputs, PropagatorWorkspace};
 use crate::alloc::Alloc;
+use crate::checks::ensure_shape;
 use crate::error::{Quantity, Result, Stage};
 use crate::function::TwiceDifferentiable;
 use crate::kernel::{self, Accum, mul};
-use crate::linalg::ensure_shape;
 use crate::scalar::{Real, real};
 
 /// Papoulis' second-order approximation (Boje eq 7 and eq 9):

@@ -5,10 +5,11 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use super::workspace::buffer;
 use super::{MomentPropagator, Outputs, PropagatorWorkspace, check_inputs};
 use crate::alloc::Alloc;
+use crate::checks::ensure_shape;
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
 use crate::function::{SigmaScratch, VectorFunction};
 use crate::kernel::{self, Accum, CholeskyScratch, is_static, mul_tr, mul_tr_lower};
-use crate::linalg::{ensure_shape, psd_factor_into};
+use crate::linalg::psd_factor_into;
 use crate::scalar::{Real, real};
 
 /// The scaled unscented transform (Julier 2002; Wan & van der Merwe 2000).

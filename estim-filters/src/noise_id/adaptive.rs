@@ -67,7 +67,8 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use estim_core::linalg::{all_finite, ensure_finite, ensure_symmetric, symmetric_map};
+use estim_core::checks::{all_finite, ensure_finite, ensure_symmetric};
+use estim_core::linalg::symmetric_map;
 use estim_core::nalgebra::{DMatrix, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::scalar::real;
 use estim_core::{

@@ -80,7 +80,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use estim_core::linalg::{all_finite, ensure_finite, ensure_psd, ensure_symmetric, symmetrize};
+use estim_core::checks::{all_finite, ensure_finite, ensure_psd, ensure_symmetric, symmetrize};
 use estim_core::nalgebra::{DMatrix, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Gaussian, LinearMeasurement, LinearProcess, Quantity, Real, Stage};
 

@@ -1,8 +1,8 @@
 //! The array-form steps through a linear or linearised function: the square-root KF
 //! ([`Affine`](estim_core::propagate::Affine)) and EKF ([`Linearized`](estim_core::Linearized)).
 
+use estim_core::checks::ensure_shape;
 use estim_core::kernel::{self, Accum};
-use estim_core::linalg::ensure_shape;
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::{
     Alloc, Differentiable, MeasurementJacobian, Observation, Quantity, Real, Stage, VectorFunction,

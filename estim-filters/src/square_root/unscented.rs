@@ -1,8 +1,8 @@
 //! The square-root unscented steps (Van der Merwe & Wan 2001): sigma-point deviations
 //! triangularised with the noise factor, and the array-form update.
 
+use estim_core::checks::ensure_shape;
 use estim_core::kernel::{self, Accum};
-use estim_core::linalg::ensure_shape;
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::Unscented;
 use estim_core::scalar::real;

@@ -5,7 +5,7 @@
 //! symmetric and positive semi-definite within the library's round-off tolerance
 //! (16 n ε max Pᵢᵢ, the one `psd_factor` uses).
 
-use estim_core::linalg::ensure_psd;
+use estim_core::checks::ensure_psd;
 use estim_core::nalgebra::{Matrix2, Matrix3, U2, U3, Vector2, Vector3};
 use estim_core::{Error, Gaussian, MeasurementModel, ProcessModel, Quantity, Stage, Unscented};
 use estim_filters::{Estimator, GaussianFilter, Predict, Update};

@@ -317,7 +317,7 @@ impl AccelerometerProcess for NonlinearPlanarProcess {
         _: &Vector6<f64>,
         _: &Matrix6<f64>,
     ) -> Result<Vector4<f64>> {
-        estim_core::linalg::ensure_finite(
+        estim_core::checks::ensure_finite(
             accel,
             estim_core::Stage::Prediction,
             estim_core::Quantity::Measurement,

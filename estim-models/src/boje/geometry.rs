@@ -5,8 +5,8 @@
 //! run on it; [`inertial_mean`] and [`lambda`] are Boje's closed forms (eq 12 and the corrected
 //! eq 13), which the tests compare with those propagators entry by entry.
 
+use estim_core::checks::ensure_finite;
 use estim_core::error::Result;
-use estim_core::linalg::ensure_finite;
 use estim_core::nalgebra::{Matrix4, Matrix4x5, Matrix5, U4, U5, Vector4, Vector5};
 use estim_core::{Differentiable, Error, Quantity, Stage, TwiceDifferentiable, VectorFunction};
 

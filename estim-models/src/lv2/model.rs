@@ -4,7 +4,7 @@
 
 use core::f64::consts::FRAC_1_SQRT_2;
 
-use estim_core::linalg::{ensure_finite, ensure_shape, symmetrize};
+use estim_core::checks::{ensure_finite, ensure_shape, symmetrize};
 use estim_core::nalgebra::{
     Cholesky, Const, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1, U2, U3, Vector1,
     allocator::Allocator,

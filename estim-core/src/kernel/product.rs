@@ -1,0 +1,308 @@
+//! Products into a destination, dst (+)= α a op(b), on the whole of dst or its lower
+//! triangle: nalgebra's fixed-size operators on small static sizes, one runtime-size
+//! [`product`] (faer, or [`Matvec`](crate::dense::Matvec) for one column) otherwise.
+
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, allocator::Allocator};
+
+use super::{fixed_route, is_static};
+#[cfg(feature = "std")]
+use super::{view, view_mut};
+use crate::dense::{Accum, Operand, Part};
+use crate::scalar::Real;
+
+/// The form of a runtime-size product dst (+)= α a op(b): whether b enters transposed, and
+/// which part of dst is written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Form {
+    /// b or bᵀ.
+    b: Operand,
+    /// All of dst, or its lower triangle.
+    part: Part,
+}
+
+impl Form {
+    /// dst (+)= α a b.
+    const PLAIN: Self = Self {
+        b: Operand::AsIs,
+        part: Part::Whole,
+    };
+    /// dst (+)= α a bᵀ.
+    const B_TRANSPOSED: Self = Self {
+        b: Operand::Transposed,
+        part: Part::Whole,
+    };
+    /// The lower triangle of dst (+)= α a b.
+    const LOWER: Self = Self {
+        b: Operand::AsIs,
+        part: Part::Lower,
+    };
+    /// The lower triangle of dst (+)= α a bᵀ.
+    const LOWER_B_TRANSPOSED: Self = Self {
+        b: Operand::Transposed,
+        part: Part::Lower,
+    };
+}
+
+/// dst (+)= α a op(b) on runtime sizes, b transposed and only the lower triangle of dst
+/// written as `form` says. One-column products of the [`Form::PLAIN`] form go to
+/// [`Matvec`](crate::dense::Matvec), the rest to faer. The one product behind [`mul`],
+/// [`mul_tr`], [`mul_lower`] and [`mul_tr_lower`] on the runtime route.
+#[cfg(feature = "std")]
+#[inline(always)]
+#[track_caller]
+fn product<T, R, C, RA, CA, RB, CB>(
+    dst: &mut OMatrix<T, R, C>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, RA, CA>,
+    b: &OMatrix<T, RB, CB>,
+    form: Form,
+) where
+    T: Real,
+    R: Dim,
+    C: Dim,
+    RA: Dim,
+    CA: Dim,
+    RB: Dim,
+    CB: Dim,
+    DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RB, CB>,
+{
+    if dst.ncols() == 1 && form == Form::PLAIN {
+        assert!(
+            a.shape() == (dst.nrows(), b.nrows()) && b.ncols() == 1,
+            "matrix × vector: {:?} ← {:?} × {:?}",
+            dst.shape(),
+            a.shape(),
+            b.shape()
+        );
+        return T::matvec(dst.as_mut_slice(), accum, alpha, a.as_slice(), b.as_slice());
+    }
+    let (a, b) = (view(a), view(b));
+    let b = match form.b {
+        Operand::AsIs => b,
+        Operand::Transposed => b.transpose(),
+    };
+    T::matmul(view_mut(dst), accum, alpha, a, b, form.part);
+}
+
+/// [`product`] without faer (no `std`): one dot product per entry, generic over the
+/// dimensions (the whole of dst, whatever `form.part`). Unreached by estim without std (its
+/// bounds admit static sizes only); there so that the kernels keep one body for both builds.
+#[cfg(not(feature = "std"))]
+#[track_caller]
+fn product<T, R, C, RA, CA, RB, CB>(
+    dst: &mut OMatrix<T, R, C>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, RA, CA>,
+    b: &OMatrix<T, RB, CB>,
+    form: Form,
+) where
+    T: Real,
+    R: Dim,
+    C: Dim,
+    RA: Dim,
+    CA: Dim,
+    RB: Dim,
+    CB: Dim,
+    DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RB, CB>,
+{
+    let transpose_b = form.b == Operand::Transposed;
+    let bt = |k: usize, j: usize| if transpose_b { b[(j, k)] } else { b[(k, j)] };
+    let inner = a.ncols();
+    let (rows, cols) = dst.shape();
+    assert!(
+        a.nrows() == rows
+            && (if transpose_b { b.nrows() } else { b.ncols() }) == cols
+            && (if transpose_b { b.ncols() } else { b.nrows() }) == inner,
+        "kernel product: shapes differ"
+    );
+    for j in 0..cols {
+        for i in 0..rows {
+            let sum = (0..inner).fold(T::zero(), |sum, k| sum + a[(i, k)] * bt(k, j));
+            let d = &mut dst[(i, j)];
+            *d = match accum {
+                Accum::Add => *d + alpha * sum,
+                Accum::Replace => alpha * sum,
+            };
+        }
+    }
+}
+
+/// Writes or adds α · `value` into `dst` (static sizes), skipping the scaling when α = 1.
+#[inline(always)]
+fn store<T: Real, R: Dim, C: Dim>(
+    dst: &mut OMatrix<T, R, C>,
+    accum: Accum,
+    alpha: T,
+    value: OMatrix<T, R, C>,
+) where
+    DefaultAllocator: Allocator<R, C>,
+{
+    let value = if alpha == T::one() {
+        value
+    } else {
+        value * alpha
+    };
+    match accum {
+        Accum::Replace => *dst = value,
+        Accum::Add => *dst += value,
+    }
+}
+
+/// dst (+)= α a b.
+#[inline(always)]
+#[track_caller]
+pub fn mul<T, R, K, C>(
+    dst: &mut OMatrix<T, R, C>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, R, K>,
+    b: &OMatrix<T, K, C>,
+) where
+    T: Real,
+    R: Dim,
+    K: Dim,
+    C: Dim,
+    DefaultAllocator: Allocator<R, C> + Allocator<R, K> + Allocator<K, C>,
+{
+    let fixed = is_static::<R>() && is_static::<K>() && is_static::<C>();
+    if fixed_route(fixed, a.nrows().max(a.ncols()).max(b.ncols())) {
+        store(dst, accum, alpha, a * b);
+    } else {
+        product(dst, accum, alpha, a, b, Form::PLAIN);
+    }
+}
+
+/// dst (+)= α a bᵀ.
+#[inline(always)]
+#[track_caller]
+pub fn mul_tr<T, R, K, C>(
+    dst: &mut OMatrix<T, R, C>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, R, K>,
+    b: &OMatrix<T, C, K>,
+) where
+    T: Real,
+    R: Dim,
+    K: Dim,
+    C: Dim,
+    DefaultAllocator: Allocator<R, C> + Allocator<R, K> + Allocator<C, K> + Allocator<K, C>,
+{
+    let fixed = is_static::<R>() && is_static::<K>() && is_static::<C>();
+    if fixed_route(fixed, a.nrows().max(a.ncols()).max(b.nrows())) {
+        // The operator form: for small static sizes it unrolls, where nalgebra's generic
+        // `gemm` loops column by column (measured: the filters bench).
+        store(dst, accum, alpha, a * b.transpose());
+    } else {
+        product(dst, accum, alpha, a, b, Form::B_TRANSPOSED);
+    }
+}
+
+/// The lower triangle (diagonal included) of dst (+)= α a b, for a product known to be
+/// symmetric (such as J (C Jᵀ)): on runtime sizes only that triangle is computed, about half
+/// the work. The strict upper triangle of `dst` is unspecified afterwards (static sizes compute
+/// the whole product, which is cheaper than selecting a triangle there); mirror the lower
+/// triangle ([`crate::linalg::mirror_lower_checked`]) before using it.
+#[inline(always)]
+#[track_caller]
+pub fn mul_lower<T, D, K>(
+    dst: &mut OMatrix<T, D, D>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, D, K>,
+    b: &OMatrix<T, K, D>,
+) where
+    T: Real,
+    D: Dim,
+    K: Dim,
+    DefaultAllocator: Allocator<D, D> + Allocator<D, K> + Allocator<K, D>,
+{
+    let fixed = is_static::<D>() && is_static::<K>();
+    if fixed_route(fixed, a.nrows().max(a.ncols())) {
+        store(dst, accum, alpha, a * b);
+    } else {
+        product(dst, accum, alpha, a, b, Form::LOWER);
+    }
+}
+
+/// The lower triangle of dst (+)= α a bᵀ (see [`mul_lower`]; e.g. w D Dᵀ or (K S) Kᵀ).
+#[inline(always)]
+#[track_caller]
+pub fn mul_tr_lower<T, D, K>(
+    dst: &mut OMatrix<T, D, D>,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, D, K>,
+    b: &OMatrix<T, D, K>,
+) where
+    T: Real,
+    D: Dim,
+    K: Dim,
+    DefaultAllocator: Allocator<D, D> + Allocator<D, K> + Allocator<K, D>,
+{
+    let fixed = is_static::<D>() && is_static::<K>();
+    if fixed_route(fixed, a.nrows().max(a.ncols())) {
+        store(dst, accum, alpha, a * b.transpose());
+    } else {
+        product(dst, accum, alpha, a, b, Form::LOWER_B_TRANSPOSED);
+    }
+}
+
+/// Column `column` of `dst` (+)= α A x: [`Matvec`] on runtime sizes, one dot product per row
+/// on static sizes.
+///
+/// # Panics
+/// If the shapes do not agree or `column` is out of range (a programmer error).
+#[track_caller]
+pub(crate) fn mul_into_column<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim>(
+    dst: &mut OMatrix<T, R, C>,
+    column: usize,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, RA, CA>,
+    x: &OVector<T, RX>,
+) where
+    DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RX>,
+{
+    let rows = dst.nrows();
+    assert!(
+        column < dst.ncols() && a.shape() == (rows, x.nrows()),
+        "mul_into_column: column {column} of {:?} ← {:?} × {:?}",
+        dst.shape(),
+        a.shape(),
+        x.shape()
+    );
+    #[cfg(feature = "std")]
+    {
+        let fixed = is_static::<R>() && is_static::<RA>() && is_static::<CA>();
+        let size = rows.max(x.nrows());
+        if !fixed_route(fixed, size) {
+            let y = &mut dst.as_mut_slice()[column * rows..(column + 1) * rows];
+            return T::matvec(y, accum, alpha, a.as_slice(), x.as_slice());
+        }
+    }
+    column_by_dot_products(dst, column, accum, alpha, a, x);
+}
+
+/// [`mul_into_column`] on static sizes: one dot product per row.
+pub(super) fn column_by_dot_products<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim>(
+    dst: &mut OMatrix<T, R, C>,
+    column: usize,
+    accum: Accum,
+    alpha: T,
+    a: &OMatrix<T, RA, CA>,
+    x: &OVector<T, RX>,
+) where
+    DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RX>,
+{
+    for i in 0..dst.nrows() {
+        let sum = (0..x.nrows()).fold(T::zero(), |sum, j| sum + a[(i, j)] * x[j]);
+        let d = &mut dst[(i, column)];
+        *d = match accum {
+            Accum::Add => *d + alpha * sum,
+            Accum::Replace => alpha * sum,
+        };
+    }
+}
