@@ -73,6 +73,8 @@ mod correlated;
 #[cfg(feature = "std")]
 pub mod fusion;
 mod gaussian_filter;
+#[cfg(feature = "std")]
+pub mod imm;
 mod iterated;
 #[cfg(feature = "std")]
 pub mod monte_carlo;
