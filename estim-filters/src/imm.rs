@@ -67,6 +67,8 @@
 //! # Ok::<(), estim_core::Error>(())
 //! ```
 
+#[cfg(feature = "serde")]
+mod checkpoint;
 mod mixture;
 pub mod modes;
 

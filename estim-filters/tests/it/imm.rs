@@ -658,3 +658,35 @@ fn a_measurement_every_mode_gates_changes_nothing() {
     assert_eq!(report.outcome, UpdateOutcome::Gated);
     assert_eq!(imm.snapshot(), before);
 }
+
+#[cfg(feature = "serde")]
+#[test]
+fn a_checkpoint_resumes_bit_identically() {
+    type Modes = (KalmanFilter<f64, U2>, Ukf<f64, U2>);
+    let sensor = position(0.5);
+    let modes = (KalmanFilter::new(prior()), Ukf::new(prior()));
+    let mut imm = Imm::new(modes, two_by_two(0.1, 0.2), DVector::from_element(2, 0.5)).unwrap();
+    let models = (cv(0.01), stationary_model(0.1));
+    let zs = manoeuvre(9, 12);
+    let step = |imm: &mut Imm<f64, U2, Modes>, z: f64| {
+        imm.predict_modes(&models, &u0(), DT).unwrap();
+        imm.update_modes(&sensor, &Vector1::new(z)).unwrap();
+    };
+    for z in &zs[..6] {
+        step(&mut imm, *z);
+    }
+    let saved = serde_json::to_string(&imm).unwrap();
+    let mut resumed: Imm<f64, U2, Modes> = serde_json::from_str(&saved).unwrap();
+    assert_eq!(resumed.snapshot(), imm.snapshot());
+    for z in &zs[6..] {
+        step(&mut imm, *z);
+        step(&mut resumed, *z);
+        assert_bitwise_eq(resumed.state(), imm.state(), "resumed state");
+        assert_bitwise_eq(resumed.covariance(), imm.covariance(), "resumed covariance");
+        assert_bitwise_eq(resumed.probabilities(), imm.probabilities(), "resumed μ");
+    }
+    // A checkpoint whose Π was edited into a non-stochastic one is refused.
+    let edited = saved.replace("\"transition\":[[0.9,", "\"transition\":[[0.5,");
+    assert_ne!(edited, saved);
+    assert!(serde_json::from_str::<Imm<f64, U2, Modes>>(&edited).is_err());
+}
