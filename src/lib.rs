@@ -78,8 +78,9 @@ pub mod prelude {
     };
     pub use estim_filters::{
         CovarianceUpdate, Ekf, EnsembleStats, Estimator, FadingMemoryRls, Gate, GaussianFilter,
-        GaussianSecondOrderEkf, KalmanFilter, MonteCarlo, Predict, PredictCorrelated, Recorder,
-        SecondOrderEkf, Ukf, Update, UpdateOutcome, UpdateReport, Verdict,
+        GaussianSecondOrderEkf, KalmanFilter, MonteCarlo, OnStateSpace, Predict, PredictCorrelated,
+        PredictCross, ProcessInput, Recorder, Rollback, SecondOrderEkf, Ukf, Update, UpdateOutcome,
+        UpdateReport, Verdict,
     };
     pub use estim_filters::{Iekf, SquareRootFilter, SrEkf, SrKalmanFilter, SrUkf};
 }

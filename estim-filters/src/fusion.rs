@@ -23,9 +23,16 @@
 //!   sensor until it recovers ([`MonitorSettings`]).
 //!
 //! The driver never changes the filters: it calls [`Predict::predict`](crate::Predict) and the
-//! sensors' updates, reads the estimate through [`Estimator`](crate::Estimator) and restores it
-//! with [`Estimator::reset`](crate::Estimator::reset), which is how it rejects a measurement
-//! after seeing its NIS (the filter's own gate is not needed; leave it unset).
+//! sensors' updates, reads the estimate through [`Estimator`](crate::Estimator), and rolls the
+//! filter back with its own snapshots ([`Rollback`](crate::Rollback)): the history keeps one
+//! per event, and a rejected, excluded or replayed measurement puts one back bit for bit, a
+//! square-root factor included (the filter's own gate is not needed; leave it unset). Only a
+//! covariance reset ([`ResetSettings`]) re-initialises the filter from a new Gaussian, through
+//! [`Estimator::reset`](crate::Estimator::reset). Any estimator implementing [`Predict`],
+//! the sensors' updates and [`Rollback`] goes in: a multiple-model estimator's "process" is
+//! whatever its `Predict` takes (its set of per-mode models).
+//!
+//! [`Predict`]: crate::Predict
 //!
 //! # Registering sensors
 //!
@@ -112,9 +119,11 @@
 //! Everything is allocated at construction: the history's records (with static sizes their
 //! vectors and matrices live inside the records), the per-sensor windows. After that, with
 //! static sizes, no call allocates (tested with a counting allocator). With runtime sizes the
-//! restores through [`Estimator::reset`](crate::Estimator::reset) allocate one vector and one
-//! matrix per rejected, reset, excluded or replayed measurement, and a runtime-sized input is
-//! cloned into each record it is held over.
+//! snapshots are copied into the records' buffers ([`Rollback::snapshot_into`]), a covariance
+//! reset allocates one vector and one matrix, and a runtime-sized input is cloned into each
+//! record it is held over.
+//!
+//! [`Rollback::snapshot_into`]: crate::Rollback::snapshot_into
 //!
 //! # Time
 //!

@@ -18,7 +18,10 @@ use estim_core::{
 use crate::correlated::Decorrelated;
 use crate::report::UpdateReport;
 use crate::scratch::{PredictScratch, ScratchCache, UpdateScratch};
-use crate::traits::{Estimator, Predict, PredictCorrelated, Update};
+use crate::snapshot::EstimateSnapshot;
+use crate::traits::{
+    Estimator, OnStateSpace, Predict, PredictCorrelated, PredictCross, Rollback, Update,
+};
 use crate::update::{self, CovarianceUpdate, Gate, UpdateSettings};
 
 /// A Gaussian filter: the estimate is N(x̂, P), and both steps ask the propagator `Pr` for the
@@ -54,7 +57,7 @@ use crate::update::{self, CovarianceUpdate, Gate, UpdateSettings};
 /// [`LinearMeasurement`](estim_core::LinearMeasurement) do) and
 /// [`update_into`](Update::update_into) with a reused report. Which to pick, measured
 /// (BENCHMARKS.md, "Static or dynamic"): static sizes for the small states of the papers
-/// (n ≤ 6; no heap; 1.45–1.9× faster there); from n = 12 both run the same kernels and are
+/// (n ≤ 6; no heap; 1.6–1.9× faster there); from n = 12 both run the same kernels and are
 /// within 10 % of each other (static ahead at 12–16, runtime sizes up to 10 % ahead at 50).
 #[derive(Debug)]
 pub struct GaussianFilter<T: Real, N: Dim, Pr: PropagatorWorkspace<T>, S = Euclidean>
@@ -275,9 +278,38 @@ where
     }
 }
 
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>, S> Rollback for GaussianFilter<T, N, Pr, S>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Snapshot = EstimateSnapshot<T, N>;
+
+    fn snapshot(&self) -> EstimateSnapshot<T, N> {
+        EstimateSnapshot {
+            state: self.state.clone(),
+            covariance: self.covariance.clone(),
+        }
+    }
+
+    fn snapshot_into(&self, snapshot: &mut EstimateSnapshot<T, N>) {
+        snapshot.copy_from(&self.state, &self.covariance);
+    }
+
+    fn restore(&mut self, snapshot: &EstimateSnapshot<T, N>) {
+        let n = self.state.nrows();
+        self.state.clone_from(&snapshot.state);
+        self.covariance.clone_from(&snapshot.covariance);
+        if self.state.nrows() != n {
+            self.scratch.clear();
+            self.accepted_noise = AcceptedNoise::like(&self.covariance);
+        }
+    }
+}
+
 /// One prediction through `g` plus additive noise (`fill_noise` writes Q(x̂) into its buffer),
 /// computed in the step's scratch (a local for static sizes, the filter's cached one for `Dyn`)
-/// and committed only if every check passes. Q is checked positive semi-definite unless it
+/// and committed only if every check passes; the cross-covariance cov(x, g(x)) into `cross`
+/// if given (the smoother's prediction: the same path). Q is checked positive semi-definite unless it
 /// equals `accepted`, the last Q a committed prediction checked (which it then becomes).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
@@ -289,6 +321,7 @@ fn predict_step<T, N, Pr, G>(
     accepted: &mut AcceptedNoise<T, N>,
     g: &G,
     fill_noise: impl FnOnce(&OVector<T, N>, &mut OMatrix<T, N, N>),
+    cross: Option<&mut OMatrix<T, N, N>>,
     step: Step,
 ) -> Result<()>
 where
@@ -311,7 +344,7 @@ where
     };
     fill_noise(state, &mut work.noise);
     let known = accepted.holds(&work.noise);
-    let result = predicted(propagator, state, covariance, g, work, known);
+    let result = predicted(propagator, state, covariance, g, work, known, cross);
     match result {
         Ok(()) if step == Step::Apply => {
             if !known {
@@ -379,6 +412,7 @@ fn predicted<T, N, Pr, G>(
     g: &G,
     scratch: &mut PredictScratch<T, N, Pr>,
     known: bool,
+    cross: Option<&mut OMatrix<T, N, N>>,
 ) -> Result<()>
 where
     T: Real,
@@ -400,7 +434,8 @@ where
     }
     // The propagator checks its own outputs; Q is checked through P⁻ = cov f + Q, and only on
     // failure is it examined to name the culprit.
-    let out = Outputs::mean_covariance(mean, p).with_noise(q);
+    let mut out = Outputs::mean_covariance(mean, p).with_noise(q);
+    out.cross_covariance = cross;
     propagator
         .propagate_into(state, covariance, g, out, propagation)
         .map_err(|e| match e {
@@ -490,11 +525,11 @@ where
 {
     #[inline(always)]
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
-        self.process_step(model, input, dt, Step::Apply)
+        self.process_step(model, input, dt, None, Step::Apply)
     }
 
     fn prepare_predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
-        self.process_step(model, input, dt, Step::Prepare)
+        self.process_step(model, input, dt, None, Step::Prepare)
     }
 }
 
@@ -504,7 +539,14 @@ where
 {
     /// A prediction through `model` (or its preparation).
     #[inline(always)]
-    fn process_step<P>(&mut self, model: &P, input: &P::Input, dt: T, step: Step) -> Result<()>
+    fn process_step<P>(
+        &mut self,
+        model: &P,
+        input: &P::Input,
+        dt: T,
+        cross: Option<&mut OMatrix<T, N, N>>,
+        step: Step,
+    ) -> Result<()>
     where
         P: ProcessModel<T, N>,
         Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
@@ -530,58 +572,58 @@ where
             accepted_noise,
             &map,
             noise,
+            cross,
             step,
         )
     }
+}
 
-    /// [`Predict::predict`] that also returns C = cov(xₖ, xₖ₊₁), the covariance of the state
-    /// before and after the step (the propagator's cross-covariance; Q adds none): what a
-    /// Rauch–Tung–Striebel smoother needs ([`crate::smoother::Rts`]). Allocates its result
-    /// and, for runtime sizes, its buffers; on an error the filter is unchanged.
-    ///
-    /// ```
-    /// use estim_filters::{Ekf, Estimator};
-    /// use estim_core::{Gaussian, LinearProcess};
-    /// use estim_core::nalgebra::{Matrix2, Matrix2x1, Vector1, Vector2};
-    ///
-    /// let f = Matrix2::new(1.0, 0.1, 0.0, 1.0);
-    /// let process = LinearProcess { transition: f, input: Matrix2x1::zeros(), noise: Matrix2::identity() * 0.01 };
-    /// let mut ekf = Ekf::new(Gaussian::new(Vector2::zeros(), Matrix2::identity())?);
-    /// let c = ekf.predict_with_cross_covariance(&process, &Vector1::zeros(), 0.1)?;
-    /// assert!((c - f.transpose()).abs().max() < 1e-15); // cov(x, F x) = P Fᵀ with P = I
-    /// # Ok::<(), estim_core::Error>(())
-    /// ```
-    pub fn predict_with_cross_covariance<P>(
+/// The state space the filter was given ([`with_state_space`](GaussianFilter::with_state_space)).
+impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>, S: StateSpace<T, N>> OnStateSpace<T, N>
+    for GaussianFilter<T, N, Pr, S>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Space = S;
+
+    fn state_space(&self) -> &S {
+        &self.space
+    }
+}
+
+/// The prediction's own path, with the propagator's cross-covariance written out:
+///
+/// ```
+/// use estim_filters::{Ekf, PredictCross};
+/// use estim_core::{Gaussian, LinearProcess};
+/// use estim_core::nalgebra::{Matrix2, Matrix2x1, Vector1, Vector2};
+///
+/// let f = Matrix2::new(1.0, 0.1, 0.0, 1.0);
+/// let process = LinearProcess { transition: f, input: Matrix2x1::zeros(), noise: Matrix2::identity() * 0.01 };
+/// let mut ekf = Ekf::new(Gaussian::new(Vector2::zeros(), Matrix2::identity())?);
+/// let c = ekf.predict_with_cross_covariance(&process, &Vector1::zeros(), 0.1)?;
+/// assert!((c - f.transpose()).abs().max() < 1e-15); // cov(x, F x) = P Fᵀ with P = I
+/// # Ok::<(), estim_core::Error>(())
+/// ```
+impl<T, N, Pr, P, S> PredictCross<T, N, P> for GaussianFilter<T, N, Pr, S>
+where
+    T: Real,
+    N: Dim,
+    P: ProcessModel<T, N>,
+    S: StateSpace<T, N>,
+    Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
+    DefaultAllocator: Alloc<N>,
+{
+    fn predict_with_cross_covariance(
         &mut self,
         model: &P,
         input: &P::Input,
         dt: T,
-    ) -> Result<OMatrix<T, N, N>>
-    where
-        P: ProcessModel<T, N>,
-        Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
-    {
-        ensure_time_step(dt)?;
+    ) -> Result<OMatrix<T, N, N>> {
         let n = self.state.shape_generic().0;
-        let mut q = OMatrix::zeros_generic(n, n);
-        model.process_noise_into(&self.state, input, dt, &mut q);
-        let known = self.accepted_noise.holds(&q);
-        if !known {
-            ensure_process_noise(&q, &mut OMatrix::zeros_generic(n, n), n.value())?;
-        }
-        let map = Transition::on(&self.space, model, input, dt);
-        let mut moments = estim_core::Moments::zeros(n, n);
-        let mut workspace = Default::default();
-        let out = Outputs::moments(&mut moments).with_noise(&q);
-        self.propagator
-            .propagate_into(&self.state, &self.covariance, &map, out, &mut workspace)?;
-        ensure_predicted_covariance(&moments.covariance)?;
-        if !known {
-            self.accepted_noise.remember(&q);
-        }
-        self.state = moments.mean;
-        self.covariance = moments.covariance;
-        Ok(moments.cross_covariance)
+        let mut cross = OMatrix::zeros_generic(n, n);
+        self.process_step(model, input, dt, Some(&mut cross), Step::Apply)?;
+        Ok(cross)
     }
 }
 
@@ -627,6 +669,7 @@ where
             accepted_noise,
             &map,
             noise,
+            None,
             Step::Apply,
         )
     }

@@ -12,7 +12,8 @@ use estim_core::{
 use crate::gaussian_filter::{Ekf, measurement_update};
 use crate::report::{Iterations, UpdateReport};
 use crate::scratch::UpdateScratch;
-use crate::traits::{Estimator, Predict, Update};
+use crate::snapshot::EstimateSnapshot;
+use crate::traits::{Estimator, OnStateSpace, Predict, PredictCross, Rollback, Update};
 use crate::update::{CovarianceUpdate, Gate, UpdateSettings};
 
 /// Most step halvings of the step-size safeguard per Gauss–Newton step: 2⁻³⁰ ≈ 10⁻⁹ of the
@@ -206,6 +207,57 @@ where
 
     fn reset(&mut self, prior: Gaussian<T, N>) {
         self.filter.reset(prior);
+    }
+}
+
+/// The inner EKF's snapshot: the iteration settings are configuration.
+impl<T: Real, N: Dim> Rollback for Iekf<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Snapshot = EstimateSnapshot<T, N>;
+
+    fn snapshot(&self) -> EstimateSnapshot<T, N> {
+        self.filter.snapshot()
+    }
+
+    fn snapshot_into(&self, snapshot: &mut EstimateSnapshot<T, N>) {
+        self.filter.snapshot_into(snapshot);
+    }
+
+    fn restore(&mut self, snapshot: &EstimateSnapshot<T, N>) {
+        self.filter.restore(snapshot);
+    }
+}
+
+/// Euclidean, as its inner EKF.
+impl<T: Real, N: Dim> OnStateSpace<T, N> for Iekf<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Space = Euclidean;
+
+    fn state_space(&self) -> &Euclidean {
+        self.filter.state_space()
+    }
+}
+
+/// The EKF's prediction, so an IEKF run can be smoothed.
+impl<T, N, P> PredictCross<T, N, P> for Iekf<T, N>
+where
+    T: Real,
+    N: Dim,
+    P: ProcessModel<T, N>,
+    Ekf<T, N>: PredictCross<T, N, P>,
+    DefaultAllocator: Alloc<N>,
+{
+    fn predict_with_cross_covariance(
+        &mut self,
+        model: &P,
+        input: &P::Input,
+        dt: T,
+    ) -> Result<OMatrix<T, N, N>> {
+        self.filter.predict_with_cross_covariance(model, input, dt)
     }
 }
 

@@ -87,6 +87,7 @@ mod rls;
 mod scratch;
 #[cfg(feature = "std")]
 pub mod smoother;
+mod snapshot;
 pub mod square_root;
 mod traits;
 pub mod update;
@@ -108,8 +109,12 @@ pub use rls::FadingMemoryRls;
 pub use smoother::{Rts, Sequence, SmootherError, filter_sequence, smooth_sequence};
 #[cfg(feature = "std")]
 pub use smoother::{Smoothed, smooth_sequence_with_cross_covariances};
+pub use snapshot::{EstimateSnapshot, FactorSnapshot};
 pub use square_root::{SquareRootFilter, SrEkf, SrKalmanFilter, SrUkf};
-pub use traits::{Estimator, Predict, PredictCorrelated, Update};
+pub use traits::{
+    Estimator, OnStateSpace, Predict, PredictCorrelated, PredictCross, ProcessInput, Rollback,
+    Update,
+};
 pub use update::{CovarianceUpdate, Gate};
 #[cfg(feature = "std")]
 pub use validation::ValidationError;

@@ -5,7 +5,8 @@ use estim_core::{Alloc, Error, Gaussian, MeasurementJacobian, Parameter, Real, e
 
 use crate::gaussian_filter::{Ekf, Step};
 use crate::report::UpdateReport;
-use crate::traits::{Estimator, Update};
+use crate::snapshot::EstimateSnapshot;
+use crate::traits::{Estimator, Rollback, Update};
 use crate::update::{CovarianceUpdate, Gate};
 
 /// Recursive least squares with exponential forgetting (the own-ship trajectory estimator,
@@ -91,6 +92,26 @@ where
 
     fn reset(&mut self, prior: Gaussian<T, N>) {
         self.filter.reset(prior);
+    }
+}
+
+/// The estimate (θ̂, P) is all an RLS carries from step to step: γ is configuration.
+impl<T: Real, N: Dim> Rollback for FadingMemoryRls<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Snapshot = EstimateSnapshot<T, N>;
+
+    fn snapshot(&self) -> EstimateSnapshot<T, N> {
+        self.filter.snapshot()
+    }
+
+    fn snapshot_into(&self, snapshot: &mut EstimateSnapshot<T, N>) {
+        self.filter.snapshot_into(snapshot);
+    }
+
+    fn restore(&mut self, snapshot: &EstimateSnapshot<T, N>) {
+        self.filter.restore(snapshot);
     }
 }
 

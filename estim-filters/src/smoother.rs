@@ -69,15 +69,11 @@ use std::collections::VecDeque;
 use estim_core::kernel::{self, CholeskyScratch};
 use estim_core::linalg::{all_finite, symmetrize};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
-use estim_core::propagate::{MomentPropagator, PropagatorWorkspace};
-use estim_core::{
-    Alloc, Error, Gaussian, MeasurementModel, ProcessModel, Quantity, Real, Stage, StateSpace,
-    Transition, error::Result,
-};
+use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, StateSpace, error::Result};
 
-use crate::gaussian_filter::{GaussianFilter, ensure_time_step};
+use crate::gaussian_filter::ensure_time_step;
 use crate::report::{UpdateOutcome, UpdateReport};
-use crate::traits::{Estimator, Predict, Update};
+use crate::traits::{OnStateSpace, Predict, PredictCross, ProcessInput, Rollback, Update};
 
 /// A failed backward step, with the index k of the estimate it was computing (0 = the first).
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
@@ -181,21 +177,19 @@ where
         self.records.is_empty()
     }
 
-    /// Predicts `filter` through `model` ([`GaussianFilter::predict_with_cross_covariance`])
+    /// Predicts `filter` through `model` ([`PredictCross::predict_with_cross_covariance`])
     /// and records what the backward pass needs. On an error nothing is recorded and the
     /// filter is unchanged.
-    pub fn predict<Pr, S, P>(
+    pub fn predict<F, P>(
         &mut self,
-        filter: &mut GaussianFilter<T, N, Pr, S>,
+        filter: &mut F,
         model: &P,
         input: &P::Input,
         dt: T,
     ) -> Result<()>
     where
-        P: ProcessModel<T, N>,
-        Pr: PropagatorWorkspace<T>
-            + for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
-        S: StateSpace<T, N>,
+        F: PredictCross<T, N, P>,
+        P: ProcessInput<T, N> + ?Sized,
     {
         let (state, covariance) = (filter.state().clone(), filter.covariance().clone());
         let cross = filter.predict_with_cross_covariance(model, input, dt)?;
@@ -220,14 +214,10 @@ where
     /// Errors, with the index of the estimate being computed: a predicted covariance that is
     /// not positive definite ([`Error::NotPositiveDefinite`], stage
     /// [`Smoothing`](Stage::Smoothing)), a non-finite result ([`Error::NonFinite`]).
-    pub fn smooth<Pr, S>(
+    pub fn smooth<F: OnStateSpace<T, N>>(
         &self,
-        filter: &GaussianFilter<T, N, Pr, S>,
-    ) -> core::result::Result<Vec<Gaussian<T, N>>, SmootherError>
-    where
-        Pr: PropagatorWorkspace<T>,
-        S: StateSpace<T, N>,
-    {
+        filter: &F,
+    ) -> core::result::Result<Vec<Gaussian<T, N>>, SmootherError> {
         self.backward(filter, None)
     }
 
@@ -269,14 +259,10 @@ where
     /// assert!(c[(0, 0)] / f64::sqrt(p0[(0, 0)] * p1[(0, 0)]) > 0.5);
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
-    pub fn smooth_with_cross_covariances<Pr, S>(
+    pub fn smooth_with_cross_covariances<F: OnStateSpace<T, N>>(
         &self,
-        filter: &GaussianFilter<T, N, Pr, S>,
-    ) -> core::result::Result<Smoothed<T, N>, SmootherError>
-    where
-        Pr: PropagatorWorkspace<T>,
-        S: StateSpace<T, N>,
-    {
+        filter: &F,
+    ) -> core::result::Result<Smoothed<T, N>, SmootherError> {
         let mut cross_covariances = Vec::with_capacity(self.records.len());
         let estimates = self.backward(filter, Some(&mut cross_covariances))?;
         Ok(Smoothed {
@@ -286,15 +272,11 @@ where
     }
 
     /// The backward pass; pushes Pₖ₊₁,ₖ|K into `cross` (in time order) if given.
-    fn backward<Pr, S>(
+    fn backward<F: OnStateSpace<T, N>>(
         &self,
-        filter: &GaussianFilter<T, N, Pr, S>,
+        filter: &F,
         mut cross: Option<&mut Vec<OMatrix<T, N, N>>>,
-    ) -> core::result::Result<Vec<Gaussian<T, N>>, SmootherError>
-    where
-        Pr: PropagatorWorkspace<T>,
-        S: StateSpace<T, N>,
-    {
+    ) -> core::result::Result<Vec<Gaussian<T, N>>, SmootherError> {
         let space = filter.state_space();
         let n = filter.state().shape_generic().0;
         let mut smoothed = Vec::with_capacity(self.records.len() + 1);
@@ -410,8 +392,8 @@ where
 /// assert!(run.updates[1].is_none() && f64::is_finite(run.log_likelihood));
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
-pub fn filter_sequence<T, N, M, Pr, S, P, H>(
-    filter: &mut GaussianFilter<T, N, Pr, S>,
+pub fn filter_sequence<T, N, M, F, P, H>(
+    filter: &mut F,
     process: &P,
     inputs: &[P::Input],
     dt: T,
@@ -422,16 +404,13 @@ where
     T: Real,
     N: Dim,
     M: Dim,
-    P: ProcessModel<T, N>,
-    H: MeasurementModel<T, N, M>,
-    Pr: PropagatorWorkspace<T>
-        + for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
-    S: StateSpace<T, N>,
-    GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
+    F: Predict<T, N, P> + Update<T, N, M, H> + Rollback,
+    P: ProcessInput<T, N> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
     restoring_on_error(filter, |filter| {
-        run(filter, process, inputs, dt, measurement, measurements, None)
+        let predict = |filter: &mut F, input: &P::Input| filter.predict(process, input, dt);
+        run(filter, inputs, dt, measurement, measurements, predict)
     })
 }
 
@@ -458,8 +437,8 @@ where
 /// assert!(f64::abs(run.estimates[1].mean()[0] - 1.0) < 0.3);
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
-pub fn smooth_sequence<T, N, M, Pr, S, P, H>(
-    filter: &mut GaussianFilter<T, N, Pr, S>,
+pub fn smooth_sequence<T, N, M, F, P, H>(
+    filter: &mut F,
     process: &P,
     inputs: &[P::Input],
     dt: T,
@@ -470,12 +449,8 @@ where
     T: Real,
     N: Dim,
     M: Dim,
-    P: ProcessModel<T, N>,
-    H: MeasurementModel<T, N, M>,
-    Pr: PropagatorWorkspace<T>
-        + for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
-    S: StateSpace<T, N>,
-    GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
+    F: PredictCross<T, N, P> + Update<T, N, M, H> + Rollback,
+    P: ProcessInput<T, N>,
     DefaultAllocator: Alloc<N, M>,
 {
     smoothed(filter, process, inputs, dt, measurement, measurements, None)
@@ -506,8 +481,8 @@ where
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[allow(clippy::type_complexity)]
-pub fn smooth_sequence_with_cross_covariances<T, N, M, Pr, S, P, H>(
-    filter: &mut GaussianFilter<T, N, Pr, S>,
+pub fn smooth_sequence_with_cross_covariances<T, N, M, F, P, H>(
+    filter: &mut F,
     process: &P,
     inputs: &[P::Input],
     dt: T,
@@ -518,12 +493,8 @@ where
     T: Real,
     N: Dim,
     M: Dim,
-    P: ProcessModel<T, N>,
-    H: MeasurementModel<T, N, M>,
-    Pr: PropagatorWorkspace<T>
-        + for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
-    S: StateSpace<T, N>,
-    GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
+    F: PredictCross<T, N, P> + Update<T, N, M, H> + Rollback,
+    P: ProcessInput<T, N>,
     DefaultAllocator: Alloc<N, M>,
 {
     let mut cross = Vec::with_capacity(inputs.len());
@@ -541,8 +512,8 @@ where
 
 /// The forward pass of [`filter_sequence`] recorded, then the backward pass (pushing the
 /// lag-one cross-covariances into `cross` if given); the filter restored on any error.
-fn smoothed<T, N, M, Pr, S, P, H>(
-    filter: &mut GaussianFilter<T, N, Pr, S>,
+fn smoothed<T, N, M, F, P, H>(
+    filter: &mut F,
     process: &P,
     inputs: &[P::Input],
     dt: T,
@@ -554,71 +525,49 @@ where
     T: Real,
     N: Dim,
     M: Dim,
-    P: ProcessModel<T, N>,
-    H: MeasurementModel<T, N, M>,
-    Pr: PropagatorWorkspace<T>
-        + for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
-    S: StateSpace<T, N>,
-    GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
+    F: PredictCross<T, N, P> + Update<T, N, M, H> + Rollback,
+    P: ProcessInput<T, N>,
     DefaultAllocator: Alloc<N, M>,
 {
     restoring_on_error(filter, |filter| {
         let mut rts = Rts::new();
-        let mut sequence = run(
-            filter,
-            process,
-            inputs,
-            dt,
-            measurement,
-            measurements,
-            Some(&mut rts),
-        )?;
+        let predict = |filter: &mut F, input: &P::Input| rts.predict(filter, process, input, dt);
+        let mut sequence = run(filter, inputs, dt, measurement, measurements, predict)?;
         sequence.estimates = rts.backward(filter, cross)?;
         Ok(sequence)
     })
 }
 
-/// Runs `body` on `filter`; on an error puts back the estimate it started from (the filter's
-/// configuration is never changed by a step), so a failed sequence leaves the filter as it was.
-fn restoring_on_error<T, N, Pr, S, R>(
-    filter: &mut GaussianFilter<T, N, Pr, S>,
-    body: impl FnOnce(&mut GaussianFilter<T, N, Pr, S>) -> core::result::Result<R, SmootherError>,
-) -> core::result::Result<R, SmootherError>
-where
-    T: Real,
-    N: Dim,
-    Pr: PropagatorWorkspace<T>,
-    S: StateSpace<T, N>,
-    DefaultAllocator: Alloc<N>,
-{
-    let before = filter.estimate();
+/// Runs `body` on `filter`; on an error puts back the snapshot it started from
+/// ([`Rollback`]), so a failed sequence leaves the filter exactly as it was.
+fn restoring_on_error<F: Rollback, R>(
+    filter: &mut F,
+    body: impl FnOnce(&mut F) -> core::result::Result<R, SmootherError>,
+) -> core::result::Result<R, SmootherError> {
+    let before = filter.snapshot();
     let result = body(filter);
     if result.is_err() {
-        filter.reset(before);
+        filter.restore(&before);
     }
     result
 }
 
-/// The forward pass of [`filter_sequence`], recording into `rts` if given.
-fn run<T, N, M, Pr, S, P, H>(
-    filter: &mut GaussianFilter<T, N, Pr, S>,
-    process: &P,
+/// The forward pass of [`filter_sequence`], predicting with `predict` (recording for the
+/// smoother, or not).
+fn run<T, N, M, F, P, H>(
+    filter: &mut F,
     inputs: &[P::Input],
     dt: T,
     measurement: &H,
     measurements: &[Option<OVector<T, M>>],
-    mut rts: Option<&mut Rts<T, N>>,
+    mut predict: impl FnMut(&mut F, &P::Input) -> Result<()>,
 ) -> core::result::Result<Sequence<T, N, M>, SmootherError>
 where
     T: Real,
     N: Dim,
     M: Dim,
-    P: ProcessModel<T, N>,
-    H: MeasurementModel<T, N, M>,
-    Pr: PropagatorWorkspace<T>
-        + for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
-    S: StateSpace<T, N>,
-    GaussianFilter<T, N, Pr, S>: Update<T, N, M, H>,
+    F: Predict<T, N, P> + Update<T, N, M, H>,
+    P: ProcessInput<T, N> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
     if measurements.len() != inputs.len() + 1 {
@@ -660,11 +609,7 @@ where
             filter.covariance().clone(),
         ));
         if let Some(input) = inputs.get(step) {
-            match rts.as_deref_mut() {
-                Some(rts) => rts.predict(filter, process, input, dt),
-                None => filter.predict(process, input, dt),
-            }
-            .map_err(fail)?;
+            predict(filter, input).map_err(fail)?;
         }
     }
     Ok(sequence)

@@ -111,27 +111,32 @@
 //! # Ok::<(), estim_core::Error>(())
 //! ```
 
+mod linearized;
+mod propagator;
 mod triangular;
+mod unscented;
+
+pub use propagator::{FactorPredict, FactorUpdate};
 
 use estim_core::kernel::{self, Accum};
 use estim_core::linalg::{
     all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_shape, mirror_lower_checked,
     psd_factor,
 };
-use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
+use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{Affine, Linearized, Unscented};
 use estim_core::scalar::real;
 use estim_core::{
-    Alloc, Differentiable, Error, Gaussian, LinearMeasurementModel, LinearProcessModel,
-    MeasurementJacobian, MeasurementModel, Observation, Parameter, ProcessJacobian, ProcessModel,
-    Quantity, Real, SigmaScratch, Stage, Transition, VectorFunction, error::Result,
+    Alloc, Error, Euclidean, Gaussian, MeasurementModel, ProcessModel, Quantity, Real, Stage,
+    error::Result,
 };
 
 use crate::gaussian_filter::ensure_time_step;
 use crate::report::{UpdateOutcome, UpdateReport};
-use crate::traits::{Estimator, Predict, Update};
+use crate::snapshot::{EstimateSnapshot, FactorSnapshot};
+use crate::traits::{Estimator, OnStateSpace, Predict, PredictCross, Rollback, Update};
 use crate::update::{Gate, UpdateSettings, log_det_from_cholesky};
-use triangular::{Block, lower_triangularize, rank_one_downdate};
+use triangular::{Block, lower_triangularize};
 
 /// A Gaussian filter that carries the covariance as a lower-triangular factor S, P = S Sᵀ
 /// (module docs: [`square_root`](self)). `Pr` names the propagation: [`Affine`]
@@ -315,6 +320,38 @@ where
     }
 }
 
+/// x̂, S and the P formed from it, copied as they are: a restore does not refactorise.
+impl<T: Real, N: Dim, Pr> Rollback for SquareRootFilter<T, N, Pr>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Snapshot = FactorSnapshot<T, N>;
+
+    fn snapshot(&self) -> FactorSnapshot<T, N> {
+        FactorSnapshot {
+            estimate: EstimateSnapshot {
+                state: self.state.clone(),
+                covariance: self.covariance.clone(),
+            },
+            factor: self.factor.clone(),
+            factored: self.factored,
+        }
+    }
+
+    fn snapshot_into(&self, snapshot: &mut FactorSnapshot<T, N>) {
+        snapshot.estimate.copy_from(&self.state, &self.covariance);
+        snapshot.factor.clone_from(&self.factor);
+        snapshot.factored = self.factored;
+    }
+
+    fn restore(&mut self, snapshot: &FactorSnapshot<T, N>) {
+        self.state.clone_from(&snapshot.estimate.state);
+        self.covariance.clone_from(&snapshot.estimate.covariance);
+        self.factor.clone_from(&snapshot.factor);
+        self.factored = snapshot.factored;
+    }
+}
+
 impl<T: Real, N: Dim, Pr> Estimator<T, N> for SquareRootFilter<T, N, Pr>
 where
     DefaultAllocator: Alloc<N>,
@@ -406,102 +443,6 @@ where
 /// A new estimate (x̂, S), not yet committed.
 type Estimate<T, N> = (OVector<T, N>, OMatrix<T, N, N>);
 
-// ---------------------------------------------------------------------------------------
-// Linear and linearised steps (KF, EKF).
-
-/// x̂⁻ = f(x̂), S⁻ from [F S | S_Q]: the predicted state and factor.
-fn linearized_predict<T, N, G>(
-    state: &OVector<T, N>,
-    factor: &OMatrix<T, N, N>,
-    f: &G,
-    q: &OMatrix<T, N, N>,
-) -> Result<Estimate<T, N>>
-where
-    T: Real,
-    N: Dim,
-    G: Differentiable<T, N, N>,
-    DefaultAllocator: Alloc<N>,
-{
-    let stage = Stage::Prediction;
-    let n_dim = state.shape_generic().0;
-    let n = n_dim.value();
-    let mut sq = noise_factor(q, n, stage, Quantity::ProcessNoise)?;
-    let mut mean = OVector::zeros_generic(n_dim, U1);
-    f.eval_into(state, &mut mean);
-    ensure_shape(&mean, n, 1, stage, Quantity::FunctionValue)?;
-    finite(&mean, stage, Quantity::Mean)?;
-    let mut jacobian = OMatrix::zeros_generic(n_dim, n_dim);
-    f.jacobian_into(state, &mut jacobian);
-    ensure_shape(&jacobian, n, n, stage, Quantity::Jacobian)?;
-    finite(&jacobian, stage, Quantity::Jacobian)?;
-    let mut fs = OMatrix::zeros_generic(n_dim, n_dim);
-    kernel::mul(&mut fs, Accum::Replace, T::one(), &jacobian, factor);
-    lower_triangularize(
-        n,
-        0,
-        &mut [
-            Block::new(fs.as_mut_slice(), &mut [], n),
-            Block::new(sq.as_mut_slice(), &mut [], n),
-        ],
-    );
-    finite(&fs, stage, Quantity::Covariance)?;
-    Ok((mean, fs))
-}
-
-/// The array-form update: ẑ = h(x̂), H = ∂h/∂x, and from the pre-array [[S_R, H S], [0, S]]
-/// the factor L of S_zz, K̄ = P Hᵀ L⁻ᵀ and S⁺; then the shared tail.
-fn linearized_update<T, N, M, H>(
-    state: &OVector<T, N>,
-    factor: &OMatrix<T, N, N>,
-    model: &H,
-    z: &OVector<T, M>,
-    settings: &UpdateSettings<T>,
-    report: &mut UpdateReport<T, M>,
-) -> Result<Option<Estimate<T, N>>>
-where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    H: MeasurementJacobian<T, N, M>,
-    DefaultAllocator: Alloc<N, M>,
-{
-    let stage = Stage::Update;
-    let (n_dim, m_dim) = (state.shape_generic().0, z.shape_generic().0);
-    let (n, m) = (n_dim.value(), m_dim.value());
-    let h = Observation::new(model);
-    let mut predicted = OVector::zeros_generic(m_dim, U1);
-    h.eval_into(state, &mut predicted);
-    ensure_shape(&predicted, m, 1, stage, Quantity::Measurement)?;
-    let mut r = OMatrix::zeros_generic(m_dim, m_dim);
-    model.measurement_noise_into(state, &mut r);
-    let mut l = noise_factor(&r, m, stage, Quantity::MeasurementNoise)?;
-    report.fit(m_dim);
-    innovation_into(model, z, &predicted, report)?;
-    let mut jacobian = OMatrix::zeros_generic(m_dim, n_dim);
-    h.jacobian_into(state, &mut jacobian);
-    ensure_shape(&jacobian, m, n, stage, Quantity::Jacobian)?;
-    finite(&jacobian, stage, Quantity::Jacobian)?;
-    let mut hs = OMatrix::zeros_generic(m_dim, n_dim);
-    kernel::mul(&mut hs, Accum::Replace, T::one(), &jacobian, factor);
-    let mut kbar: OMatrix<T, N, M> = OMatrix::zeros_generic(n_dim, m_dim);
-    let mut posterior = factor.clone();
-    lower_triangularize(
-        m,
-        n,
-        &mut [
-            Block::new(l.as_mut_slice(), kbar.as_mut_slice(), m),
-            Block::new(hs.as_mut_slice(), posterior.as_mut_slice(), n),
-        ],
-    );
-    let Some(whitened) = statistics(&l, settings, report)? else {
-        return Ok(None);
-    };
-    finite(&posterior, stage, Quantity::Covariance)?;
-    let mut new_state = state.clone();
-    kernel::mul(&mut new_state, Accum::Add, T::one(), &kbar, &whitened);
-    finite(&new_state, stage, Quantity::Mean)?;
-    Ok(Some((new_state, posterior)))
-}
 /// ν = z ⊖ ẑ into the report, checked finite (a non-finite z is `NonFinite`, `Measurement`).
 fn innovation_into<T, N, M, H>(
     model: &H,
@@ -535,13 +476,14 @@ where
     finite(&report.innovation, stage, Quantity::Innovation)
 }
 
-/// The report's statistics from the lower factor `l` of S_zz (`report.innovation` holds ν):
+/// The report's statistics from the lower factor `l` of S_zz (`report.innovation` holds ν;
+/// `threshold` is the gate's NIS threshold for this m, if any):
 /// S_zz = L Lᵀ, NIS = |L⁻¹ν|², ln p = −½ (NIS + 2 Σ ln Lᵢᵢ + m ln 2π), and the gate. Returns
 /// L⁻¹ν if the update applies, `None` if gated. A zero (or non-finite) pivot of L is a
 /// singular (non-finite) S_zz.
 fn statistics<T: Real, M: Dim>(
     l: &OMatrix<T, M, M>,
-    settings: &UpdateSettings<T>,
+    threshold: Option<T>,
     report: &mut UpdateReport<T, M>,
 ) -> Result<Option<OVector<T, M>>>
 where
@@ -561,7 +503,7 @@ where
     report.nis = nis;
     report.log_likelihood = -real::<T>(0.5)
         * (nis + log_det_from_cholesky(l) + real::<T>(m as f64 * crate::update::LN_TWO_PI));
-    if settings.threshold(m).is_some_and(|g| !(nis <= g)) {
+    if threshold.is_some_and(|g| !(nis <= g)) {
         report.outcome = UpdateOutcome::Gated;
         return Ok(None);
     }
@@ -570,247 +512,7 @@ where
 }
 
 // ---------------------------------------------------------------------------------------
-// Unscented steps.
-
-/// The sigma-point deviations of y = g(x) at (x̂, S): g(x̂), Dₚ = [g(x̂ + γSⱼ) ⊖ g(x̂)]ⱼ,
-/// Dₘ = [g(x̂ − γSⱼ) ⊖ g(x̂)]ⱼ (m × n each), d̄ = w Σ dᵢ and w = 1/(2c).
-struct Deviations<T: Real, N: Dim, M: Dim>
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    value: OVector<T, M>,
-    plus: OMatrix<T, M, N>,
-    minus: OMatrix<T, M, N>,
-    mean: OVector<T, M>,
-    weight: T,
-}
-
-fn deviations<T, N, M, G>(
-    ut: &Unscented<T>,
-    x: &OVector<T, N>,
-    s: &OMatrix<T, N, N>,
-    g: &G,
-    m_dim: M,
-    stage: Stage,
-) -> Result<Deviations<T, N, M>>
-where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    G: VectorFunction<T, N, M>,
-    DefaultAllocator: Alloc<N, M>,
-{
-    let n_dim = x.shape_generic().0;
-    let (n, m) = (n_dim.value(), m_dim.value());
-    let c = ut.alpha() * ut.alpha() * (real::<T>(n as f64) + ut.kappa());
-    if !(c > T::zero()) {
-        return Err(Error::InvalidParameter {
-            parameter: Parameter::UnscentedKappa,
-            value: estim_core::nalgebra::try_convert::<T, f64>(ut.kappa()).unwrap_or(f64::NAN),
-        });
-    }
-    let offsets = s * c.sqrt();
-    let mut value = OVector::zeros_generic(m_dim, U1);
-    g.eval_into(x, &mut value);
-    ensure_shape(&value, m, 1, stage, Quantity::FunctionValue)?;
-    finite(&value, stage, Quantity::FunctionValue)?;
-    let mut plus = OMatrix::zeros_generic(m_dim, n_dim);
-    let mut minus = OMatrix::zeros_generic(m_dim, n_dim);
-    let mut scratch = SigmaScratch::new(n_dim, m_dim);
-    g.eval_sigma_points_into(x, &offsets, &mut plus, &mut minus, &mut scratch)?;
-    let weight = T::one() / (real::<T>(2.0) * c);
-    let mut mean = OVector::zeros_generic(m_dim, U1);
-    let mut y = OVector::zeros_generic(m_dim, U1);
-    let mut d = OVector::zeros_generic(m_dim, U1);
-    for points in [&mut plus, &mut minus] {
-        ensure_shape(points, m, n, stage, Quantity::FunctionValue)?;
-        finite(points, stage, Quantity::FunctionValue)?;
-        for j in 0..n {
-            let column = &mut points.as_mut_slice()[j * m..(j + 1) * m];
-            y.as_mut_slice().copy_from_slice(column);
-            g.difference_into(&y, &value, &mut d);
-            ensure_shape(&d, m, 1, stage, Quantity::FunctionValue)?;
-            column.copy_from_slice(d.as_slice());
-            mean += &d;
-        }
-    }
-    mean *= weight;
-    Ok(Deviations {
-        value,
-        plus,
-        minus,
-        mean,
-        weight,
-    })
-}
-
-/// The factor of w Σ dᵢdᵢᵀ + (β − α²) d̄ d̄ᵀ + N N ᵀ into `noise` (the m × m factor N on entry):
-/// one triangularisation of [N | √w Dₚ | √w Dₘ | √(β − α²) d̄] when β ≥ α², else of the first
-/// three blocks and a downdate by √(α² − β) d̄ (`Err(())` if it fails). Consumes the
-/// deviations' columns.
-fn deviation_factor<T: Real, N: Dim, M: Dim>(
-    ut: &Unscented<T>,
-    dev: &mut Deviations<T, N, M>,
-    noise: &mut OMatrix<T, M, M>,
-) -> core::result::Result<(), ()>
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    let (m, n) = dev.plus.shape();
-    let root_w = dev.weight.sqrt();
-    dev.plus *= root_w;
-    dev.minus *= root_w;
-    let centre = ut.beta() - ut.alpha() * ut.alpha();
-    let mut column = dev.mean.clone();
-    column *= centre.abs().sqrt();
-    let extra = usize::from(centre > T::zero());
-    lower_triangularize(
-        m,
-        0,
-        &mut [
-            Block::new(noise.as_mut_slice(), &mut [], m),
-            Block::new(dev.plus.as_mut_slice(), &mut [], n),
-            Block::new(dev.minus.as_mut_slice(), &mut [], n),
-            Block::new(&mut column.as_mut_slice()[..m * extra], &mut [], extra),
-        ],
-    );
-    if centre < T::zero() {
-        rank_one_downdate(noise.as_mut_slice(), column.as_mut_slice(), m)?;
-    }
-    Ok(())
-}
-
-/// x̂⁻ = f(x̂) ⊞ d̄ and S⁻ from the sigma-point deviations and S_Q.
-fn unscented_predict<T, N, G>(
-    ut: &Unscented<T>,
-    state: &OVector<T, N>,
-    factor: &OMatrix<T, N, N>,
-    f: &G,
-    q: &OMatrix<T, N, N>,
-) -> Result<Estimate<T, N>>
-where
-    T: Real,
-    N: Dim,
-    G: VectorFunction<T, N, N>,
-    DefaultAllocator: Alloc<N>,
-{
-    let stage = Stage::Prediction;
-    let n_dim = state.shape_generic().0;
-    let mut s = noise_factor(q, n_dim.value(), stage, Quantity::ProcessNoise)?;
-    let mut dev = deviations(ut, state, factor, f, n_dim, stage)?;
-    let mut mean = state.clone();
-    f.output_plus_into(&dev.value, &dev.mean, &mut mean);
-    ensure_shape(&mean, n_dim.value(), 1, stage, Quantity::Mean)?;
-    finite(&mean, stage, Quantity::Mean)?;
-    deviation_factor(ut, &mut dev, &mut s).map_err(|()| Error::NotPositiveSemiDefinite {
-        stage,
-        quantity: Quantity::Covariance,
-    })?;
-    finite(&s, stage, Quantity::Covariance)?;
-    Ok((mean, s))
-}
-
-/// The square-root UKF update in array form (module docs): with Aⱼ = (d₊ⱼ − d₋ⱼ)/2 and
-/// Bⱼ = (d₊ⱼ + d₋ⱼ)/2, H̃S = √(2w) A (H̃ = P_xzᵀP⁻¹, the statistical linearisation) and
-/// R̃ = R + 2w B Bᵀ + (β − α²) d̄ d̄ᵀ, the pre-array [[S_R̃, H̃S], [0, S]] gives L, K̄ = P_xz L⁻ᵀ and
-/// S⁺ at once. R̃'s factor comes from [S_R | √(2w) B | √(β − α²) d̄] inside the array when
-/// β ≥ α², else from [S_R | √(2w) B] and a rank-one downdate by √(α² − β) d̄ (its failure is
-/// `NotPositiveDefinite`, `InnovationCovariance`).
-fn unscented_update<T, N, M, H>(
-    ut: &Unscented<T>,
-    state: &OVector<T, N>,
-    factor: &OMatrix<T, N, N>,
-    model: &H,
-    z: &OVector<T, M>,
-    settings: &UpdateSettings<T>,
-    report: &mut UpdateReport<T, M>,
-) -> Result<Option<Estimate<T, N>>>
-where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    H: MeasurementModel<T, N, M>,
-    DefaultAllocator: Alloc<N, M>,
-{
-    let stage = Stage::Update;
-    let (n_dim, m_dim) = (state.shape_generic().0, z.shape_generic().0);
-    let (n, m) = (n_dim.value(), m_dim.value());
-    let h = Observation::new(model);
-    let mut r = OMatrix::zeros_generic(m_dim, m_dim);
-    model.measurement_noise_into(state, &mut r);
-    let mut l = noise_factor(&r, m, stage, Quantity::MeasurementNoise)?;
-    let dev = deviations(ut, state, factor, &h, m_dim, stage).map_err(|e| match e {
-        Error::DimensionMismatch { .. } => Error::DimensionMismatch {
-            stage,
-            quantity: Quantity::Measurement,
-            expected_rows: model.measure(state).nrows(),
-            expected_cols: 1,
-            found_rows: m,
-            found_cols: 1,
-        },
-        e => e,
-    })?;
-    let mut predicted = dev.value.clone();
-    h.output_plus_into(&dev.value, &dev.mean, &mut predicted);
-    report.fit(m_dim);
-    innovation_into(model, z, &predicted, report)?;
-    let half_root = (real::<T>(2.0) * dev.weight).sqrt() * real::<T>(0.5);
-    let mut odd = dev.plus.clone();
-    odd -= &dev.minus;
-    odd *= half_root;
-    let mut even = dev.plus;
-    even += &dev.minus;
-    even *= half_root;
-    let centre = ut.beta() - ut.alpha() * ut.alpha();
-    let mut column = dev.mean;
-    column *= centre.abs().sqrt();
-    if centre < T::zero() {
-        lower_triangularize(
-            m,
-            0,
-            &mut [
-                Block::new(l.as_mut_slice(), &mut [], m),
-                Block::new(even.as_mut_slice(), &mut [], n),
-            ],
-        );
-        rank_one_downdate(l.as_mut_slice(), column.as_mut_slice(), m).map_err(|()| {
-            Error::NotPositiveDefinite {
-                stage,
-                quantity: Quantity::InnovationCovariance,
-            }
-        })?;
-    }
-    let extra = usize::from(centre > T::zero());
-    let mut kbar: OMatrix<T, N, M> = OMatrix::zeros_generic(n_dim, m_dim);
-    let mut posterior: OMatrix<T, N, N> = OMatrix::zeros_generic(n_dim, n_dim);
-    let mut below_centre: OVector<T, N> = OVector::zeros_generic(n_dim, U1);
-    let mut prior = factor.clone();
-    lower_triangularize(
-        m,
-        n,
-        &mut [
-            Block::new(l.as_mut_slice(), kbar.as_mut_slice(), m),
-            Block::new(even.as_mut_slice(), posterior.as_mut_slice(), n),
-            Block::new(
-                &mut column.as_mut_slice()[..m * extra],
-                &mut below_centre.as_mut_slice()[..n * extra],
-                extra,
-            ),
-            Block::new(odd.as_mut_slice(), prior.as_mut_slice(), n),
-        ],
-    );
-    let Some(whitened) = statistics(&l, settings, report)? else {
-        return Ok(None);
-    };
-    finite(&posterior, stage, Quantity::Covariance)?;
-    let mut new_state = state.clone();
-    kernel::mul(&mut new_state, Accum::Add, T::one(), &kbar, &whitened);
-    finite(&new_state, stage, Quantity::Mean)?;
-    Ok(Some((new_state, posterior)))
-}
-
-// ---------------------------------------------------------------------------------------
-// The step traits.
+// The step traits: one impl each, through the factor-form propagator.
 
 impl<T: Real, N: Dim, Pr> SquareRootFilter<T, N, Pr>
 where
@@ -831,113 +533,103 @@ where
         Ok(q)
     }
 
-    /// A prediction through a differentiable f (KF, EKF).
-    fn predict_linearized<P: ProcessJacobian<T, N>>(
+    /// The prediction (with C = cov(xₖ, xₖ₊₁) into `cross` if given), committed if it
+    /// succeeds.
+    fn predict_step<P>(
         &mut self,
         model: &P,
         input: &P::Input,
         dt: T,
-    ) -> Result<()> {
-        let q = self.process_noise(model, input, dt)?;
-        let f = Transition::new(model, input, dt);
-        let (x, s) = linearized_predict(&self.state, &self.factor, &f, &q)?;
-        self.commit(x, s);
-        Ok(())
-    }
-
-    /// An update through a differentiable h (KF, EKF).
-    fn update_linearized<M: Dim, H: MeasurementJacobian<T, N, M>>(
-        &mut self,
-        model: &H,
-        z: &OVector<T, M>,
-        report: &mut UpdateReport<T, M>,
+        cross: Option<&mut OMatrix<T, N, N>>,
     ) -> Result<()>
     where
-        DefaultAllocator: Alloc<N, M>,
+        P: ProcessModel<T, N>,
+        Pr: FactorPredict<T, N, P>,
     {
-        self.ensure_factored(Stage::Update)?;
-        let result =
-            linearized_update(&self.state, &self.factor, model, z, &self.settings, report)?;
-        if let Some((x, s)) = result {
-            self.commit(x, s);
-        }
-        Ok(())
-    }
-}
-
-impl<T: Real, N: Dim, P: LinearProcessModel<T, N>> Predict<T, N, P> for SrKalmanFilter<T, N>
-where
-    DefaultAllocator: Alloc<N>,
-{
-    fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
-        self.predict_linearized(model, input, dt)
-    }
-}
-
-impl<T: Real, N: Dim, P: ProcessJacobian<T, N>> Predict<T, N, P> for SrEkf<T, N>
-where
-    DefaultAllocator: Alloc<N>,
-{
-    fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
-        self.predict_linearized(model, input, dt)
-    }
-}
-
-impl<T: Real, N: Dim, P: ProcessModel<T, N>> Predict<T, N, P> for SrUkf<T, N>
-where
-    DefaultAllocator: Alloc<N>,
-{
-    fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
         let q = self.process_noise(model, input, dt)?;
-        let f = Transition::new(model, input, dt);
-        let (x, s) = unscented_predict(&self.propagator, &self.state, &self.factor, &f, &q)?;
+        let (x, s) = (self.propagator).predict_factor(
+            &self.state,
+            &self.factor,
+            model,
+            input,
+            dt,
+            &q,
+            cross,
+        )?;
         self.commit(x, s);
         Ok(())
     }
 }
 
-impl<T, N, M, H> Update<T, N, M, H> for SrKalmanFilter<T, N>
+impl<T, N, P, Pr> Predict<T, N, P> for SquareRootFilter<T, N, Pr>
 where
     T: Real,
     N: Dim,
-    M: Dim,
-    H: LinearMeasurementModel<T, N, M>,
-    DefaultAllocator: Alloc<N, M>,
+    P: ProcessModel<T, N>,
+    Pr: FactorPredict<T, N, P>,
+    DefaultAllocator: Alloc<N>,
 {
-    fn update_into(
-        &mut self,
-        model: &H,
-        z: &OVector<T, M>,
-        report: &mut UpdateReport<T, M>,
-    ) -> Result<()> {
-        self.update_linearized(model, z, report)
+    fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
+        self.predict_step(model, input, dt, None)
     }
 }
 
-impl<T, N, M, H> Update<T, N, M, H> for SrEkf<T, N>
+/// Euclidean: the square-root forms have no ⊞/⊟ yet.
+impl<T: Real, N: Dim, Pr> OnStateSpace<T, N> for SquareRootFilter<T, N, Pr>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Space = Euclidean;
+
+    fn state_space(&self) -> &Euclidean {
+        &Euclidean
+    }
+}
+
+/// The prediction's own path with C written out, so a square-root run can be smoothed by
+/// [`Rts`](crate::smoother::Rts) (the RTS form on P = S Sᵀ: the backward pass factorises
+/// P⁻, as it does for the full-covariance filters).
+///
+/// ```
+/// use estim_core::nalgebra::{Matrix2, Matrix2x1, Vector1, Vector2};
+/// use estim_core::{Gaussian, LinearProcess};
+/// use estim_filters::{PredictCross, SrKalmanFilter};
+///
+/// let f = Matrix2::new(1.0, 0.1, 0.0, 1.0);
+/// let process = LinearProcess { transition: f, input: Matrix2x1::zeros(), noise: Matrix2::identity() * 0.01 };
+/// let mut kf = SrKalmanFilter::new(Gaussian::new(Vector2::zeros(), Matrix2::identity())?);
+/// let c = kf.predict_with_cross_covariance(&process, &Vector1::zeros(), 0.1)?;
+/// assert!((c - f.transpose()).abs().max() < 1e-15); // cov(x, F x) = P Fᵀ with P = I
+/// # Ok::<(), estim_core::Error>(())
+/// ```
+impl<T, N, P, Pr> PredictCross<T, N, P> for SquareRootFilter<T, N, Pr>
 where
     T: Real,
     N: Dim,
-    M: Dim,
-    H: MeasurementJacobian<T, N, M>,
-    DefaultAllocator: Alloc<N, M>,
+    P: ProcessModel<T, N>,
+    Pr: FactorPredict<T, N, P>,
+    DefaultAllocator: Alloc<N>,
 {
-    fn update_into(
+    fn predict_with_cross_covariance(
         &mut self,
-        model: &H,
-        z: &OVector<T, M>,
-        report: &mut UpdateReport<T, M>,
-    ) -> Result<()> {
-        self.update_linearized(model, z, report)
+        model: &P,
+        input: &P::Input,
+        dt: T,
+    ) -> Result<OMatrix<T, N, N>> {
+        let n = self.state.shape_generic().0;
+        let mut cross = OMatrix::zeros_generic(n, n);
+        self.predict_step(model, input, dt, Some(&mut cross))?;
+        Ok(cross)
     }
 }
 
-impl<T, N, M, H> Update<T, N, M, H> for SrUkf<T, N>
+impl<T, N, M, H, Pr> Update<T, N, M, H> for SquareRootFilter<T, N, Pr>
 where
     T: Real,
     N: Dim,
     M: Dim,
     H: MeasurementModel<T, N, M>,
+    Pr: FactorUpdate<T, N, M, H>,
     DefaultAllocator: Alloc<N, M>,
 {
     fn update_into(
@@ -947,13 +639,13 @@ where
         report: &mut UpdateReport<T, M>,
     ) -> Result<()> {
         self.ensure_factored(Stage::Update)?;
-        let result = unscented_update(
-            &self.propagator,
+        let threshold = self.settings.threshold(z.nrows());
+        let result = (self.propagator).update_factor(
             &self.state,
             &self.factor,
             model,
             z,
-            &self.settings,
+            threshold,
             report,
         )?;
         if let Some((x, s)) = result {

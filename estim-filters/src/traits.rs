@@ -1,7 +1,9 @@
 //! The step traits every filter implements.
 
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
-use estim_core::{Alloc, Gaussian, MeasurementModel, ProcessModel, Real, error::Result};
+use estim_core::{
+    Alloc, Gaussian, MeasurementModel, ProcessModel, Real, StateSpace, error::Result,
+};
 
 use crate::report::UpdateReport;
 
@@ -60,8 +62,70 @@ where
     }
 }
 
-/// The time update over a process model `P`. Each filter bounds `P` by what it needs.
-pub trait Predict<T: Real, N: Dim, P: ProcessModel<T, N>>: Estimator<T, N>
+/// Rollback: everything an estimator's future steps depend on, saved and put back bit-exactly.
+///
+/// A snapshot holds what the steps change (the estimate, a square-root factor, whatever a
+/// cloud of particles or a set of modes needs), not the configuration (propagator, gate,
+/// covariance form), which steps never change. After [`restore`](Self::restore) every step
+/// gives the same bits it would have given when the snapshot was taken. This, not
+/// [`Estimator::reset`], is how the fusion driver replays delayed readings, how the sequence
+/// functions undo a failed run and what checkpoints write: `reset` starts from a Gaussian,
+/// which would refactorise a square-root factor (losing bits) and could not hold a particle
+/// cloud or mode probabilities.
+///
+/// ```
+/// use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Vector1, Vector2};
+/// use estim_core::{Gaussian, LinearMeasurement};
+/// use estim_filters::{Estimator, Rollback, SrKalmanFilter, Update};
+///
+/// let mut filter = SrKalmanFilter::new(Gaussian::new(Vector2::zeros(), Matrix2::identity())?);
+/// let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.1) };
+/// let saved = filter.snapshot();
+/// let first = filter.update(&sensor, &Vector1::new(0.3))?;
+/// let after = filter.factor().clone();
+/// filter.restore(&saved); // as if the update never happened, factor and all
+/// let again = filter.update(&sensor, &Vector1::new(0.3))?;
+/// assert_eq!((filter.factor(), again.log_likelihood), (&after, first.log_likelihood));
+/// # Ok::<(), estim_core::Error>(())
+/// ```
+pub trait Rollback {
+    /// What a snapshot holds (cheap to clone relative to a step: a few vectors and matrices).
+    type Snapshot: Clone;
+
+    /// A snapshot of the current state of the estimator.
+    fn snapshot(&self) -> Self::Snapshot;
+
+    /// Overwrites `snapshot` with the current state, reusing its buffers where the sizes
+    /// agree (so a history of snapshots recycled this way allocates nothing with runtime
+    /// sizes).
+    fn snapshot_into(&self, snapshot: &mut Self::Snapshot) {
+        *snapshot = self.snapshot();
+    }
+
+    /// Puts back a snapshot taken from this estimator (or from a clone of it).
+    fn restore(&mut self, snapshot: &Self::Snapshot);
+}
+
+/// The input type a prediction with the model `P` takes (besides Δt): the model's
+/// [`ProcessModel::Input`] for every process model (a blanket impl), or what a set of
+/// per-mode models (a multiple-model estimator) names as its input.
+pub trait ProcessInput<T: Real, N: Dim> {
+    /// The input u.
+    type Input;
+}
+
+impl<T: Real, N: Dim, P: ProcessModel<T, N> + ?Sized> ProcessInput<T, N> for P
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Input = P::Input;
+}
+
+/// The time update over a process model `P`. Each filter bounds `P` by what it needs; the
+/// trait asks only that `P` name its input ([`ProcessInput`], which every [`ProcessModel`]
+/// does), so an estimator whose model is a set of per-mode models, or one that samples,
+/// implements it too.
+pub trait Predict<T: Real, N: Dim, P: ProcessInput<T, N> + ?Sized>: Estimator<T, N>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -90,9 +154,9 @@ where
 }
 
 /// The measurement update with a measurement model `H` of `M` components. Each filter bounds
-/// `H` by what it needs. The model is passed per call, so one filter takes any number of
-/// sensors at any rates.
-pub trait Update<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>>: Estimator<T, N>
+/// `H` by what it needs (the trait does not). The model is passed per call, so one filter
+/// takes any number of sensors at any rates.
+pub trait Update<T: Real, N: Dim, M: Dim, H: ?Sized>: Estimator<T, N>
 where
     DefaultAllocator: Alloc<N, M>,
 {
@@ -136,6 +200,39 @@ where
         let _ = (model, report);
         Ok(())
     }
+}
+
+/// A filter whose estimate lives on a state space with ⊞/⊟ ([`StateSpace`]): what a
+/// smoother's backward pass needs of the filter that ran the forward pass.
+pub trait OnStateSpace<T: Real, N: Dim>: Estimator<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// The state space type (⊞/⊟ default to + and −: [`Euclidean`](estim_core::Euclidean)).
+    type Space: StateSpace<T, N>;
+
+    /// The state space the estimate lives on.
+    fn state_space(&self) -> &Self::Space;
+}
+
+/// A filter that can be smoothed: its prediction also gives C = cov(xₖ, xₖ₊₁), the
+/// covariance of the state before and after the step, which a Rauch–Tung–Striebel smoother
+/// records (G = C (P⁻)⁻¹). Every Gaussian filter of the family implements it; the smoother
+/// and the sequence functions ([`crate::smoother`]) take any filter that does.
+pub trait PredictCross<T: Real, N: Dim, P: ProcessInput<T, N> + ?Sized>:
+    Predict<T, N, P> + OnStateSpace<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// [`Predict::predict`] that also returns C = cov(xₖ, xₖ₊₁) (the propagator's
+    /// cross-covariance; additive process noise adds none). Allocates its result; on an
+    /// error the filter is unchanged.
+    fn predict_with_cross_covariance(
+        &mut self,
+        model: &P,
+        input: &P::Input,
+        dt: T,
+    ) -> Result<OMatrix<T, N, N>>;
 }
 
 /// The time update when the process noise wₖ of this step is correlated with the noise vₖ of

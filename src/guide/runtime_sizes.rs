@@ -2,7 +2,8 @@
 //!
 //! The same filters run on `DVector<f64>`/`DMatrix<f64>` when the state's size is known only at
 //! run time: change the types, nothing else. Static sizes (`SVector<f64, 6>`) are fastest for
-//! small states (n ≤ 6); runtime sizes win from n ≈ 12 (BENCHMARKS.md, "Static or dynamic").
+//! small states (n ≤ 6); from n ≈ 12 both are within 10 % of each other (BENCHMARKS.md, "Static
+//! or dynamic").
 //!
 //! ```
 //! use estim::prelude::*;

@@ -1,7 +1,7 @@
 //! The fusion driver: time, replay of late measurements, and the decision on each one.
 
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, convert};
-use estim_core::{Alloc, Error, Gaussian, ProcessModel, Quantity, Real, Stage};
+use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage};
 
 use super::error::{FusionError, FusionSetting};
 use super::history::{Event, History, Record};
@@ -9,18 +9,21 @@ use super::monitor::{Health, SensorHealth};
 use super::outcome::{ExclusionReason, Fused, Innovation, Outcome, ResetReason};
 use super::sensors::SensorSet;
 use super::settings::{FusionSettings, Resolved, SensorSettings};
-use crate::traits::{Estimator, Predict};
+use crate::traits::{Estimator, Predict, ProcessInput, Rollback};
 
 /// A filter `F` of the family, its process model `P` with its input, and the sensors `S`,
 /// driven by timestamped events: see the [module docs](super) for what it does and why.
 ///
-/// Requirements: `F` predicts with `P` ([`Predict`]) and `S` updates `F` ([`SensorSet`]);
-/// the input is `Clone` (it is recorded).
+/// Requirements: `F` predicts with `P` ([`Predict`]) and can be rolled back ([`Rollback`]:
+/// every filter of the family), and `S` updates `F` ([`SensorSet`]); the input is `Clone`
+/// (it is recorded). `P` is whatever `F` predicts with: a process model for the single-model
+/// filters, a set of per-mode models for a multiple-model estimator.
 pub struct FusionDriver<T, N, F, P, S>
 where
     T: Real,
     N: Dim,
-    P: ProcessModel<T, N>,
+    F: Predict<T, N, P> + Rollback,
+    P: ProcessInput<T, N>,
     S: SensorSet<T, N, F>,
     DefaultAllocator: Alloc<N>,
 {
@@ -31,7 +34,9 @@ where
     resolved: Vec<Resolved<T>>,
     input: P::Input,
     health: Health<T>,
-    history: History<T, N, P::Input, S::Reading>,
+    history: History<T, F::Snapshot, P::Input, S::Reading>,
+    /// The filter before the update being decided, put back when the decision undoes it.
+    prior: F::Snapshot,
     prior_state: OVector<T, N>,
     prior_covariance: OMatrix<T, N, N>,
 }
@@ -40,8 +45,8 @@ impl<T, N, F, P, S> FusionDriver<T, N, F, P, S>
 where
     T: Real,
     N: Dim,
-    F: Predict<T, N, P>,
-    P: ProcessModel<T, N>,
+    F: Predict<T, N, P> + Rollback,
+    P: ProcessInput<T, N>,
     P::Input: Clone,
     S: SensorSet<T, N, F>,
     DefaultAllocator: Alloc<N>,
@@ -100,13 +105,13 @@ where
         let start_record = Record {
             time: start,
             event: Event::Start,
-            state: filter.state().clone(),
-            covariance: filter.covariance().clone(),
+            snapshot: filter.snapshot(),
             input: input.clone(),
             health: health.clone(),
             outcome: None,
         };
         Ok(Self {
+            prior: filter.snapshot(),
             prior_state: filter.state().clone(),
             prior_covariance: filter.covariance().clone(),
             history: History::new(start_record, settings.capacity),
@@ -291,12 +296,13 @@ where
             input,
             health,
             history,
+            prior,
             prior_state,
             prior_covariance,
         } = self;
         let checkpoint = history.get(start - 1);
         if restore {
-            restore_estimate(filter, &checkpoint.state, &checkpoint.covariance);
+            filter.restore(&checkpoint.snapshot);
             input.clone_from(&checkpoint.input);
             health.copy_from(&checkpoint.health);
         }
@@ -309,6 +315,7 @@ where
                 Event::Start | Event::Mark => {}
                 Event::Measurement { sensor, reading } => {
                     let work = Work {
+                        prior: &mut *prior,
                         prior_state: &mut *prior_state,
                         prior_covariance: &mut *prior_covariance,
                     };
@@ -323,8 +330,7 @@ where
                     )?);
                 }
             }
-            record.state.copy_from(filter.state());
-            record.covariance.copy_from(filter.covariance());
+            filter.snapshot_into(&mut record.snapshot);
             record.input.clone_from(input);
             record.health.copy_from(health);
             previous = record.time;
@@ -337,7 +343,8 @@ impl<T, N, F, P, S> FusionDriver<T, N, F, P, S>
 where
     T: Real,
     N: Dim,
-    P: ProcessModel<T, N>,
+    F: Predict<T, N, P> + Rollback,
+    P: ProcessInput<T, N>,
     S: SensorSet<T, N, F>,
     DefaultAllocator: Alloc<N>,
 {
@@ -497,7 +504,7 @@ where
     T: Real,
     N: Dim,
     F: Predict<T, N, P>,
-    P: ProcessModel<T, N>,
+    P: ProcessInput<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     let n = substeps(gap, settings)?;
@@ -511,22 +518,14 @@ where
     Ok(())
 }
 
-/// Sets the filter's estimate to N(x, P) (a copy).
-fn restore_estimate<T: Real, N: Dim, F: Estimator<T, N>>(
-    filter: &mut F,
-    state: &OVector<T, N>,
-    covariance: &OMatrix<T, N, N>,
-) where
-    DefaultAllocator: Alloc<N>,
-{
-    filter.reset(Gaussian::new_unchecked(state.clone(), covariance.clone()));
-}
-
-/// The driver's buffers for the estimate before an update.
-struct Work<'a, T: Real, N: Dim>
+/// The driver's buffers for the filter before an update: its snapshot (put back, to the bit,
+/// when the decision undoes the update) and its estimate (read, and re-initialised by a
+/// covariance reset).
+struct Work<'a, T: Real, N: Dim, Sn>
 where
     DefaultAllocator: Alloc<N>,
 {
+    prior: &'a mut Sn,
     prior_state: &'a mut OVector<T, N>,
     prior_covariance: &'a mut OMatrix<T, N, N>,
 }
@@ -540,21 +539,25 @@ fn decide<T, N, F, S>(
     sensor: usize,
     config: &Resolved<T>,
     health: &mut Health<T>,
-    work: Work<'_, T, N>,
+    work: Work<'_, T, N, F::Snapshot>,
 ) -> Result<Outcome<T>, FusionError>
 where
     T: Real,
     N: Dim,
-    F: Estimator<T, N>,
+    F: Estimator<T, N> + Rollback,
     S: SensorSet<T, N, F>,
     DefaultAllocator: Alloc<N>,
 {
     let Work {
+        prior,
         prior_state,
         prior_covariance,
     } = work;
-    prior_state.copy_from(filter.state());
-    prior_covariance.copy_from(filter.covariance());
+    filter.snapshot_into(prior);
+    if config.reset.is_some() {
+        prior_state.copy_from(filter.state());
+        prior_covariance.copy_from(filter.covariance());
+    }
     let innovation: Innovation<T> = sensors.update(filter, reading)?;
     if innovation.dimension != config.dimension {
         return Err(FusionError::Filter(Error::DimensionMismatch {
@@ -570,8 +573,6 @@ where
     let state = &mut health.sensors[sensor];
     let nis = innovation.nis;
     state.health.last_nis = nis;
-    let restore =
-        |filter: &mut F, x: &OVector<T, N>, p: &OMatrix<T, N, N>| restore_estimate(filter, x, p);
 
     if let Some(monitor) = &config.monitor {
         // `nis <= clip` is false for NaN, which then counts as the clip (evidence of a fault).
@@ -582,7 +583,7 @@ where
         });
         let window_sum = state.window.sum();
         if state.excluded {
-            restore(filter, prior_state, prior_covariance);
+            filter.restore(prior);
             state.since_exclusion += 1;
             state.health.excluded += 1;
             let reason = if state.window.is_full() && window_sum <= monitor.threshold {
@@ -599,7 +600,7 @@ where
             return Ok(Outcome::Excluded { innovation, reason });
         }
         if !(window_sum <= monitor.threshold) {
-            restore(filter, prior_state, prior_covariance);
+            filter.restore(prior);
             state.excluded = true;
             state.since_exclusion = 0;
             state.window.clear();
@@ -649,7 +650,11 @@ where
             for &i in &reset.states {
                 prior_covariance[(i, i)] = reset.variance;
             }
-            restore(filter, prior_state, prior_covariance);
+            // A re-initialisation from a new Gaussian, not a rollback: `reset` is the contract.
+            filter.reset(Gaussian::new_unchecked(
+                prior_state.clone(),
+                prior_covariance.clone(),
+            ));
             sensors.update(filter, reading)?;
             state.run = 0;
             state.window.clear();
@@ -659,7 +664,7 @@ where
         }
     }
     if gated {
-        restore(filter, prior_state, prior_covariance);
+        filter.restore(prior);
         if state.run == 0 {
             state.run_start_accepted = accepted_total;
         }

@@ -1,10 +1,10 @@
-//! The bounded history: records in time order, each with the estimate, the input and the
-//! sensors' health after its event, in a ring whose records are allocated once and recycled.
+//! The bounded history: records in time order, each with the filter's snapshot
+//! ([`Rollback`](crate::Rollback)), the input and the sensors' health after its event, in a
+//! ring whose records are allocated once and recycled.
 
 use std::collections::VecDeque;
 
-use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
-use estim_core::{Alloc, Real};
+use estim_core::Real;
 
 use super::monitor::Health;
 use super::outcome::Outcome;
@@ -24,14 +24,11 @@ pub(crate) enum Event<U, R> {
 
 /// One event and the driver's state just after it.
 #[derive(Clone, Debug)]
-pub(crate) struct Record<T: Real, N: Dim, U, R>
-where
-    DefaultAllocator: Alloc<N>,
-{
+pub(crate) struct Record<T: Real, Sn, U, R> {
     pub time: f64,
     pub event: Event<U, R>,
-    pub state: OVector<T, N>,
-    pub covariance: OMatrix<T, N, N>,
+    /// The filter after the event, as its [`Rollback`](crate::Rollback) snapshot.
+    pub snapshot: Sn,
     /// The input in force after the event.
     pub input: U,
     pub health: Health<T>,
@@ -39,10 +36,7 @@ where
     pub outcome: Option<Outcome<T>>,
 }
 
-impl<T: Real, N: Dim, U, R> Record<T, N, U, R>
-where
-    DefaultAllocator: Alloc<N>,
-{
+impl<T: Real, Sn, U, R> Record<T, Sn, U, R> {
     /// Whether a measurement of `sensor` at `time` goes after this record: records are
     /// ordered by time, and measurements at equal times by sensor index (so that the order
     /// does not depend on the order of arrival).
@@ -62,21 +56,15 @@ where
 /// The records, oldest first. `ring.len() + pool.len() == capacity + 1` always: the ring
 /// holds at most `capacity` records between calls and one more while an event is processed.
 #[derive(Debug)]
-pub(crate) struct History<T: Real, N: Dim, U, R>
-where
-    DefaultAllocator: Alloc<N>,
-{
-    ring: VecDeque<Record<T, N, U, R>>,
-    pool: Vec<Record<T, N, U, R>>,
+pub(crate) struct History<T: Real, Sn, U, R> {
+    ring: VecDeque<Record<T, Sn, U, R>>,
+    pool: Vec<Record<T, Sn, U, R>>,
     capacity: usize,
 }
 
-impl<T: Real, N: Dim, U: Clone, R: Clone> History<T, N, U, R>
-where
-    DefaultAllocator: Alloc<N>,
-{
+impl<T: Real, Sn: Clone, U: Clone, R: Clone> History<T, Sn, U, R> {
     /// A history of `capacity` records whose first is `start`.
-    pub fn new(start: Record<T, N, U, R>, capacity: usize) -> Self {
+    pub fn new(start: Record<T, Sn, U, R>, capacity: usize) -> Self {
         let mut ring = VecDeque::with_capacity(capacity + 1);
         let pool = (0..capacity).map(|_| start.clone()).collect();
         ring.push_back(start);
@@ -88,31 +76,28 @@ where
     }
 }
 
-impl<T: Real, N: Dim, U, R> History<T, N, U, R>
-where
-    DefaultAllocator: Alloc<N>,
-{
+impl<T: Real, Sn, U, R> History<T, Sn, U, R> {
     pub fn len(&self) -> usize {
         self.ring.len()
     }
 
-    pub fn get(&self, i: usize) -> &Record<T, N, U, R> {
+    pub fn get(&self, i: usize) -> &Record<T, Sn, U, R> {
         &self.ring[i]
     }
 
-    pub fn get_mut(&mut self, i: usize) -> &mut Record<T, N, U, R> {
+    pub fn get_mut(&mut self, i: usize) -> &mut Record<T, Sn, U, R> {
         &mut self.ring[i]
     }
 
-    pub fn latest(&self) -> &Record<T, N, U, R> {
+    pub fn latest(&self) -> &Record<T, Sn, U, R> {
         &self.ring[self.ring.len() - 1]
     }
 
-    pub fn oldest(&self) -> &Record<T, N, U, R> {
+    pub fn oldest(&self) -> &Record<T, Sn, U, R> {
         &self.ring[0]
     }
 
-    pub fn iter(&self) -> impl Iterator<Item = &Record<T, N, U, R>> {
+    pub fn iter(&self) -> impl Iterator<Item = &Record<T, Sn, U, R>> {
         self.ring.iter()
     }
 
@@ -155,7 +140,7 @@ where
     }
 
     /// Every record, in the ring and in the pool (to re-size a sensor's health).
-    pub fn all_mut(&mut self) -> impl Iterator<Item = &mut Record<T, N, U, R>> {
+    pub fn all_mut(&mut self) -> impl Iterator<Item = &mut Record<T, Sn, U, R>> {
         self.ring.iter_mut().chain(self.pool.iter_mut())
     }
 }

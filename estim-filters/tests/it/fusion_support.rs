@@ -10,7 +10,7 @@ use estim_core::{
 use estim_filters::fusion::{
     FusionDriver, FusionSettings, Innovation, Outcome, SensorHealth, SensorSet, SensorSettings,
 };
-use estim_filters::{Estimator, KalmanFilter, Predict, Update};
+use estim_filters::{KalmanFilter, Predict, Rollback, Update};
 use rand::rngs::StdRng;
 
 use crate::common::{normal, rng};
@@ -122,7 +122,9 @@ pub fn settings() -> FusionSettings {
 
 pub fn driver<F>(filter: F, sensor: SensorSettings) -> CartDriver<F>
 where
-    F: Predict<f64, U2, ConstantVelocity> + Update<f64, U2, U1, LinearMeasurement<f64, U2, U1>>,
+    F: Predict<f64, U2, ConstantVelocity>
+        + Update<f64, U2, U1, LinearMeasurement<f64, U2, U1>>
+        + Rollback,
 {
     FusionDriver::new(
         filter,
@@ -209,7 +211,9 @@ pub struct Snapshot {
 
 pub fn snapshot<F>(d: &CartDriver<F>) -> Snapshot
 where
-    F: Estimator<f64, U2> + Update<f64, U2, U1, LinearMeasurement<f64, U2, U1>>,
+    F: Predict<f64, U2, ConstantVelocity>
+        + Update<f64, U2, U1, LinearMeasurement<f64, U2, U1>>
+        + Rollback,
 {
     Snapshot {
         state: *d.filter().state(),

@@ -62,7 +62,7 @@ use estim_core::propagate::Unscented;
 use estim_core::{Alloc, Gaussian, LinearMeasurement, LinearProcess, Real};
 use estim_filters::{
     CovarianceUpdate, Ekf, Estimator, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter,
-    Predict, SecondOrderEkf, SquareRootFilter, SrEkf, SrKalmanFilter, Update,
+    Predict, PredictCross, SecondOrderEkf, SquareRootFilter, SrEkf, SrKalmanFilter, Update,
 };
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;

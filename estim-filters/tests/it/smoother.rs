@@ -12,7 +12,9 @@ use estim_filters::smoother::{
     Rts, Smoothed, SmootherError, filter_sequence, smooth_sequence,
     smooth_sequence_with_cross_covariances,
 };
-use estim_filters::{Ekf, GaussianFilter, KalmanFilter, Update};
+use estim_filters::{
+    Ekf, GaussianFilter, KalmanFilter, PredictCross, SrEkf, SrKalmanFilter, SrUkf, Update,
+};
 
 /// A time-varying 2-state system: Δt changes each step (so does F), Q scales with Δt, an input
 /// drives the velocity, and the position is measured at some steps only.
@@ -60,21 +62,10 @@ impl Scenario {
 
     /// The forward pass through `Rts::predict`, then the backward pass with the lag-one
     /// cross-covariances (whose estimates must be `Rts::smooth`'s, bit for bit).
-    fn smooth<Pr>(&self, mut filter: GaussianFilter<f64, U2, Pr>) -> Smoothed<f64, U2>
+    fn smooth<F>(&self, mut filter: F) -> Smoothed<f64, U2>
     where
-        Pr: estim_core::propagate::PropagatorWorkspace<f64>
-            + for<'a> estim_core::propagate::MomentPropagator<
-                f64,
-                U2,
-                U2,
-                estim_core::Transition<
-                    'a,
-                    LinearProcess<f64, U2, estim_core::nalgebra::U1>,
-                    Vector1<f64>,
-                    f64,
-                >,
-            >,
-        GaussianFilter<f64, U2, Pr>: Update<
+        F: PredictCross<f64, U2, LinearProcess<f64, U2, estim_core::nalgebra::U1>>
+            + Update<
                 f64,
                 U2,
                 estim_core::nalgebra::U1,
@@ -224,8 +215,8 @@ fn assert_close(a: &[f64], b: &[f64], tol: f64, what: &str) {
     }
 }
 
-/// KF, EKF and cubature-UKF RTS on a linear-Gaussian system equal the batch posterior: every
-/// smoothed mean and covariance block. Tolerance: backward-stable solves of both routes give
+/// KF, EKF and cubature-UKF RTS, full-covariance and square-root, on a linear-Gaussian system
+/// equal the batch posterior: every smoothed mean and covariance block. Tolerance: backward-stable solves of both routes give
 /// relative errors of order κ(Λ) ε times the number of operations along a chain; we allow
 /// 100 K κ(Λ) ε (K = steps).
 #[test]
@@ -245,6 +236,12 @@ fn rts_equals_the_batch_posterior_of_a_linear_gaussian_system() {
                 prior(),
                 Unscented::cubature(),
             )),
+        ),
+        ("SR-KF", s.smooth(SrKalmanFilter::new(prior()))),
+        ("SR-EKF", s.smooth(SrEkf::new(prior()))),
+        (
+            "SR-UKF",
+            s.smooth(SrUkf::with_propagator(prior(), Unscented::cubature())),
         ),
     ];
     for (name, pass) in runs {
@@ -443,6 +440,16 @@ fn sequences_match_the_batch_posterior_and_the_marginal_likelihood() {
         );
     }
 
+    // The sequence functions take any filter that can be smoothed: the square-root KF too.
+    let mut sr = SrKalmanFilter::new(prior.clone());
+    let sr_smoothed = smooth_sequence(&mut sr, &process, &inputs, 0.5, &s.sensor(), &zs).unwrap();
+    for (k, g) in sr_smoothed.estimates.iter().enumerate() {
+        let block = covariance.view((2 * k, 2 * k), (2, 2)).clone_owned();
+        let batch_mean = mean.rows(2 * k, 2);
+        assert_close(g.mean().as_slice(), batch_mean.as_slice(), tol, "SR mean");
+        assert_close(g.covariance().as_slice(), block.as_slice(), tol, "SR cov");
+    }
+
     let (prior_mean, prior_cov, prior_condition) = s.batch(false);
     let measured: Vec<usize> = (0..zs.len()).filter(|&k| zs[k].is_some()).collect();
     let m = measured.len();
@@ -463,6 +470,14 @@ fn sequences_match_the_batch_posterior_and_the_marginal_likelihood() {
         "the check would be too weak: κ = {prior_condition:e}"
     );
     assert_close(&[run.log_likelihood], &[expected], tol, "log-likelihood");
+    let mut sr = SrKalmanFilter::new(Gaussian::new(s.prior.0, s.prior.1).unwrap());
+    let sr_run = filter_sequence(&mut sr, &process, &inputs, 0.5, &s.sensor(), &zs).unwrap();
+    assert_close(
+        &[sr_run.log_likelihood],
+        &[expected],
+        tol,
+        "SR log-likelihood",
+    );
     assert_eq!(run.updates.iter().filter(|u| u.is_none()).count(), 4);
     // The filtered estimates are the smoother's forward pass: the last ones agree.
     assert_eq!(run.estimates.last(), smoothed.estimates.last());
