@@ -29,6 +29,12 @@
 //! [`Estimator::reset`]; a square-root filter refactorises P⁰ⱼ there, which costs it nothing it
 //! had: mixing makes a new Gaussian anyway.
 //!
+//! The IMM implements the step traits and the contract: [`Predict`] over a set of per-mode
+//! models the user names ([`ModeModels`]), [`Update`] with any measurement model every mode
+//! accepts, and [`Rollback`] (every mode's snapshot plus μ), so it goes into the fusion driver
+//! (a late measurement rolls μ back too), the Monte Carlo runner and the sequence functions;
+//! with the `serde` feature it checkpoints and resumes bit for bit.
+//!
 //! The IMM is an approximation: it merges the mᵏ mode histories into m Gaussians at each step
 //! (the exact posterior is a mixture of mᵏ). The tests (`tests/it/imm.rs`) measure that error
 //! against the enumeration of every mode sequence.
@@ -75,10 +81,10 @@ pub mod modes;
 use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 
-pub use modes::{Modes, PredictModes, UpdateModes};
+pub use modes::{ModeModels, Modes, PredictModes, UpdateModes};
 
 use crate::report::{UpdateOutcome, UpdateReport};
-use crate::traits::Estimator;
+use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
 use mixture::{RunningMoments, mixture_into};
 
 /// The interacting multiple model estimator over the mode filters `F` (see the [module
@@ -251,33 +257,6 @@ where
     #[track_caller]
     pub fn mode_estimate(&self, i: usize) -> Gaussian<T, N> {
         self.modes.mode(i).estimate()
-    }
-
-    /// Saves what a step changes.
-    pub fn snapshot(&self) -> ImmSnapshot<T, N, F::Snapshot> {
-        ImmSnapshot {
-            modes: self.modes.snapshot(),
-            probabilities: self.probabilities.clone(),
-            state: self.state.clone(),
-            covariance: self.covariance.clone(),
-        }
-    }
-
-    /// [`snapshot`](Self::snapshot) into `snapshot`, reusing its buffers.
-    pub fn snapshot_into(&self, snapshot: &mut ImmSnapshot<T, N, F::Snapshot>) {
-        self.modes.snapshot_into(&mut snapshot.modes);
-        snapshot.probabilities.clone_from(&self.probabilities);
-        snapshot.state.clone_from(&self.state);
-        snapshot.covariance.clone_from(&self.covariance);
-    }
-
-    /// Puts back a snapshot of this estimator: every later step gives the bits it would have
-    /// given at the time of the snapshot.
-    pub fn restore(&mut self, snapshot: &ImmSnapshot<T, N, F::Snapshot>) {
-        self.modes.restore(&snapshot.modes);
-        self.probabilities.clone_from(&snapshot.probabilities);
-        self.state.clone_from(&snapshot.state);
-        self.covariance.clone_from(&snapshot.covariance);
     }
 
     /// The combined estimate from the modes and μ.
@@ -482,5 +461,76 @@ where
             self.covariance = OMatrix::zeros_generic(n, n);
         }
         self.combine();
+    }
+}
+
+/// Every mode filter's snapshot, μ and the combined estimate: a restore puts back the factor
+/// of a square-root mode too, so every later step gives the same bits.
+impl<T: Real, N: Dim, F: Modes<T, N>> Rollback for Imm<T, N, F>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Snapshot = ImmSnapshot<T, N, F::Snapshot>;
+
+    fn snapshot(&self) -> Self::Snapshot {
+        ImmSnapshot {
+            modes: self.modes.snapshot(),
+            probabilities: self.probabilities.clone(),
+            state: self.state.clone(),
+            covariance: self.covariance.clone(),
+        }
+    }
+
+    fn snapshot_into(&self, snapshot: &mut Self::Snapshot) {
+        self.modes.snapshot_into(&mut snapshot.modes);
+        snapshot.probabilities.clone_from(&self.probabilities);
+        snapshot.state.clone_from(&self.state);
+        snapshot.covariance.clone_from(&self.covariance);
+    }
+
+    fn restore(&mut self, snapshot: &Self::Snapshot) {
+        self.modes.restore(&snapshot.modes);
+        self.probabilities.clone_from(&snapshot.probabilities);
+        self.state.clone_from(&snapshot.state);
+        self.covariance.clone_from(&snapshot.covariance);
+    }
+}
+
+/// [`Imm::predict_modes`] with the per-mode models of `model` ([`ModeModels`]).
+impl<T, N, F, W> Predict<T, N, W> for Imm<T, N, F>
+where
+    T: Real,
+    N: Dim,
+    W: ProcessInput<T, N> + ModeModels + ?Sized,
+    F: PredictModes<T, N, W::Models, Input = <W as ProcessInput<T, N>>::Input>,
+    DefaultAllocator: Alloc<N>,
+{
+    fn predict(
+        &mut self,
+        model: &W,
+        input: &<W as ProcessInput<T, N>>::Input,
+        dt: T,
+    ) -> Result<()> {
+        self.predict_modes(model.models(), input, dt)
+    }
+}
+
+/// [`Imm::update_modes_into`]: every mode updates with `model`.
+impl<T, N, M, F, H> Update<T, N, M, H> for Imm<T, N, F>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: ?Sized,
+    F: UpdateModes<T, N, M, H>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn update_into(
+        &mut self,
+        model: &H,
+        z: &OVector<T, M>,
+        report: &mut UpdateReport<T, M>,
+    ) -> Result<()> {
+        self.update_modes_into(model, z, report)
     }
 }

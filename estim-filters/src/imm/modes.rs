@@ -9,7 +9,15 @@
 //!   the mixing. Each mode has its own process model: the IMM's prediction takes the tuple
 //!   `(P0, P1, …)` of models, mode i predicting with model i.
 //! - **A `Vec<F>`** of one filter type, when the number of modes is known only at run time
-//!   (a bank of turn rates, say): the prediction takes a slice `[P]` of models, one per mode.
+//!   (a bank of turn rates, say): the prediction takes a `Vec<P>` (or an array `[P; K]`) of
+//!   models, one per mode.
+//!
+//! Through the [`Predict`] trait the set of models is the user's type implementing
+//! [`ModeModels`] and [`ProcessInput`]; [`Imm::predict_modes`](super::Imm::predict_modes) takes
+//! it bare.
+//!
+//! Each mode filter implements [`Rollback`]: a failed IMM step puts every mode back from its
+//! snapshot (a square-root filter with its factor, bit for bit).
 //!
 //! Every mode takes the same input u (the physical control, shared by all hypotheses) and the
 //! same measurement model (the sensor does not depend on the mode). Modes implement
@@ -17,10 +25,49 @@
 //! another shape (modes that own extra state, say) implements these three traits.
 
 use estim_core::nalgebra::{DefaultAllocator, Dim, OVector};
-use estim_core::{Alloc, Gaussian, ProcessModel, Real, error::Result};
+use estim_core::{Alloc, Gaussian, Real, error::Result};
 
 use crate::report::UpdateReport;
-use crate::traits::{Estimator, Predict, Update};
+use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
+
+/// A set of per-mode process models as the model of the IMM's [`Predict`] impl: the user's
+/// own type, which names the input ([`ProcessInput`]) and lends the models as the mode set
+/// takes them (a tuple `(P0, P1, …)` for a tuple of modes, a `Vec<P>` or `[P; K]` for a
+/// `Vec` of modes).
+///
+/// Why the user's type: `Predict`'s model must implement [`ProcessInput`], which every
+/// [`ProcessModel`](estim_core::ProcessModel) does through a blanket impl. A wrapper generic
+/// over the scalar type cannot implement it beside that blanket impl (a crate with its own
+/// scalar type could make the wrapper a process model: E0119), but a type with concrete
+/// scalar and dimensions can, in the user's crate:
+///
+/// ```
+/// use estim_core::LinearProcess;
+/// use estim_core::nalgebra::{U1, U2};
+/// use estim_filters::ProcessInput;
+/// use estim_filters::imm::ModeModels;
+///
+/// type Cv = LinearProcess<f64, U2, U1>;
+/// /// Quiet and manoeuvring constant-velocity models.
+/// struct TwoModes((Cv, Cv));
+/// impl ProcessInput<f64, U2> for TwoModes {
+///     type Input = estim_core::nalgebra::Vector1<f64>;
+/// }
+/// impl ModeModels for TwoModes {
+///     type Models = (Cv, Cv);
+///     fn models(&self) -> &(Cv, Cv) {
+///         &self.0
+///     }
+/// }
+/// ```
+///
+/// [`Imm::predict_modes`](super::Imm::predict_modes) takes the bare tuple or `Vec` without it.
+pub trait ModeModels {
+    /// The per-mode models as the mode set takes them.
+    type Models: ?Sized;
+    /// The per-mode models.
+    fn models(&self) -> &Self::Models;
+}
 
 /// A set of mode filters over the same `N`-dimensional state.
 pub trait Modes<T: Real, N: Dim>
@@ -94,10 +141,10 @@ macro_rules! tuple_modes {
     ($count:literal; $($F:ident $P:ident $idx:tt),+) => {
         impl<T: Real, N: Dim, $($F),+> Modes<T, N> for ($($F,)+)
         where
-            $($F: Estimator<T, N> + Clone,)+
+            $($F: Estimator<T, N> + Rollback,)+
             DefaultAllocator: Alloc<N>,
         {
-            type Snapshot = ($($F,)+);
+            type Snapshot = ($($F::Snapshot,)+);
 
             fn count(&self) -> usize {
                 $count
@@ -120,21 +167,21 @@ macro_rules! tuple_modes {
             }
 
             fn snapshot(&self) -> Self::Snapshot {
-                self.clone()
+                ($(self.$idx.snapshot(),)+)
             }
 
             fn snapshot_into(&self, snapshot: &mut Self::Snapshot) {
-                $(snapshot.$idx.clone_from(&self.$idx);)+
+                $(self.$idx.snapshot_into(&mut snapshot.$idx);)+
             }
 
             fn restore(&mut self, snapshot: &Self::Snapshot) {
-                $(self.$idx.clone_from(&snapshot.$idx);)+
+                $(self.$idx.restore(&snapshot.$idx);)+
             }
         }
 
         impl<T: Real, N: Dim, U, $($F, $P),+> PredictModes<T, N, ($($P,)+)> for ($($F,)+)
         where
-            $($F: Predict<T, N, $P> + Clone, $P: ProcessModel<T, N, Input = U>,)+
+            $($F: Predict<T, N, $P> + Rollback, $P: ProcessInput<T, N, Input = U>,)+
             DefaultAllocator: Alloc<N>,
         {
             type Input = U;
@@ -150,8 +197,8 @@ macro_rules! tuple_modes {
 
         impl<T: Real, N: Dim, M: Dim, H, $($F),+> UpdateModes<T, N, M, H> for ($($F,)+)
         where
-            H: estim_core::MeasurementModel<T, N, M>,
-            $($F: Update<T, N, M, H> + Clone,)+
+            H: ?Sized,
+            $($F: Update<T, N, M, H> + Rollback,)+
             DefaultAllocator: Alloc<N, M>,
         {
             #[track_caller]
@@ -180,10 +227,10 @@ tuple_modes!(6; F0 P0 0, F1 P1 1, F2 P2 2, F3 P3 3, F4 P4 4, F5 P5 5);
 
 impl<T: Real, N: Dim, F> Modes<T, N> for Vec<F>
 where
-    F: Estimator<T, N> + Clone,
+    F: Estimator<T, N> + Rollback,
     DefaultAllocator: Alloc<N>,
 {
-    type Snapshot = Vec<F>;
+    type Snapshot = Vec<F::Snapshot>;
 
     fn count(&self) -> usize {
         self.len()
@@ -200,15 +247,27 @@ where
     }
 
     fn snapshot(&self) -> Self::Snapshot {
-        self.clone()
+        self.iter().map(Rollback::snapshot).collect()
     }
 
     fn snapshot_into(&self, snapshot: &mut Self::Snapshot) {
-        snapshot.clone_from(self);
+        if snapshot.len() != self.len() {
+            *snapshot = self.snapshot();
+            return;
+        }
+        for (mode, saved) in self.iter().zip(snapshot.iter_mut()) {
+            mode.snapshot_into(saved);
+        }
     }
 
+    /// # Panics
+    /// If `snapshot` was taken from a set with another number of modes.
+    #[track_caller]
     fn restore(&mut self, snapshot: &Self::Snapshot) {
-        self.clone_from(snapshot);
+        assert_eq!(snapshot.len(), self.len(), "snapshot of another mode count");
+        for (mode, saved) in self.iter_mut().zip(snapshot) {
+            mode.restore(saved);
+        }
     }
 }
 
@@ -216,8 +275,8 @@ where
 /// If `models` has fewer entries than there are modes.
 impl<T: Real, N: Dim, F, P> PredictModes<T, N, [P]> for Vec<F>
 where
-    F: Predict<T, N, P> + Clone,
-    P: ProcessModel<T, N>,
+    F: Predict<T, N, P> + Rollback,
+    P: ProcessInput<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     type Input = P::Input;
@@ -228,10 +287,41 @@ where
     }
 }
 
-impl<T: Real, N: Dim, M: Dim, F, H> UpdateModes<T, N, M, H> for Vec<F>
+/// # Panics
+/// If `models` has fewer entries than there are modes.
+impl<T: Real, N: Dim, F, P> PredictModes<T, N, Vec<P>> for Vec<F>
 where
-    F: Update<T, N, M, H> + Clone,
-    H: estim_core::MeasurementModel<T, N, M>,
+    F: Predict<T, N, P> + Rollback,
+    P: ProcessInput<T, N>,
+    DefaultAllocator: Alloc<N>,
+{
+    type Input = P::Input;
+
+    #[track_caller]
+    fn predict_mode(&mut self, i: usize, models: &Vec<P>, input: &P::Input, dt: T) -> Result<()> {
+        self[i].predict(&models[i], input, dt)
+    }
+}
+
+/// # Panics
+/// If `K` is less than the number of modes.
+impl<T: Real, N: Dim, F, P, const K: usize> PredictModes<T, N, [P; K]> for Vec<F>
+where
+    F: Predict<T, N, P> + Rollback,
+    P: ProcessInput<T, N>,
+    DefaultAllocator: Alloc<N>,
+{
+    type Input = P::Input;
+
+    #[track_caller]
+    fn predict_mode(&mut self, i: usize, models: &[P; K], input: &P::Input, dt: T) -> Result<()> {
+        self[i].predict(&models[i], input, dt)
+    }
+}
+
+impl<T: Real, N: Dim, M: Dim, F, H: ?Sized> UpdateModes<T, N, M, H> for Vec<F>
+where
+    F: Update<T, N, M, H> + Rollback,
     DefaultAllocator: Alloc<N, M>,
 {
     #[track_caller]

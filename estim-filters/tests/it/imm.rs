@@ -9,7 +9,8 @@ use estim_core::nalgebra::{
 use estim_core::{Error, Gaussian, LinearMeasurement, LinearProcess, Parameter, Quantity};
 use estim_filters::imm::Imm;
 use estim_filters::{
-    Ekf, Estimator, KalmanFilter, Predict, SrKalmanFilter, SrUkf, Ukf, Update, UpdateOutcome,
+    Ekf, Estimator, KalmanFilter, Predict, Rollback, SrKalmanFilter, SrUkf, Ukf, Update,
+    UpdateOutcome,
 };
 
 use crate::common::{ReferenceKf, assert_bitwise_eq, normal, rng};
@@ -689,4 +690,127 @@ fn a_checkpoint_resumes_bit_identically() {
     let edited = saved.replace("\"transition\":[[0.9,", "\"transition\":[[0.5,");
     assert_ne!(edited, saved);
     assert!(serde_json::from_str::<Imm<f64, U2, Modes>>(&edited).is_err());
+}
+
+/// The two constant-velocity modes (quiet, agile) as one model for the `Predict` trait.
+#[derive(Clone, Debug)]
+struct QuietAgile((Process, Process));
+
+impl estim_filters::ProcessInput<f64, U2> for QuietAgile {
+    type Input = Vector1<f64>;
+}
+
+impl estim_filters::imm::ModeModels for QuietAgile {
+    type Models = (Process, Process);
+    fn models(&self) -> &(Process, Process) {
+        &self.0
+    }
+}
+
+type Pair = (KalmanFilter<f64, U2>, SrKalmanFilter<f64, U2>);
+
+fn pair_imm() -> Imm<f64, U2, Pair> {
+    let modes = (KalmanFilter::new(prior()), SrKalmanFilter::new(prior()));
+    Imm::new(
+        modes,
+        two_by_two(0.1, 0.2),
+        DVector::from_vec(vec![0.8, 0.2]),
+    )
+    .unwrap()
+}
+
+#[test]
+fn the_step_traits_are_the_inherent_steps() {
+    let sensor = position(0.5);
+    let [quiet, agile] = models();
+    let set = QuietAgile((quiet.clone(), agile.clone()));
+    let (mut by_trait, mut inherent) = (pair_imm(), pair_imm());
+    for z in manoeuvre(10, 10) {
+        let z = Vector1::new(z);
+        Predict::predict(&mut by_trait, &set, &u0(), DT).unwrap();
+        inherent
+            .predict_modes(&(quiet.clone(), agile.clone()), &u0(), DT)
+            .unwrap();
+        let a = Update::update(&mut by_trait, &sensor, &z).unwrap();
+        let b = inherent.update_modes(&sensor, &z).unwrap();
+        assert_eq!(a, b);
+        assert_eq!(by_trait.snapshot(), inherent.snapshot());
+    }
+}
+
+mod in_the_fusion_driver {
+    use super::*;
+    use estim_core::error::Result;
+    use estim_filters::fusion::{
+        FusionDriver, FusionSettings, Innovation, SensorSet, SensorSettings,
+    };
+
+    /// One position sensor.
+    struct Fix(Sensor);
+
+    impl SensorSet<f64, U2, Imm<f64, U2, Pair>> for Fix {
+        type Reading = Vector1<f64>;
+        fn count(&self) -> usize {
+            1
+        }
+        fn sensor(&self, _: &Vector1<f64>) -> usize {
+            0
+        }
+        fn dimension(&self, _: usize) -> usize {
+            1
+        }
+        fn update(
+            &self,
+            imm: &mut Imm<f64, U2, Pair>,
+            z: &Vector1<f64>,
+        ) -> Result<Innovation<f64>> {
+            imm.update(&self.0, z).map(|r| Innovation::of(&r))
+        }
+    }
+
+    fn driver() -> FusionDriver<f64, U2, Imm<f64, U2, Pair>, QuietAgile, Fix> {
+        let [quiet, agile] = models();
+        let settings = FusionSettings {
+            horizon: 5.0,
+            max_step: DT,
+            ..FusionSettings::default()
+        };
+        FusionDriver::new(
+            pair_imm(),
+            QuietAgile((quiet, agile)),
+            u0(),
+            Fix(position(0.5)),
+            0.0,
+            settings,
+            SensorSettings::default(),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn a_late_measurement_rolls_back_the_mode_probabilities_bit_identically() {
+        let zs = manoeuvre(11, 10);
+        let mut ordered = driver();
+        for (k, z) in zs.iter().enumerate() {
+            ordered.fuse((k + 1) as f64 * DT, Vector1::new(*z)).unwrap();
+        }
+        // The same readings with the sixth delivered three steps late (after the manoeuvre,
+        // when the modes' probabilities move most): the replay re-runs the IMM's steps from
+        // the checkpoint before it, μ included.
+        let mut late = driver();
+        let order = [0, 1, 2, 3, 4, 6, 7, 8, 5, 9];
+        let mut replayed = 0;
+        for &k in &order {
+            replayed += late
+                .fuse((k + 1) as f64 * DT, Vector1::new(zs[k]))
+                .unwrap()
+                .replayed;
+        }
+        assert!(replayed > 0);
+        let (a, b) = (ordered.filter().snapshot(), late.filter().snapshot());
+        assert_bitwise_eq(&a.probabilities, &b.probabilities, "μ after the replay");
+        assert_bitwise_eq(&a.state, &b.state, "state after the replay");
+        assert_bitwise_eq(&a.covariance, &b.covariance, "covariance after the replay");
+        assert_eq!(a, b);
+    }
 }
