@@ -96,11 +96,33 @@ where
 {
     modes: F,
     transition: DMatrix<T>,
+    mixing: Mixing,
     probabilities: DVector<T>,
     initial: DVector<T>,
     state: OVector<T, N>,
     covariance: OMatrix<T, N, N>,
     work: Work<T, N, F::Snapshot>,
+}
+
+/// Where each mode restarts from at a prediction.
+///
+/// ```text
+/// Interacting (IMM):  mode j from Σᵢ μᵢ|ⱼ N(x̂ᵢ, Pᵢ),  μᵢ|ⱼ = πᵢⱼ μᵢ / c̄ⱼ   (m mixtures)
+/// Gpb1:               mode j from Σᵢ μᵢ N(x̂ᵢ, Pᵢ) = N(x̂, P), the combined estimate (one)
+/// ```
+///
+/// GPB1 (the first-order generalised pseudo-Bayesian estimator, Bar-Shalom, Li &
+/// Kirubarajan §11.6.4) forgets which mode each hypothesis came from at every step; the IMM
+/// keeps that per destination mode at the same cost in filter steps. They coincide when
+/// every row of Π is the same (the next mode independent of the current one).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub enum Mixing {
+    /// The interacting multiple model mixing (the default).
+    #[default]
+    Interacting,
+    /// Every mode restarts from the combined estimate (GPB1).
+    Gpb1,
 }
 
 /// A mean and covariance.
@@ -215,10 +237,36 @@ where
             initial: probabilities.clone(),
             probabilities,
             transition,
+            mixing: Mixing::Interacting,
             modes,
         };
         imm.combine();
         Ok(imm)
+    }
+
+    /// The same estimator with the mixing `mixing` ([`Mixing::Gpb1`] for GPB1).
+    ///
+    /// ```
+    /// use estim_core::nalgebra::{DMatrix, DVector, Matrix2, Vector2};
+    /// use estim_core::Gaussian;
+    /// use estim_filters::imm::{Imm, Mixing};
+    /// use estim_filters::KalmanFilter;
+    ///
+    /// let prior = Gaussian::new(Vector2::zeros(), Matrix2::identity())?;
+    /// let modes = (KalmanFilter::new(prior.clone()), KalmanFilter::new(prior));
+    /// let pi = DMatrix::from_row_slice(2, 2, &[0.9, 0.1, 0.1, 0.9]);
+    /// let gpb1 = Imm::new(modes, pi, DVector::from_element(2, 0.5))?.with_mixing(Mixing::Gpb1);
+    /// assert_eq!(gpb1.mixing(), Mixing::Gpb1);
+    /// # Ok::<(), estim_core::Error>(())
+    /// ```
+    pub fn with_mixing(mut self, mixing: Mixing) -> Self {
+        self.mixing = mixing;
+        self
+    }
+
+    /// The mixing.
+    pub fn mixing(&self) -> Mixing {
+        self.mixing
     }
 
     /// The mode filters.
@@ -284,7 +332,10 @@ where
         let Self {
             modes,
             transition: pi,
+            mixing,
             probabilities: mu,
+            state,
+            covariance,
             work,
             ..
         } = self;
@@ -293,6 +344,14 @@ where
         let m = modes.count();
         for j in 0..m {
             let c = work.predicted[j];
+            if *mixing == Mixing::Gpb1 {
+                // The combined estimate is that mode's own when μⱼ = 1 (copied bit for bit).
+                work.mixing[j] = mu[j] != T::one();
+                let (x, p) = &mut work.mixed[j];
+                x.copy_from(state);
+                p.copy_from(covariance);
+                continue;
+            }
             let own = (0..m).all(|i| i == j || pi[(i, j)] * mu[i] == T::zero());
             work.mixing[j] = c > T::zero() && !own;
             if !work.mixing[j] {

@@ -1,6 +1,6 @@
 //! Checkpoints of an [`Imm`] (feature `serde`): the mode filters (each as its own type
 //! serialises, e.g. a [`GaussianFilter`](crate::GaussianFilter) as in
-//! [`checkpoint`](crate::checkpoint)), Π, μ and the initial μ₀. The combined estimate is not
+//! [`checkpoint`](crate::checkpoint)), Π, the [`Mixing`](super::Mixing), μ and the initial μ₀. The combined estimate is not
 //! written: it is a function of the modes and μ, recomputed on the way in to the same bits.
 //! On the way in Π and μ are checked as by [`Imm::new`] (an error otherwise).
 
@@ -17,6 +17,7 @@ use super::{Imm, Modes, mixture};
 struct Fields<F, M, V> {
     modes: F,
     transition: M,
+    mixing: super::Mixing,
     probabilities: V,
     initial_probabilities: V,
 }
@@ -30,6 +31,7 @@ where
         Fields {
             modes: &self.modes,
             transition: &self.transition,
+            mixing: self.mixing,
             probabilities: &self.probabilities,
             initial_probabilities: &self.initial,
         }
@@ -44,8 +46,9 @@ where
 {
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
         let f = Fields::<F, DMatrix<T>, DVector<T>>::deserialize(deserializer)?;
-        let mut imm =
-            Imm::new(f.modes, f.transition, f.initial_probabilities).map_err(D::Error::custom)?;
+        let mut imm = Imm::new(f.modes, f.transition, f.initial_probabilities)
+            .map_err(D::Error::custom)?
+            .with_mixing(f.mixing);
         mixture::check_probabilities(&f.probabilities, imm.modes.count())
             .map_err(D::Error::custom)?;
         imm.probabilities = f.probabilities;

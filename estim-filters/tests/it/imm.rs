@@ -229,10 +229,12 @@ fn enumerate(
 
 /// The textbook IMM cycle (Bar-Shalom, Li & Kirubarajan §11.6.6, steps 1–5) written out over
 /// the hand-written Kalman equations: an independent implementation to compare against.
+/// With `gpb1` every mode restarts from the combined estimate instead (weights μᵢ).
 struct ReferenceImm {
     filters: Vec<ReferenceKf<U2>>,
     mu: DVector<f64>,
     pi: DMatrix<f64>,
+    gpb1: bool,
 }
 
 impl ReferenceImm {
@@ -247,7 +249,10 @@ impl ReferenceImm {
         let mut mixed = Vec::new();
         for j in 0..m {
             let w: Vec<f64> = (0..m)
-                .map(|i| self.pi[(i, j)] * self.mu[i] / cbar[j])
+                .map(|i| match self.gpb1 {
+                    true => self.mu[i],
+                    false => self.pi[(i, j)] * self.mu[i] / cbar[j],
+                })
                 .collect();
             let x: Vector2<f64> = (0..m).map(|i| self.filters[i].x * w[i]).sum();
             let p: Matrix2<f64> = (0..m)
@@ -359,6 +364,7 @@ fn the_imm_is_exact_after_one_step_and_close_to_the_enumeration_after_eight() {
         filters: vec![ReferenceKf::new(&prior()); 2],
         mu: DVector::from_vec(vec![0.8, 0.2]),
         pi: two_by_two(0.1, 0.2),
+        gpb1: false,
     };
     // A single filter with the quiet model: what ignoring the switching costs.
     let mut single = KalmanFilter::new(prior());
@@ -813,4 +819,63 @@ mod in_the_fusion_driver {
         assert_bitwise_eq(&a.covariance, &b.covariance, "covariance after the replay");
         assert_eq!(a, b);
     }
+}
+
+#[test]
+fn gpb1_is_the_hand_written_gpb1_and_the_imm_when_the_next_mode_ignores_the_current() {
+    use estim_filters::imm::Mixing;
+    let sensor = position(0.5);
+    let [quiet, agile] = models();
+    let models = (quiet.clone(), agile.clone());
+    let zs = manoeuvre(12, 10);
+    let pi = two_by_two(0.1, 0.2);
+    let mu0 = DVector::from_vec(vec![0.8, 0.2]);
+    let modes = (KalmanFilter::new(prior()), KalmanFilter::new(prior()));
+    let mut gpb1 = Imm::new(modes, pi.clone(), mu0.clone())
+        .unwrap()
+        .with_mixing(Mixing::Gpb1);
+    let mut reference = ReferenceImm {
+        filters: vec![ReferenceKf::new(&prior()); 2],
+        mu: mu0.clone(),
+        pi,
+        gpb1: true,
+    };
+    // Rows equal: π_ij = p_j whatever i, so the IMM's μ_i|j = p_j μ_i / (p_j Σ μ) = μ_i.
+    let memoryless = DMatrix::from_row_slice(2, 2, &[0.7, 0.3, 0.7, 0.3]);
+    let modes = (KalmanFilter::new(prior()), KalmanFilter::new(prior()));
+    let mut imm = Imm::new(modes.clone(), memoryless.clone(), mu0.clone()).unwrap();
+    let mut gpb1_memoryless = Imm::new(modes, memoryless, mu0)
+        .unwrap()
+        .with_mixing(Mixing::Gpb1);
+    for z in zs {
+        let z = Vector1::new(z);
+        for f in [&mut gpb1, &mut imm, &mut gpb1_memoryless] {
+            f.predict_modes(&models, &u0(), DT).unwrap();
+            f.update_modes(&sensor, &z).unwrap();
+        }
+        // Independent code, the same algorithm: round-off of a few Kalman steps and the
+        // mixtures (as for the IMM against its reference above).
+        let (x_ref, p_ref) = reference.step(&[quiet.clone(), agile.clone()], &sensor, z[0]);
+        assert!((gpb1.state() - x_ref).amax() < 1e-12 * x_ref.amax().max(1.0));
+        assert!((gpb1.covariance() - p_ref).amax() < 1e-12 * p_ref.amax());
+        assert!((gpb1.probabilities() - &reference.mu).amax() < 1e-12);
+        // μ_i|j and μ_i differ by the rounding of p_j μ_i / c̄_j: ulps, over 10 steps.
+        let scale = imm.state().amax().max(1.0);
+        assert!((imm.state() - gpb1_memoryless.state()).amax() < 1e-12 * scale);
+        assert!(
+            (imm.covariance() - gpb1_memoryless.covariance()).amax()
+                < 1e-12 * imm.covariance().amax()
+        );
+        assert!((imm.probabilities() - gpb1_memoryless.probabilities()).amax() < 1e-12);
+    }
+    // With memory in Π the two differ: GPB1 is not the IMM under another name.
+    let mut imm = pair_imm();
+    let mut gpb1 = pair_imm().with_mixing(Mixing::Gpb1);
+    for z in manoeuvre(12, 6) {
+        for f in [&mut imm, &mut gpb1] {
+            f.predict_modes(&models, &u0(), DT).unwrap();
+            f.update_modes(&sensor, &Vector1::new(z)).unwrap();
+        }
+    }
+    assert!((imm.state() - gpb1.state()).amax() > 1e-6);
 }
