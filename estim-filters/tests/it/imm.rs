@@ -879,3 +879,75 @@ fn gpb1_is_the_hand_written_gpb1_and_the_imm_when_the_next_mode_ignores_the_curr
     }
     assert!((imm.state() - gpb1.state()).amax() > 1e-6);
 }
+
+#[test]
+fn the_update_report_is_the_predicted_mixtures_and_a_partly_gated_update_weighs_every_mode() {
+    use estim_filters::Gate;
+    let sensor = position(0.5);
+    let [quiet, agile] = models();
+    // The quiet mode gates at NIS 4, the agile one does not gate.
+    let modes = (
+        KalmanFilter::new(prior())
+            .with_gate(Gate::Nis(4.0))
+            .unwrap(),
+        KalmanFilter::new(prior()),
+    );
+    let mut imm = Imm::new(
+        modes,
+        two_by_two(0.1, 0.2),
+        DVector::from_vec(vec![0.8, 0.2]),
+    )
+    .unwrap();
+    imm.predict_modes(&(quiet, agile), &u0(), DT).unwrap();
+    let c = imm.probabilities().clone();
+    // The modes' own updates, on copies, as the independent route.
+    let (mut a, mut b) = (imm.modes().0.clone(), imm.modes().1.clone());
+    let z = Vector1::new(imm.modes().0.state()[0] + 6.0);
+    let ra = a.update(&sensor, &z).unwrap();
+    let rb = b.update(&sensor, &z).unwrap();
+    assert_eq!(ra.outcome, UpdateOutcome::Gated);
+    assert_eq!(rb.outcome, UpdateOutcome::Applied);
+    let report = imm.update_modes(&sensor, &z).unwrap();
+    assert_eq!(report.outcome, UpdateOutcome::Applied);
+    // The gated mode keeps its estimate; the other is the standalone update.
+    assert_bitwise_eq(imm.modes().0.state(), a.state(), "gated mode");
+    assert_bitwise_eq(imm.modes().1.state(), b.state(), "updated mode");
+    // μ by Bayes' rule over both likelihoods, written directly (no logs: these are ~e⁻⁵).
+    let w = [
+        c[0] * ra.log_likelihood.exp(),
+        c[1] * rb.log_likelihood.exp(),
+    ];
+    let total = w[0] + w[1];
+    // exp/ln against the direct product: a few ulps.
+    assert!((imm.probabilities()[0] - w[0] / total).abs() < 1e-14);
+    assert!((report.log_likelihood - total.ln()).abs() < 1e-13);
+    // ν̄ = Σ c̄ⱼ νⱼ and S̄ = Σ c̄ⱼ (Sⱼ + (νⱼ − ν̄)²), written out.
+    let nu = c[0] * ra.innovation[0] + c[1] * rb.innovation[0];
+    let s = c[0] * (ra.innovation_covariance[(0, 0)] + (ra.innovation[0] - nu).powi(2))
+        + c[1] * (rb.innovation_covariance[(0, 0)] + (rb.innovation[0] - nu).powi(2));
+    assert!((report.innovation[0] - nu).abs() < 1e-14 * nu.abs().max(1.0));
+    assert!((report.innovation_covariance[(0, 0)] - s).abs() < 1e-14 * s);
+    assert!((report.nis - nu * nu / s).abs() < 1e-13 * report.nis);
+}
+
+#[test]
+fn reset_restarts_every_mode_and_the_initial_probabilities() {
+    let sensor = position(0.5);
+    let mut imm = pair_imm();
+    let [quiet, agile] = models();
+    for z in manoeuvre(13, 5) {
+        imm.predict_modes(&(quiet.clone(), agile.clone()), &u0(), DT)
+            .unwrap();
+        imm.update_modes(&sensor, &Vector1::new(z)).unwrap();
+    }
+    let restart = Gaussian::new(Vector2::new(5.0, -1.0), Matrix2::identity() * 3.0).unwrap();
+    imm.reset(restart.clone());
+    assert_eq!(imm.probabilities(), &DVector::from_vec(vec![0.8, 0.2]));
+    for j in 0..2 {
+        assert_eq!(imm.mode_estimate(j).mean(), restart.mean());
+    }
+    // The mixture of two copies of one Gaussian is that Gaussian (to the rounding of
+    // 0.8 x + 0.2 x).
+    assert!((imm.state() - restart.mean()).amax() < 4.0 * f64::EPSILON * 5.0);
+    assert!((imm.covariance() - restart.covariance()).amax() < 4.0 * f64::EPSILON * 3.0);
+}
