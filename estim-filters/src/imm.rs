@@ -244,6 +244,35 @@ where
         Ok(imm)
     }
 
+    /// The static multiple-model bank: Π = I, so no mode ever switches, nothing is mixed and
+    /// each mode filter runs exactly as it would alone; μ is then the posterior probability
+    /// of each model given the data (Magill 1965), model selection by likelihood.
+    ///
+    /// ```
+    /// use estim_core::nalgebra::{DVector, Matrix1, Matrix1x2, Matrix2, Vector1, Vector2};
+    /// use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+    /// use estim_filters::imm::Imm;
+    /// use estim_filters::KalmanFilter;
+    ///
+    /// // Is the cart moving (constant velocity) or parked (the velocity held at 0)?
+    /// let moving = LinearProcess::without_input(Matrix2::new(1.0, 1.0, 0.0, 1.0), Matrix2::identity() * 1e-4);
+    /// let parked = LinearProcess::without_input(Matrix2::new(1.0, 0.0, 0.0, 0.0), Matrix2::identity() * 1e-4);
+    /// let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.01) };
+    /// let prior = Gaussian::new(Vector2::zeros(), Matrix2::identity())?;
+    /// let modes = (KalmanFilter::new(prior.clone()), KalmanFilter::new(prior));
+    /// let mut bank = Imm::static_bank(modes, DVector::from_element(2, 0.5))?;
+    /// for k in 1..=10 {
+    ///     bank.predict_modes(&(moving.clone(), parked.clone()), &(), 1.0)?;
+    ///     bank.update_modes(&sensor, &Vector1::new(0.5 * k as f64))?;
+    /// }
+    /// assert!(bank.probabilities()[0] > 0.999);
+    /// # Ok::<(), estim_core::Error>(())
+    /// ```
+    pub fn static_bank(modes: F, probabilities: DVector<T>) -> Result<Self> {
+        let m = modes.count();
+        Self::new(modes, DMatrix::identity(m, m), probabilities)
+    }
+
     /// The same estimator with the mixing `mixing` ([`Mixing::Gpb1`] for GPB1).
     ///
     /// ```

@@ -315,7 +315,8 @@ fn with_the_identity_chain_the_imm_is_the_static_bank_and_the_exact_posterior() 
     let zs = manoeuvre(4, 8);
     let exact = enumerate(&[quiet.clone(), agile.clone()], &sensor, &pi, &mu0, &zs);
     let modes = (KalmanFilter::new(prior()), SrKalmanFilter::new(prior()));
-    let mut imm = Imm::new(modes, pi, mu0).unwrap();
+    let mut imm = Imm::static_bank(modes, mu0).unwrap();
+    assert_eq!(imm.transition(), &pi);
     let (mut bank_quiet, mut bank_agile) = (KalmanFilter::new(prior()), KalmanFilter::new(prior()));
     for (z, (mean, cov, marginal)) in zs.iter().zip(&exact) {
         let z = Vector1::new(*z);
