@@ -17,7 +17,10 @@
 //! ```
 //!
 //! Mixing happens at each prediction (one Markov transition per prediction), so several
-//! sensors may update between two predictions, each multiplying in its likelihood. The
+//! sensors may update between two predictions, each multiplying in its likelihood. Π is
+//! therefore per prediction step: where steps vary in length (the fusion driver predicts in
+//! sub-steps of at most `max_step`), give Π for that step, or change it with
+//! [`Imm::set_transition`]. The
 //! combined estimate ([`Estimator::state`], [`Estimator::covariance`]) and μ
 //! ([`Imm::probabilities`]) are current after every step: after a prediction they are the
 //! predicted mixture's (weights c̄), after an update the posterior's.
