@@ -78,12 +78,14 @@
 
 #[cfg(feature = "serde")]
 mod checkpoint;
+mod gpb2;
 mod mixture;
 pub mod modes;
 
 use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 
+pub use gpb2::Gpb2;
 pub use modes::{ModeModels, Modes, PredictModes, UpdateModes};
 
 use crate::report::{UpdateOutcome, UpdateReport};
