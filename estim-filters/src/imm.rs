@@ -85,7 +85,7 @@ pub mod modes;
 use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 
-pub use gpb2::Gpb2;
+pub use gpb2::{Gpb2, Gpb2Snapshot};
 pub use modes::{ModeModels, Modes, PredictModes, UpdateModes};
 
 use crate::report::{UpdateOutcome, UpdateReport};

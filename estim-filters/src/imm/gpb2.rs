@@ -18,7 +18,8 @@
 //! histories), which the tests check against the enumeration.
 //!
 //! The modes are a `Vec<F>` of one filter type (each component is a clone of its mode's
-//! filter, restarted with [`Estimator::reset`]); every step is atomic.
+//! filter, restarted with [`Estimator::reset`]); every step is atomic. It implements
+//! [`Predict`] (over a [`ModeModels`] whose models are a `Vec`), [`Update`] and [`Rollback`].
 //!
 //! ```
 //! use estim_core::nalgebra::{DMatrix, DVector, Matrix1, Matrix1x2, Matrix2, Vector1, Vector2};
@@ -48,9 +49,10 @@
 use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 
+use super::ModeModels;
 use super::mixture::{self, RunningMoments, mixture_into};
 use crate::report::{UpdateOutcome, UpdateReport};
-use crate::traits::{Estimator, Predict, ProcessInput, Update};
+use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
 
 /// One hypothesis: its current mode, its filter and its weight.
 #[derive(Clone, Debug)]
@@ -313,5 +315,78 @@ where
         self.state = prior.mean().clone();
         self.covariance = prior.covariance().clone();
         self.combine();
+    }
+}
+
+/// What a [`Gpb2`] step changes: every hypothesis (its filter, mode and weight), μ and the
+/// combined estimate. Opaque: take it with [`Rollback::snapshot`], give it to
+/// [`Rollback::restore`].
+#[derive(Clone, Debug)]
+pub struct Gpb2Snapshot<T: Real, N: Dim, F>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    components: Vec<Component<T, F>>,
+    probabilities: DVector<T>,
+    state: OVector<T, N>,
+    covariance: OMatrix<T, N, N>,
+}
+
+/// The hypotheses are cloned whole (their number changes between m and m²).
+impl<T: Real, N: Dim, F: Estimator<T, N> + Clone> Rollback for Gpb2<T, N, F>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Snapshot = Gpb2Snapshot<T, N, F>;
+
+    fn snapshot(&self) -> Self::Snapshot {
+        Gpb2Snapshot {
+            components: self.components.clone(),
+            probabilities: self.probabilities.clone(),
+            state: self.state.clone(),
+            covariance: self.covariance.clone(),
+        }
+    }
+
+    fn restore(&mut self, snapshot: &Self::Snapshot) {
+        self.components.clone_from(&snapshot.components);
+        self.probabilities.clone_from(&snapshot.probabilities);
+        self.state.clone_from(&snapshot.state);
+        self.covariance.clone_from(&snapshot.covariance);
+    }
+}
+
+/// [`Gpb2::predict_modes`] with the per-mode models of `model` (a `Vec`, [`ModeModels`]).
+impl<T, N, F, W, P> Predict<T, N, W> for Gpb2<T, N, F>
+where
+    T: Real,
+    N: Dim,
+    P: ProcessInput<T, N>,
+    W: ModeModels<Models = Vec<P>> + ProcessInput<T, N, Input = P::Input> + ?Sized,
+    F: Estimator<T, N> + Clone + Predict<T, N, P>,
+    DefaultAllocator: Alloc<N>,
+{
+    fn predict(&mut self, model: &W, input: &P::Input, dt: T) -> Result<()> {
+        self.predict_modes(model.models(), input, dt)
+    }
+}
+
+/// [`Gpb2::update_modes_into`].
+impl<T, N, M, F, H> Update<T, N, M, H> for Gpb2<T, N, F>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: ?Sized,
+    F: Estimator<T, N> + Clone + Update<T, N, M, H>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn update_into(
+        &mut self,
+        model: &H,
+        z: &OVector<T, M>,
+        report: &mut UpdateReport<T, M>,
+    ) -> Result<()> {
+        self.update_modes_into(model, z, report)
     }
 }

@@ -1060,4 +1060,51 @@ mod gpb2 {
             .is_err()
         );
     }
+
+    /// The quiet and agile models as one `Predict` model for a `Vec` of modes.
+    struct Bank(Vec<Process>);
+
+    impl estim_filters::ProcessInput<f64, U2> for Bank {
+        type Input = Vector1<f64>;
+    }
+
+    impl estim_filters::imm::ModeModels for Bank {
+        type Models = Vec<Process>;
+        fn models(&self) -> &Vec<Process> {
+            &self.0
+        }
+    }
+
+    #[test]
+    fn gpb2_through_the_traits_rolls_back_bit_identically() {
+        let sensor = position(0.5);
+        let bank = Bank(models().to_vec());
+        let modes = vec![KalmanFilter::new(prior()); 2];
+        let mut gpb2 =
+            Gpb2::new(modes, two_by_two(0.1, 0.2), DVector::from_element(2, 0.5)).unwrap();
+        let zs = manoeuvre(16, 10);
+        for z in &zs[..4] {
+            Predict::predict(&mut gpb2, &bank, &u0(), DT).unwrap();
+            Update::update(&mut gpb2, &sensor, &Vector1::new(*z)).unwrap();
+        }
+        let saved = gpb2.snapshot();
+        let run = |g: &mut Gpb2<f64, U2, KalmanFilter<f64, U2>>| {
+            zs[4..]
+                .iter()
+                .map(|z| {
+                    Predict::predict(g, &bank, &u0(), DT).unwrap();
+                    Update::update(g, &sensor, &Vector1::new(*z)).unwrap();
+                    (*g.state(), *g.covariance(), g.probabilities().clone())
+                })
+                .collect::<Vec<_>>()
+        };
+        let first = run(&mut gpb2);
+        gpb2.restore(&saved);
+        let second = run(&mut gpb2);
+        for (a, b) in first.iter().zip(&second) {
+            assert_bitwise_eq(&a.0, &b.0, "state after restore");
+            assert_bitwise_eq(&a.1, &b.1, "covariance after restore");
+            assert_bitwise_eq(&a.2, &b.2, "μ after restore");
+        }
+    }
 }
