@@ -62,6 +62,10 @@ pub enum Quantity {
     Innovation,
     /// A residual recorded for a consistency check.
     Residual,
+    /// The mode probabilities μ of a multiple-model estimator.
+    ModeProbabilities,
+    /// The Markov transition matrix Π of a multiple-model estimator.
+    TransitionMatrix,
 }
 
 /// A parameter that failed validation.
@@ -101,6 +105,11 @@ pub enum Parameter {
     RunCount,
     /// A convergence tolerance (must be finite and ≥ 0).
     Tolerance,
+    /// An entry or a row sum of a Markov transition matrix Π (entries in [0, 1], every row
+    /// summing to 1: row-stochastic).
+    TransitionProbability,
+    /// A mode probability or their sum (each in [0, 1], summing to 1).
+    ModeProbability,
 }
 
 /// Every error an estim algorithm returns.
@@ -205,6 +214,8 @@ impl fmt::Display for Quantity {
             Quantity::TimeStep => "time step",
             Quantity::Innovation => "innovation",
             Quantity::Residual => "residual",
+            Quantity::ModeProbabilities => "mode probabilities",
+            Quantity::TransitionMatrix => "transition matrix",
         })
     }
 }
@@ -226,6 +237,8 @@ impl fmt::Display for Parameter {
             Parameter::Period => "period",
             Parameter::RunCount => "run count",
             Parameter::Tolerance => "tolerance",
+            Parameter::TransitionProbability => "transition probability",
+            Parameter::ModeProbability => "mode probability",
         })
     }
 }

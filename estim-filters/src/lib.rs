@@ -38,6 +38,12 @@
 //! Models are passed to each call, never stored, so one filter serves several sensors at
 //! several rates. [`Estimator`] is object safe: `Box<dyn Estimator<f64, U6>>` holds any of them.
 //!
+//! ## Multiple models
+//!
+//! [`imm`]: the interacting multiple model estimator over any of these filters as modes (a
+//! tuple of filters of their own types, or a `Vec`), with a Markov mode chain, mixing by moment
+//! matching, and mode probabilities updated in logs.
+//!
 //! ## Learning the noise
 //!
 //! [`noise_id`]: Q and R (and x₀, P₀, F, H) from recorded data by expectation–maximisation for
@@ -75,6 +81,8 @@ mod correlated;
 #[cfg(feature = "std")]
 pub mod fusion;
 mod gaussian_filter;
+#[cfg(feature = "std")]
+pub mod imm;
 mod iterated;
 #[cfg(feature = "std")]
 pub mod monte_carlo;

@@ -31,6 +31,7 @@ mod fusion_support;
 mod fuzz;
 mod gating;
 mod iekf;
+mod imm;
 mod multirate;
 mod nees;
 mod no_alloc;
