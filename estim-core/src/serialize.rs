@@ -165,6 +165,36 @@ where
     }
 }
 
+/// [`ShapeChecked`] as a field attribute: `#[serde(deserialize_with =
+/// "estim_core::serialize::checked_matrix")]` on an `OMatrix` field reads it with its
+/// claimed shape checked.
+///
+/// ```
+/// use estim_core::nalgebra::DMatrix;
+///
+/// #[derive(serde::Deserialize)]
+/// struct Stats {
+///     #[serde(deserialize_with = "estim_core::serialize::checked_matrix")]
+///     covariance: DMatrix<f64>,
+/// }
+/// let ok: Stats = serde_json::from_str(r#"{"covariance": [[1.0], 1, 1]}"#)?;
+/// assert_eq!(ok.covariance[(0, 0)], 1.0);
+/// let corrupted = r#"{"covariance": [[1.0], 9223372036854775807, 2]}"#;
+/// assert!(serde_json::from_str::<Stats>(corrupted).is_err());
+/// # Ok::<(), serde_json::Error>(())
+/// ```
+pub fn checked_matrix<'de, D, T, R, C>(deserializer: D) -> Result<OMatrix<T, R, C>, D::Error>
+where
+    D: Deserializer<'de>,
+    T: Scalar + Deserialize<'de>,
+    R: Dim,
+    C: Dim,
+    DefaultAllocator: Allocator<R, C>,
+    OMatrix<T, R, C>: Deserialize<'de>,
+{
+    ShapeChecked::deserialize(deserializer).map(|m| m.0)
+}
+
 /// Reads (entries, rows, columns) of a matrix with a runtime size.
 struct ShapeVisitor<T, R, C>(PhantomData<(T, R, C)>);
 

@@ -31,6 +31,10 @@ where
     /// The innovation ν = z ⊖ ẑ.
     pub innovation: OVector<T, M>,
     /// Its predicted covariance S = cov(ẑ) + R.
+    #[cfg_attr(
+        feature = "serde",
+        serde(deserialize_with = "estim_core::serialize::checked_matrix")
+    )]
     pub innovation_covariance: OMatrix<T, M, M>,
     /// The normalised innovation squared νᵀ S⁻¹ ν (χ² with m degrees of freedom when the
     /// filter is consistent).

@@ -21,16 +21,32 @@ pub struct EstimateStats {
     pub mean_error: DVector<f64>,
     /// The ensemble error covariance P_ens = 1/(N − 1) Σ (eˡ − ē)(eˡ − ē)ᵀ (Lu's P^ave);
     /// NaN when N < 2.
+    #[cfg_attr(
+        feature = "serde",
+        serde(deserialize_with = "estim_core::serialize::checked_matrix")
+    )]
     pub error_covariance: DMatrix<f64>,
     /// The mean filter covariance P̄ = (1/N) Σ Pˡ, which P_ens should match.
+    #[cfg_attr(
+        feature = "serde",
+        serde(deserialize_with = "estim_core::serialize::checked_matrix")
+    )]
     pub mean_covariance: DMatrix<f64>,
     /// The average NEES ε̄ = (1/N) Σ eˡᵀ (Pˡ)⁻¹ eˡ, ~ χ²_{N·n}/N when consistent.
     pub mean_nees: f64,
     /// Lu's orthogonality matrix (1/N) Σ (eˡ − ē) x̂ˡᵀ = (1/N) Σ (eˡ − ē)(x̂ˡ − x̄)ᵀ, entry
     /// (i, j) pairing error component i with estimate component j.
+    #[cfg_attr(
+        feature = "serde",
+        serde(deserialize_with = "estim_core::serialize::checked_matrix")
+    )]
     pub orthogonality: DMatrix<f64>,
     /// Its normalised version: the sample correlation of eᵢ and x̂ⱼ across runs, in [−1, 1];
     /// NaN where either has no spread (e.g. x̂ at the prior, the same in every run).
+    #[cfg_attr(
+        feature = "serde",
+        serde(deserialize_with = "estim_core::serialize::checked_matrix")
+    )]
     pub orthogonality_correlation: DMatrix<f64>,
     /// The sample variance of each estimate component across runs, 1/(N − 1) Σ (x̂ˡ − x̄)².
     pub estimate_variance: DVector<f64>,
@@ -159,10 +175,18 @@ pub struct ResidualPairStats {
     /// Number of runs that recorded both N.
     pub samples: usize,
     /// (1/N) Σ r(a) r(b)ᵀ (m_a × m_b; 0 × 0 when N = 0).
+    #[cfg_attr(
+        feature = "serde",
+        serde(deserialize_with = "estim_core::serialize::checked_matrix")
+    )]
     pub cross_correlation: DMatrix<f64>,
     /// Entry (i, j) normalised as in Bar-Shalom et al. eq 5.4.2-12:
     /// Σ rᵢ(a) rⱼ(b) / √(Σ rᵢ(a)² Σ rⱼ(b)²), ≈ N(0, 1/N) when r(a) and r(b) are independent
     /// and zero-mean; NaN where a component is identically 0.
+    #[cfg_attr(
+        feature = "serde",
+        serde(deserialize_with = "estim_core::serialize::checked_matrix")
+    )]
     pub normalized: DMatrix<f64>,
 }
 

@@ -202,7 +202,7 @@ fn bad_checkpoints_are_refused() {
 /// storage check multiply rows × columns unchecked: a panic ("attempt to multiply with
 /// overflow") where overflow checks are on, and where they are off 2⁶³ × 2 wraps to 0 and an
 /// empty matrix claiming 2⁶³ rows got through. Every corrupted shape is a serde error now, for
-/// a filter checkpoint and for a `Gaussian`, whatever the build.
+/// a filter checkpoint, a `Gaussian` and an update report, whatever the build.
 #[test]
 fn a_corrupted_runtime_shape_is_an_error_not_a_panic() {
     let prior = Gaussian::new(DVector::<f64>::zeros(2), DMatrix::identity(2, 2)).unwrap();
@@ -247,6 +247,14 @@ fn a_corrupted_runtime_shape_is_an_error_not_a_panic() {
             .unwrap_err();
         assert!(!named || names_the_fault(&e), "{shape}: {e}");
     }
+    // An update report of runtime size reads its S the same way.
+    let mut report = serde_json::to_value(UpdateReport::<f64, Dyn>::zeros(Dyn(2))).unwrap();
+    report["innovation_covariance"] = serde_json::json!([[1.0, 0.0, 0.0, 1.0], huge, 2]);
+    let text = report.to_string();
+    let result = std::panic::catch_unwind(|| serde_json::from_str::<UpdateReport<f64, Dyn>>(&text));
+    assert!(names_the_fault(
+        &result.expect("panic restoring a report").unwrap_err()
+    ));
     // The state vector claims its length the same way.
     let mut f = filter.clone();
     f["state"] = serde_json::json!([[0.0, 0.0], huge, null]);

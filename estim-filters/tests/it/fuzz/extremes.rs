@@ -11,8 +11,9 @@
 //!   R̂ handed out is finite, exactly symmetric, with eigenvalues ≥ floor;
 //! - [`Rts::with_lag`] with lags up to `usize::MAX`: no panic or abort, at most `lag` records,
 //!   and its smoothed estimates the whole-pass smoother's last ones, to the bit;
-//! - corrupted runtime-size checkpoints (a `GaussianFilter` and a `Gaussian`) claiming shapes
-//!   up to 2⁶⁴ − 1 rows: no panic, and a restored value's shapes agree with its entries.
+//! - corrupted runtime-size checkpoints (a `GaussianFilter`, a `Gaussian`, an update report)
+//!   claiming shapes up to 2⁶⁴ − 1 rows: no panic, and a restored value's shapes agree with
+//!   its entries.
 //!
 //! 256 cases each (together well under a second in the test profile).
 
@@ -366,6 +367,18 @@ fn a_corrupted_checkpoint_is_an_error_or_consistent() {
             let n = f.state().len();
             prop_assert_eq!(f.covariance().shape(), (n, n));
             prop_assert_eq!(f.covariance().len(), len);
+        }
+        let mut report = serde_json::to_value(UpdateReport::<f64, Dyn>::zeros(Dyn(2))).unwrap();
+        report["innovation"] = stored(n, state_rows, None);
+        report["innovation_covariance"] = stored(len, rows, Some(cols));
+        let report = report.to_string();
+        let restored = catch_unwind(|| serde_json::from_str::<UpdateReport<f64, Dyn>>(&report));
+        let Ok(restored) = restored else {
+            return Err(TestCaseError::fail(format!("panic restoring {report}")));
+        };
+        if let Ok(r) = restored {
+            prop_assert_eq!(r.innovation_covariance.len(), len);
+            prop_assert_eq!(r.innovation.len(), n);
         }
         let restored = catch_unwind(|| serde_json::from_str::<Gaussian<f64, Dyn>>(&gaussian));
         let Ok(restored) = restored else {
