@@ -180,7 +180,7 @@ where
             filter.update(&AutoDiff::new(GravityAndField::about(&reference)), &z)?;
             // Fold the estimate into the reference; P is unchanged (see the manifold docs).
             let mut x = *filter.state();
-            reference.recentre(&mut x, 0);
+            reference.recentre(&mut x, 0)?;
             let p = *filter.covariance();
             filter.reset(Gaussian::new(x, p)?);
             let e = so3_log(&(reference.quaternion().inverse() * truth));

@@ -3,7 +3,8 @@
 //! Runs every paper example (Boje: moments, λ, rate accuracy, circle; Lee & Huang; LV2; Lu)
 //! with its full configuration (about 10 s of CPU time in release, the Monte Carlo runs on every
 //! core), prints their tables, writes their figures to
-//! `target/figures/`, and writes `target/figures/papers.md`: each paper's headline numbers
+//! `target/figures/`, and writes `target/figures/papers.md` (in the workspace's `target/`, or in
+//! `$CARGO_TARGET_DIR` when set: `common::target_dir`): each paper's headline numbers
 //! beside the paper's own claim, with the explanation wherever they differ, each example's
 //! JSON, and links to the figures. Each example can also be run alone, in full:
 //! `cargo run --release --example boje_circle`, etc.

@@ -4,6 +4,7 @@ use estim_core::checks::{ensure_finite, ensure_shape, symmetrize};
 use estim_core::kernel::is_static;
 use estim_core::linalg::psd_factor;
 use estim_core::nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, OVector};
+use estim_core::scalar::real;
 use estim_core::{
     Alloc, Differentiable, Error, MeasurementHessian, MeasurementJacobian, MeasurementModel,
     ProcessHessian, ProcessJacobian, ProcessModel, Quantity, Real, Stage, TwiceDifferentiable,
@@ -17,9 +18,14 @@ use estim_core::{
 ///
 /// On runtime sizes [`new`](Self::new) checks the lengths of f(x), h(x) and z ⊖ h(x) at the
 /// estimate (typed errors). The Jacobian and Hessians are not evaluated there: a process
-/// Jacobian of the wrong shape reaches the propagator, which reports it; a measurement
-/// Jacobian that is not m × n, or a measurement Hessian that is not n × n, is a programmer
-/// error and panics (never a silent product over the agreeing part).
+/// Jacobian or Hessian of the wrong shape reaches the propagator, which reports it as
+/// [`Error::DimensionMismatch`]. So does a misshapen measurement derivative (never a silent
+/// product over the agreeing part): a measurement Hessian that is not n × n is handed on as
+/// the map's Hessian, and a measurement Jacobian that is not m × n makes the map's Jacobian a
+/// matrix of that shape (n × 0 if it happens to be n × n) on a runtime-sized state, which the
+/// propagator reports as a [`Quantity::Jacobian`] mismatch. On a static state only the rows
+/// of a runtime-sized m can be wrong; the map's Jacobian is then NaN, reported as
+/// [`Error::NonFinite`] by the propagation.
 #[derive(Debug)]
 pub struct Decorrelated<'a, P, U, H, T: Real, N: Dim, M: Dim>
 where
@@ -138,9 +144,7 @@ where
     H: MeasurementJacobian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
-    /// # Panics
-    /// If the measurement Jacobian is not m × n (see [`Decorrelated`]).
-    #[track_caller]
+    /// F − D H; a misshapen H gives the stand-in described at [`Decorrelated`].
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, N, N> {
         let mut jac = self.process.transition_jacobian(x, self.input, self.dt);
         let (n, m) = self.gain.shape();
@@ -148,13 +152,27 @@ where
             return jac; // the propagator reports its shape
         }
         let h = self.measurement.measurement_jacobian(x);
-        assert!(
-            h.shape() == (m, n),
-            "measurement Jacobian is {:?}, expected {m} × {n} (m × n)",
-            h.shape()
-        );
+        if h.shape() != (m, n) {
+            return misshapen_jacobian(h.shape(), n);
+        }
         jac.gemm(-T::one(), &self.gain, &h, T::one());
         jac
+    }
+}
+
+/// What the map's Jacobian is when the measurement Jacobian has shape `h` instead of m × n: on
+/// a runtime-sized state a matrix of shape `h` (n × 0 if `h` is n × n), which the propagator's
+/// shape check rejects naming H's shape; on a static one (only m can be wrong, so `h` has n
+/// columns) an n × n NaN matrix, which the propagation reports as non-finite.
+fn misshapen_jacobian<T: Real, N: Dim>(h: (usize, usize), n: usize) -> OMatrix<T, N, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    if is_static::<N>() {
+        OMatrix::from_element_generic(N::from_usize(n), N::from_usize(n), real(f64::NAN))
+    } else {
+        let (rows, cols) = if h == (n, n) { (n, 0) } else { h };
+        OMatrix::zeros_generic(N::from_usize(rows), N::from_usize(cols))
     }
 }
 
@@ -167,9 +185,8 @@ where
     H: MeasurementHessian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
-    /// # Panics
-    /// If a measurement Hessian is not n × n (see [`Decorrelated`]).
-    #[track_caller]
+    /// ∂²fₖ − Σⱼ Dₖⱼ ∂²hⱼ; a measurement Hessian that is not n × n is returned as it is, for
+    /// the propagator to report (see [`Decorrelated`]).
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         let mut total = self.process.transition_hessian(x, self.input, self.dt, k);
         let n = self.gain.nrows();
@@ -182,11 +199,9 @@ where
                 continue;
             }
             if let Some(hj) = self.measurement.measurement_hessian(x, j) {
-                assert!(
-                    hj.shape() == (n, n),
-                    "measurement Hessian {j} is {:?}, expected {n} × {n}",
-                    hj.shape()
-                );
+                if hj.shape() != (n, n) {
+                    return Some(hj); // the propagator reports its shape
+                }
                 match &mut total {
                     Some(t) => *t -= hj * d,
                     None => total = Some(hj * (-d)),

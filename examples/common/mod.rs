@@ -58,16 +58,28 @@ pub fn quick_requested() -> bool {
     std::env::args().any(|a| a == "--quick")
 }
 
-/// `figures/` in cargo's target directory (created if missing): `$CARGO_TARGET_DIR` when set
-/// (at run time, else when the example was built), else `target/` under the workspace root.
+/// `figures/` in cargo's target directory (created if missing): see [`target_dir`].
 pub fn figure_dir() -> PathBuf {
-    let target = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .or_else(|| option_env!("CARGO_TARGET_DIR").map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target"));
-    let dir = target.join("figures");
+    let runtime = std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from);
+    let built = option_env!("CARGO_TARGET_DIR").map(PathBuf::from);
+    let dir = target_dir(runtime, built).join("figures");
     let _ = std::fs::create_dir_all(&dir);
     dir
+}
+
+/// Cargo's target directory, where the examples write their figures and the main job its
+/// `papers.md`: `$CARGO_TARGET_DIR` at run time (`runtime`) if set, else as it was when the
+/// example was built (`built`), else `target/` under the workspace root, as cargo itself
+/// chooses (a `build.target-dir` in a cargo config file is not seen). The workspace root is
+/// two levels above this library's manifest (`examples/reproductions`), not the manifest's
+/// own folder: cargo builds every member of the workspace into the root's `target/`.
+pub fn target_dir(runtime: Option<PathBuf>, built: Option<PathBuf>) -> PathBuf {
+    runtime.or(built).unwrap_or_else(|| {
+        let manifest = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        // examples/reproductions → the workspace root (`ancestors` starts at the path itself).
+        let root = manifest.ancestors().nth(2).unwrap_or(manifest);
+        root.join("target")
+    })
 }
 
 /// One named curve of a line plot.

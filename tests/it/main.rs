@@ -34,6 +34,7 @@ mod attitude_example;
 mod boje_circle_smoothing;
 mod boje_examples;
 mod consistency_example;
+mod figure_dir;
 mod firmware;
 mod heading_wrap_example;
 mod large_state_example;

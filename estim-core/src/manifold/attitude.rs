@@ -26,6 +26,7 @@ use nalgebra::{DefaultAllocator, Dim, OVector, Quaternion, UnitQuaternion, Vecto
 
 use super::{StateSpace, add_into, subtract_into};
 use crate::alloc::Alloc;
+use crate::error::{Error, Quantity, Result, Stage};
 use crate::scalar::{Real, real};
 
 /// Exp: the unit quaternion of the rotation vector v (angle |v| about v/|v|).
@@ -87,9 +88,10 @@ pub fn so3_log<T: Real>(q: &UnitQuaternion<T>) -> Vector3<T> {
 /// δθ (see the [module docs](self)): on that block x ⊞ ε = Log(Exp(δθ) ⊗ Exp(ε)) and
 /// a ⊟ b = Log(Exp(b)⁻¹ ⊗ Exp(a)); + and − on the other components.
 ///
-/// # Panics
-///
-/// If the state has fewer than `offset + 3` components (a programmer error).
+/// A state with fewer than `offset + 3` components has no attitude block: ⊞ and ⊟ then give
+/// NaN in every component, which a filter reports as [`Error::NonFinite`] (its step fails and
+/// leaves it unchanged), never a panic. [`check`](Self::check) says so up front, as a
+/// [`Error::DimensionMismatch`].
 ///
 /// ```
 /// use estim_core::manifold::{AttitudeError, so3_exp, so3_log};
@@ -123,37 +125,82 @@ impl AttitudeError {
         self.offset
     }
 
-    #[track_caller]
-    fn block<T: Real, N: Dim>(&self, x: &OVector<T, N>) -> Vector3<T>
+    /// `Ok(())` if a state of `n` components holds the block `offset..offset + 3`, else
+    /// [`Error::DimensionMismatch`] ([`Quantity::Mean`], at [`Stage::Construction`]: a state
+    /// of at least `offset + 3` rows expected).
+    ///
+    /// ```
+    /// use estim_core::manifold::AttitudeError;
+    /// use estim_core::{Error, Quantity, Stage};
+    ///
+    /// assert!(AttitudeError::at(3).check(6).is_ok());
+    /// assert_eq!(
+    ///     AttitudeError::at(3).check(5),
+    ///     Err(Error::DimensionMismatch {
+    ///         stage: Stage::Construction,
+    ///         quantity: Quantity::Mean,
+    ///         expected_rows: 6,
+    ///         expected_cols: 1,
+    ///         found_rows: 5,
+    ///         found_cols: 1,
+    ///     })
+    /// );
+    /// ```
+    pub fn check(&self, n: usize) -> Result<()> {
+        let needed = self.offset.saturating_add(3);
+        if n >= needed {
+            Ok(())
+        } else {
+            Err(Error::DimensionMismatch {
+                stage: Stage::Construction,
+                quantity: Quantity::Mean,
+                expected_rows: needed,
+                expected_cols: 1,
+                found_rows: n,
+                found_cols: 1,
+            })
+        }
+    }
+
+    /// δθ, the components `offset..offset + 3` of `x`, if `x` has them.
+    fn block<T: Real, N: Dim>(&self, x: &OVector<T, N>) -> Option<Vector3<T>>
     where
         DefaultAllocator: Alloc<N>,
     {
-        assert!(
-            x.nrows() >= self.offset + 3,
-            "AttitudeError at {} needs at least {} state components, the state has {}",
-            self.offset,
-            self.offset + 3,
-            x.nrows()
-        );
-        x.fixed_rows::<3>(self.offset).into_owned()
+        self.check(x.nrows()).ok()?;
+        Some(x.fixed_rows::<3>(self.offset).into_owned())
     }
+}
+
+/// out ← NaN in every component, shaped like `x`: a state without the attitude block.
+fn not_a_state<T: Real, N: Dim>(x: &OVector<T, N>, out: &mut OVector<T, N>)
+where
+    DefaultAllocator: Alloc<N>,
+{
+    if out.shape() != x.shape() {
+        *out = x.clone();
+    }
+    out.fill(real(f64::NAN));
 }
 
 impl<T: Real, N: Dim> StateSpace<T, N> for AttitudeError
 where
     DefaultAllocator: Alloc<N>,
 {
-    #[track_caller]
     fn plus_into(&self, x: &OVector<T, N>, delta: &OVector<T, N>, out: &mut OVector<T, N>) {
-        let (a, e) = (self.block(x), self.block(delta));
+        let (Some(a), Some(e)) = (self.block(x), self.block(delta)) else {
+            return not_a_state(x, out);
+        };
         add_into(x, delta, out);
         let composed = so3_log(&(so3_exp(&a) * so3_exp(&e)));
         out.fixed_rows_mut::<3>(self.offset).copy_from(&composed);
     }
 
-    #[track_caller]
     fn minus_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
-        let (qa, qb) = (so3_exp(&self.block(a)), so3_exp(&self.block(b)));
+        let (Some(da), Some(db)) = (self.block(a), self.block(b)) else {
+            return not_a_state(a, out);
+        };
+        let (qa, qb) = (so3_exp(&da), so3_exp(&db));
         subtract_into(a, b, out);
         let between = so3_log(&(qb.inverse() * qa));
         out.fixed_rows_mut::<3>(self.offset).copy_from(&between);
@@ -170,10 +217,11 @@ where
 /// let mut reference = AttitudeReference::new(UnitQuaternion::identity());
 /// // The filter's estimate after an update: δθ̂ = (0, 0, 0.1).
 /// let mut x = Vector3::new(0.0, 0.0, 0.1);
-/// let q = reference.attitude(&x, 0);
-/// reference.recentre(&mut x, 0);
+/// let q = reference.attitude(&x, 0)?;
+/// reference.recentre(&mut x, 0)?;
 /// assert_eq!(x, Vector3::zeros());
 /// assert!(reference.quaternion().angle_to(&q) < 1e-15);
+/// # Ok::<(), estim_core::Error>(())
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AttitudeReference<T: Real> {
@@ -193,32 +241,30 @@ impl<T: Real> AttitudeReference<T> {
 
     /// q = q_ref ⊗ Exp(δθ), δθ the components `offset..offset + 3` of `x`.
     ///
-    /// # Panics
-    ///
-    /// If `x` has fewer than `offset + 3` components.
-    #[track_caller]
-    pub fn attitude<N: Dim>(&self, x: &OVector<T, N>, offset: usize) -> UnitQuaternion<T>
+    /// Errors: `x` has fewer than `offset + 3` components (as [`AttitudeError::check`]).
+    pub fn attitude<N: Dim>(&self, x: &OVector<T, N>, offset: usize) -> Result<UnitQuaternion<T>>
     where
         DefaultAllocator: Alloc<N>,
     {
-        self.q * so3_exp(&AttitudeError::at(offset).block(x))
+        let space = AttitudeError::at(offset);
+        space.check(x.nrows())?;
+        Ok(self.q * so3_exp(&x.fixed_rows::<3>(offset).into_owned()))
     }
 
     /// q_ref ← q_ref ⊗ Exp(δθ) and δθ ← 0 in `x` (the estimate is unchanged): call it with the
     /// filter's state after a step, then give the filter the recentred state (with its
     /// covariance unchanged, e.g. `Estimator::reset` in estim-filters).
     ///
-    /// # Panics
-    ///
-    /// If `x` has fewer than `offset + 3` components.
-    #[track_caller]
-    pub fn recentre<N: Dim>(&mut self, x: &mut OVector<T, N>, offset: usize)
+    /// Errors: `x` has fewer than `offset + 3` components (as [`AttitudeError::check`]); then
+    /// neither q_ref nor `x` changes.
+    pub fn recentre<N: Dim>(&mut self, x: &mut OVector<T, N>, offset: usize) -> Result<()>
     where
         DefaultAllocator: Alloc<N>,
     {
-        self.q = self.attitude(x, offset);
+        self.q = self.attitude(x, offset)?;
         self.q.renormalize();
         x.fixed_rows_mut::<3>(offset).fill(T::zero());
+        Ok(())
     }
 
     /// q_ref ← q_ref ⊗ Exp(ω Δt) (a body rate ω held over Δt), renormalised.

@@ -13,7 +13,7 @@ use core::f64::consts::PI;
 use crate::common::config;
 use estim_core::manifold::{AttitudeError, AttitudeReference, so3_exp, so3_log};
 use estim_core::nalgebra::{DVector, UnitQuaternion, Vector3, Vector4, Vector5};
-use estim_core::{StateSpace, WrappedAngles};
+use estim_core::{Error, Quantity, Stage, StateSpace, WrappedAngles};
 use proptest::prelude::*;
 
 /// See the module docs.
@@ -107,7 +107,7 @@ fn quaternion_stays_unit_over_a_million_steps() {
         reference.rotate(&omega, 0.01);
         space.plus_into(&x, &step, &mut out);
         std::mem::swap(&mut x, &mut out);
-        reference.recentre(&mut x, 0);
+        reference.recentre(&mut x, 0).unwrap();
         let norm: f64 = reference.quaternion().as_ref().norm();
         worst = worst.max((norm - 1.0).abs());
     }
@@ -119,10 +119,44 @@ fn quaternion_stays_unit_over_a_million_steps() {
 fn recentring_keeps_the_attitude() {
     let mut reference = AttitudeReference::new(UnitQuaternion::from_euler_angles(-1.0, 0.5, 2.0));
     let mut x = Vector4::new(7.0, 0.2, -0.4, 1.1);
-    let before = reference.attitude(&x, 1);
-    reference.recentre(&mut x, 1);
+    let before = reference.attitude(&x, 1).unwrap();
+    reference.recentre(&mut x, 1).unwrap();
     assert_eq!(x, Vector4::new(7.0, 0.0, 0.0, 0.0));
-    assert!(reference.attitude(&x, 1).angle_to(&before) < TOL);
+    assert!(reference.attitude(&x, 1).unwrap().angle_to(&before) < TOL);
+}
+
+/// A state too short for the attitude block (`at(2)` needs 5 components, the state has 4):
+/// `check`, `attitude` and `recentre` return the typed error (and `recentre` changes
+/// nothing), ⊞ and ⊟ give NaN in every component (a filter then fails its step with a typed
+/// error: estim-filters' `state_space` tests). Before, each of them panicked.
+#[test]
+fn a_state_without_the_attitude_block_is_a_typed_error() {
+    let short = Error::DimensionMismatch {
+        stage: Stage::Construction,
+        quantity: Quantity::Mean,
+        expected_rows: 5,
+        expected_cols: 1,
+        found_rows: 4,
+        found_cols: 1,
+    };
+    let space = AttitudeError::at(2);
+    assert_eq!(space.check(4), Err(short));
+    assert_eq!(space.check(5), Ok(()));
+    let mut reference = AttitudeReference::new(UnitQuaternion::from_euler_angles(0.3, 0.2, 0.1));
+    let kept = reference;
+    let mut x = Vector4::new(0.1, 0.2, 0.3, 0.4);
+    assert_eq!(reference.attitude(&x, 2), Err(short));
+    assert_eq!(reference.recentre(&mut x, 2), Err(short));
+    assert_eq!((reference, x), (kept, Vector4::new(0.1, 0.2, 0.3, 0.4)));
+    let mut out = Vector4::<f64>::zeros();
+    space.plus_into(&x, &x, &mut out);
+    assert!(out.iter().all(|v| v.is_nan()), "x ⊞ δ = {out:?}");
+    let mut out = DVector::<f64>::zeros(0);
+    space.minus_into(&DVector::zeros(4), &DVector::zeros(4), &mut out);
+    assert!(
+        out.len() == 4 && out.iter().all(|v| v.is_nan()),
+        "a ⊟ b = {out:?}"
+    );
 }
 
 #[cfg(feature = "autodiff")]

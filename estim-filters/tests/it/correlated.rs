@@ -320,12 +320,15 @@ fn ignoring_the_correlation_changes_the_estimate() {
 
 /// A runtime-size linear model pair (3 states, 2 measurements) whose outputs can be given
 /// the wrong size: f(x) with `extra_states` more entries, h(x) with `extra_readings` more,
-/// the measurement Jacobian with `extra_columns` more columns.
+/// the measurement Jacobian with `extra_rows` more rows and `extra_columns` more columns,
+/// the measurement Hessians with `extra_hessian` more rows and columns.
 #[derive(Clone, Default)]
 struct Misshapen {
     extra_states: usize,
     extra_readings: usize,
+    extra_rows: usize,
     extra_columns: usize,
+    extra_hessian: usize,
 }
 
 const DYN_H: [f64; 6] = [1.0, 0.0, 0.5, 0.0, 1.0, 0.0];
@@ -361,7 +364,29 @@ impl estim_core::MeasurementModel<f64, Dyn, Dyn> for Misshapen {
 
 impl estim_core::MeasurementJacobian<f64, Dyn, Dyn> for Misshapen {
     fn measurement_jacobian(&self, _: &DVector<f64>) -> DMatrix<f64> {
-        DMatrix::from_row_slice(2, 3, &DYN_H).insert_columns(3, self.extra_columns, 7.0)
+        DMatrix::from_row_slice(2, 3, &DYN_H)
+            .insert_columns(3, self.extra_columns, 7.0)
+            .insert_rows(2, self.extra_rows, 7.0)
+    }
+}
+
+impl estim_core::ProcessHessian<f64, Dyn> for Misshapen {
+    fn transition_hessian(
+        &self,
+        _: &DVector<f64>,
+        _: &(),
+        _: f64,
+        _: usize,
+    ) -> Option<DMatrix<f64>> {
+        None
+    }
+}
+
+impl estim_core::MeasurementHessian<f64, Dyn, Dyn> for Misshapen {
+    /// h is linear: its Hessians are zero (given explicitly, so that their shape is used).
+    fn measurement_hessian(&self, x: &DVector<f64>, _: usize) -> Option<DMatrix<f64>> {
+        let n = x.len() + self.extra_hessian;
+        Some(DMatrix::zeros(n, n))
     }
 }
 
@@ -428,17 +453,67 @@ fn correlated_prediction_checks_runtime_model_lengths() {
     check(Ukf::new(dyn_prior()));
 }
 
-/// A measurement Jacobian with a column too many: before, the EKF's correlated prediction
-/// used its first n columns and returned `Ok` (the update reports the same model as a
-/// `DimensionMismatch`); now it is the documented programmer-error panic.
+/// A measurement Jacobian that is not m × n, or a measurement Hessian that is not n × n: the
+/// correlated prediction reports it as a typed error and leaves the filter unchanged, as the
+/// update does for the same model. Before, both were panics (and before that, a Jacobian
+/// with a column too many was used by its first n columns and returned `Ok`).
 #[test]
-#[should_panic(expected = "measurement Jacobian is (2, 4), expected 2 × 3")]
-fn correlated_prediction_rejects_a_misshapen_measurement_jacobian() {
+fn correlated_prediction_reports_misshapen_measurement_derivatives() {
+    let z = DVector::from_vec(vec![0.5, 1.0]);
+    let cross = DMatrix::from_element(3, 2, 0.01);
+    fn run<F>(filter: &mut F, model: &Misshapen, z: &DVector<f64>, cross: &DMatrix<f64>) -> Error
+    where
+        F: PredictCorrelated<f64, Dyn, Dyn, Misshapen, Misshapen> + Clone + PartialEq + Debug,
+    {
+        let before = filter.clone();
+        let error = filter
+            .predict_correlated(model, &(), 1.0, model, z, cross)
+            .unwrap_err();
+        assert!(*filter == before, "a failed prediction changed the filter");
+        error
+    }
+    let mismatch = |quantity, found_rows, found_cols| Error::DimensionMismatch {
+        stage: Stage::Propagation,
+        quantity,
+        expected_rows: 3,
+        expected_cols: 3,
+        found_rows,
+        found_cols,
+    };
+    // H is 2 × 4: the map's Jacobian takes H's shape.
     let wide = Misshapen {
         extra_columns: 1,
         ..Misshapen::default()
     };
-    let z = DVector::from_vec(vec![0.5, 1.0]);
-    let cross = DMatrix::from_element(3, 2, 0.01);
-    let _ = Ekf::new(dyn_prior()).predict_correlated(&wide, &(), 1.0, &wide, &z, &cross);
+    let mut ekf = Ekf::new(dyn_prior());
+    assert_eq!(
+        run(&mut ekf, &wide, &z, &cross),
+        mismatch(Quantity::Jacobian, 2, 4)
+    );
+    // H is 3 × 3 = n × n but m = 2: the map's Jacobian is n × 0.
+    let tall = Misshapen {
+        extra_rows: 1,
+        ..Misshapen::default()
+    };
+    assert_eq!(
+        run(&mut ekf, &tall, &z, &cross),
+        mismatch(Quantity::Jacobian, 3, 0)
+    );
+    // A 4 × 4 measurement Hessian is handed on as the map's Hessian.
+    let big_hessian = Misshapen {
+        extra_hessian: 1,
+        ..Misshapen::default()
+    };
+    let mut second_order = SecondOrderEkf::new(dyn_prior());
+    assert_eq!(
+        run(&mut second_order, &big_hessian, &z, &cross),
+        mismatch(Quantity::Hessian, 4, 4)
+    );
+    // The same filters then run the well-shaped model.
+    let fine = Misshapen::default();
+    ekf.predict_correlated(&fine, &(), 1.0, &fine, &z, &cross)
+        .unwrap();
+    second_order
+        .predict_correlated(&fine, &(), 1.0, &fine, &z, &cross)
+        .unwrap();
 }

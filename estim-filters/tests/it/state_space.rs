@@ -7,13 +7,15 @@ use core::cell::Cell;
 use core::f64::consts::PI;
 
 use crate::common::{normal, rng};
+use estim_core::manifold::AttitudeError;
 use estim_core::nalgebra::{
     DMatrix, DVector, DefaultAllocator, Dim, Dyn, Matrix1, Matrix2, OMatrix, OVector, U1, U2,
     Vector1, Vector2,
 };
 use estim_core::{
-    Alloc, Gaussian, MeasurementHessian, MeasurementJacobian, MeasurementModel, ProcessHessian,
-    ProcessJacobian, ProcessModel, StateSpace, Unscented, wrap_angle,
+    Alloc, Error, Gaussian, LinearMeasurement, LinearProcess, MeasurementHessian,
+    MeasurementJacobian, MeasurementModel, ProcessHessian, ProcessJacobian, ProcessModel,
+    StateSpace, Unscented, wrap_angle,
 };
 use estim_filters::{
     Ekf, Estimator, GaussianFilter, GaussianSecondOrderEkf, Predict, SecondOrderEkf, Ukf, Update,
@@ -498,4 +500,37 @@ fn ready_made_wrapped_angles_equal_the_hand_written_heading_space() {
         assert_eq!(hand.worst_error.to_bits(), ready.worst_error.to_bits());
         assert_eq!((hand.outside, ready.outside), (0, 0));
     }
+}
+
+/// An attitude error block beyond the state (`AttitudeError::at(0)` on 2 states): its ⊞ and
+/// ⊟ give NaN, so the step that uses them fails with a typed error and leaves the filter
+/// unchanged, in the UKF's prediction (sigma points x ⊞ δ) and the EKF's update (x ⊞ K ν).
+/// Before, ⊞ and ⊟ panicked.
+#[test]
+fn an_attitude_block_beyond_the_state_is_a_typed_error() {
+    let process = LinearProcess {
+        transition: DMatrix::identity(2, 2),
+        input: DMatrix::zeros(2, 1),
+        noise: DMatrix::identity(2, 2) * 0.01,
+    };
+    let measurement = LinearMeasurement {
+        observation: DMatrix::from_row_slice(1, 2, &[1.0, 0.0]),
+        noise: DMatrix::identity(1, 1) * 0.1,
+    };
+    let space = AttitudeError::at(0);
+    let non_finite = |e: &Error| matches!(e, Error::NonFinite { .. });
+
+    let mut ukf = Ukf::new(dyn_prior()).with_state_space(space);
+    let before = ukf.clone();
+    let error = ukf.predict(&process, &DVector::zeros(1), 0.1).unwrap_err();
+    assert!(non_finite(&error), "UKF prediction: {error:?}");
+    assert!(ukf == before, "a failed UKF prediction changed the filter");
+
+    let mut ekf = Ekf::new(dyn_prior()).with_state_space(space);
+    let before = ekf.clone();
+    let error = ekf
+        .update(&measurement, &DVector::from_vec(vec![0.5]))
+        .unwrap_err();
+    assert!(non_finite(&error), "EKF update: {error:?}");
+    assert!(ekf == before, "a failed EKF update changed the filter");
 }

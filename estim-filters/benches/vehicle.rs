@@ -1,35 +1,9 @@
-//! Reproduction of the optimised-build divergence of the analytic EKF (see the module docs of
-//! `estim_filters::update`, "Optimised builds"): `benches/autodiff.rs` cut down to its models,
-//! its trajectory and the EKF lockstep, no criterion. Not built by the workspace.
-//!
-//! To run it: copy it to `estim-filters/benches/slp_repro.rs`, add
-//! `[[bench]] name = "slp_repro" path = "slp_repro.rs" harness = false` to `estim-filters/benches/Cargo.toml`, restore the
-//! inlined `Standard`/`Symmetrized` arms of `update::apply` (as at `df5c075`) and
-//!
-//! ```text
-//! cargo rustc -p estim-filters-benches --profile bench --bench slp_repro            # gap 4.1e-2
-//! cargo rustc ... -- -C no-vectorize-slp                                    # 6.7e-16
-//! cargo rustc ... -- -C codegen-units=1   (or -C opt-level=1, -C opt-level=2) # 6.7e-16
-//! RUSTC_BOOTSTRAP=1 cargo rustc -j1 ... -- -C llvm-args=-debug-counter=slp-vectorized=0-N
-//! ```
-//!
-//! then run `target/release/deps/slp_repro-*`. Non-incremental builds only: with
-//! `CARGO_INCREMENTAL=1` the crate is split into other codegen units and the gap is 6.7e-16.
-//! Bisecting N (`-j1` keeps the counter's order fixed) finds the one SLP tree that breaks it;
-//! in a variant of this file that also logged every step it was N = 580 (0-579: 6.7e-16,
-//! 0-580: 4.7e-2), a tree rooted at the stores of the `Symmetrized` arm's symmetrisation that
-//! includes the product X = −K Pₓᵤᵀ computed before the arms (IR from
-//! `-C llvm-args=-print-after=slp-vectorizer -C llvm-args=-filter-print-funcs=<lockstep>`).
-//!
-//! Other discriminators, all at `df5c075`: the whole build (every dependency) with
-//! `RUSTC_BOOTSTRAP=1 RUSTFLAGS="-Zub-checks=yes -C debug-assertions=on"` in its own target
-//! directory: no check fires and the gap is 6.7e-16 (the assertions change the code, so this
-//! neither shows nor excludes the fault; it finds no precondition violated on the path). The
-//! bench crate alone with those flags: no check fires, gap 4.4e-2; with `-Zmir-opt-level=0`:
-//! 4.4e-2 (not a MIR optimisation of this crate). `valgrind --tool=memcheck` on the autodiff
-//! bench binary with `AUTODIFF_BENCH_STEPS=autodiff_6x4/Ekf_analytic=0` (set-up and lockstep
-//! only): 6,098 errors from 209 contexts (uninitialised values, the first at the finiteness
-//! check of x⁺ in the inlined analytic update) at `df5c075`, 0 errors at `05d49fa`.
+//! The problem of the autodiff bench (`autodiff.rs`), shared with the errata programs
+//! (`errata/`) that reproduce the optimised-build divergence on it: a planar vehicle
+//! x = (p_x, p_y, v, ψ, ω, a), Euler-discretised (p⁺ = p + Δt v (cos ψ, sin ψ), v⁺ = v + Δt a,
+//! ψ⁺ = ψ + Δt ω), seen in range and bearing from two beacons; each model with hand-written
+//! derivatives and its equations written once over a dual scalar (`AutoDiff`); a 64-step
+//! trajectory; and the lockstep of an analytic and an AD filter.
 
 use estim_core::autodiff::{AdScalar, AutoDiff, AutoDiffMeasurement, AutoDiffProcess};
 use estim_core::nalgebra::{Matrix4, Matrix4x6, Matrix6, U4, U6, Vector4, Vector6};
@@ -37,15 +11,18 @@ use estim_core::{
     Gaussian, MeasurementHessian, MeasurementJacobian, MeasurementModel, ProcessHessian,
     ProcessJacobian, ProcessModel, wrap_angle,
 };
-use estim_filters::{Ekf, Predict, Update};
+use estim_filters::{Predict, Update};
 
-const DT: f64 = 0.1;
-const STEPS: usize = 64;
-const BEACONS: [[f64; 2]; 2] = [[-60.0, -30.0], [-60.0, 40.0]];
+/// The time step Δt (s).
+pub const DT: f64 = 0.1;
+/// The trajectory's length.
+pub const STEPS: usize = 64;
+/// The beacons' positions (m).
+pub const BEACONS: [[f64; 2]; 2] = [[-60.0, -30.0], [-60.0, 40.0]];
 
 /// The vehicle, analytic derivatives and the generic form in one type.
 #[derive(Clone, Copy, Debug)]
-struct Car;
+pub struct Car;
 
 impl Car {
     fn noise() -> Matrix6<f64> {
@@ -115,7 +92,7 @@ impl ProcessHessian<f64, U6> for Car {
 
 /// Range and bearing to the two beacons.
 #[derive(Clone, Copy, Debug)]
-struct RangeBearing;
+pub struct RangeBearing;
 
 impl RangeBearing {
     fn noise() -> Matrix4<f64> {
@@ -191,7 +168,7 @@ impl MeasurementHessian<f64, U6, U4> for RangeBearing {
 
 /// A 64-step trajectory (a 25 m circle at 5 m/s, gently accelerating) with deterministic
 /// pseudo-noise, and a prior offset from its start.
-fn trajectory() -> (Vec<Vector4<f64>>, Gaussian<f64, U6>) {
+pub fn trajectory() -> (Vec<Vector4<f64>>, Gaussian<f64, U6>) {
     let start = Vector6::new(25.0, 0.0, 5.0, std::f64::consts::FRAC_PI_2, 0.2, 0.1);
     let mut truth = start;
     let zs = (0..STEPS)
@@ -213,7 +190,7 @@ fn trajectory() -> (Vec<Vector4<f64>>, Gaussian<f64, U6>) {
 }
 
 /// Runs the analytic and AD filters in lockstep; returns the largest relative state gap.
-fn lockstep<F>(mut analytic: F, mut automatic: F, zs: &[Vector4<f64>]) -> f64
+pub fn lockstep<F>(mut analytic: F, mut automatic: F, zs: &[Vector4<f64>]) -> f64
 where
     F: Predict<f64, U6, Car>
         + Predict<f64, U6, AutoDiff<Car>>
@@ -233,10 +210,4 @@ where
         gap = gap.max((a - b).amax() / a.amax().max(1.0));
     }
     gap
-}
-
-fn main() {
-    let (zs, prior) = trajectory();
-    let gap = lockstep(Ekf::new(prior.clone()), Ekf::new(prior), &zs);
-    println!("lockstep EKF analytic vs AD: largest relative gap {gap:.1e}");
 }
