@@ -62,6 +62,9 @@ pub enum Quantity {
     Innovation,
     /// A residual recorded for a consistency check.
     Residual,
+    /// A particle filter's (log-)weights: a NaN weight, or all weights zero (a measurement
+    /// that no particle explains).
+    Weights,
 }
 
 /// A parameter that failed validation.
@@ -205,6 +208,7 @@ impl fmt::Display for Quantity {
             Quantity::TimeStep => "time step",
             Quantity::Innovation => "innovation",
             Quantity::Residual => "residual",
+            Quantity::Weights => "particle weights",
         })
     }
 }

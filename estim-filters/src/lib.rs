@@ -78,6 +78,8 @@ mod iterated;
 pub mod monte_carlo;
 #[cfg(feature = "std")]
 pub mod noise_id;
+#[cfg(feature = "std")]
+pub mod particle;
 #[cfg(feature = "proptest-support")]
 pub mod proptest_support;
 mod report;
