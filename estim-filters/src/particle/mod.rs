@@ -23,6 +23,9 @@
 //! and [`covariance`](Estimator::covariance) are the weighted moments Σ Wᵢ xᵢ and
 //! Σ Wᵢ (xᵢ − x̂)(xᵢ − x̂)ᵀ.
 //!
+//! The auxiliary particle filter ([`ParticleFilter::auxiliary_step`], Pitt & Shephard 1999)
+//! is a combined predict-and-update step on the same cloud.
+//!
 //! **Randomness.** All draws come from counter-based streams named by (seed, step, particle)
 //! ([`ParticleRng`]): the random state is one step counter, part of every snapshot and
 //! checkpoint, and per-particle work does not depend on the visiting order.
@@ -49,6 +52,7 @@
 //! # Ok::<(), estim_core::Error>(())
 //! ```
 
+mod auxiliary;
 mod noise;
 mod resample;
 mod rng;
@@ -59,7 +63,8 @@ use estim_core::rand_distr::{Distribution, StandardNormal};
 use estim_core::{Alloc, Error, Gaussian, Parameter, Real, error::Result, psd_factor};
 
 pub use noise::{
-    AdditiveGaussian, MeasurementLikelihood, NonGaussian, ParticleMeasurement, ParticleProcess, ProcessSampler,
+    AdditiveGaussian, MeasurementLikelihood, NonGaussian, ParticleMeasurement, ParticleProcess,
+    ProcessSampler,
 };
 pub use resample::{ResampleWhen, Resampling, log_sum_exp, resample};
 pub use rng::{ParticleRng, RESAMPLE};
@@ -71,7 +76,8 @@ use resample::to_f64;
 use step::Work;
 
 /// A particle filter: bootstrap (SIR) steps through [`Predict`](crate::Predict) and
-/// [`Update`](crate::Update). See the [module documentation](self).
+/// [`Update`](crate::Update), auxiliary steps through
+/// [`auxiliary_step`](Self::auxiliary_step). See the [module documentation](self).
 #[derive(Clone, Debug)]
 pub struct ParticleFilter<T: Real, N: Dim>
 where
@@ -319,7 +325,9 @@ where
         }
         cloud.mean.fill(T::zero());
         for (i, &lw) in cloud.log_weights.iter().enumerate() {
-            cloud.mean.axpy(lw.exp(), &cloud.particles.column(i), T::one());
+            cloud
+                .mean
+                .axpy(lw.exp(), &cloud.particles.column(i), T::one());
         }
         cloud.covariance.fill(T::zero());
         for (i, &lw) in cloud.log_weights.iter().enumerate() {

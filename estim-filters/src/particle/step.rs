@@ -14,6 +14,9 @@ use crate::gaussian_filter::ensure_time_step;
 use crate::report::{UpdateOutcome, UpdateReport};
 use crate::traits::{Predict, Update};
 
+/// A noise matrix remembered with its factor (and, for R, log det(2πR)/2).
+type Factored<T, D, Extra> = Option<(OMatrix<T, D, D>, OMatrix<T, D, D>, Extra)>;
+
 /// Buffers of the steps (no state: a step overwrites what it reads).
 #[derive(Clone, Debug)]
 pub(crate) struct Work<T: Real, N: Dim>
@@ -27,13 +30,15 @@ where
     /// Normalised weights in f64, for resampling.
     pub(crate) weights: Vec<f64>,
     pub(crate) ancestors: Vec<usize>,
+    /// The auxiliary filter's first-stage log-densities log ηᵢ.
+    pub(crate) log_eta: Vec<T>,
     pub(crate) scratch: Vec<f64>,
     pub(crate) x: OVector<T, N>,
     pub(crate) y: OVector<T, N>,
     pub(crate) normals: OVector<T, N>,
     pub(crate) q: OMatrix<T, N, N>,
     /// The last Q seen and its PSD factor (Q is factorised again only when it changes).
-    pub(crate) q_cache: Option<(OMatrix<T, N, N>, OMatrix<T, N, N>)>,
+    pub(crate) q_cache: Factored<T, N, ()>,
 }
 
 impl<T: Real, N: Dim> Work<T, N>
@@ -46,6 +51,7 @@ where
             log_w: vec![T::zero(); count],
             weights: vec![0.0; count],
             ancestors: (0..count).collect(),
+            log_eta: Vec::with_capacity(count),
             scratch: Vec::with_capacity(2 * count),
             x: OVector::zeros_generic(n, U1),
             y: OVector::zeros_generic(n, U1),
@@ -74,9 +80,16 @@ where
     ) {
         if resample {
             self.weights.clear();
-            self.weights.extend(log_w.iter().map(|&lw| to_f64(lw).exp()));
+            self.weights
+                .extend(log_w.iter().map(|&lw| to_f64(lw).exp()));
             let mut rng = ParticleRng::stream(seed, step, RESAMPLE);
-            resample_with(scheme, &self.weights, &mut rng, &mut self.ancestors, &mut self.scratch);
+            resample_with(
+                scheme,
+                &self.weights,
+                &mut rng,
+                &mut self.ancestors,
+                &mut self.scratch,
+            );
         } else {
             for (i, a) in self.ancestors.iter_mut().enumerate() {
                 *a = i;
@@ -109,7 +122,7 @@ where
             model.transition_into(x, input, dt, y);
             model.process_noise_into(x, input, dt, q);
             let factor = match q_cache {
-                Some((cached, factor)) if cached == q => factor,
+                Some((cached, factor, ())) if cached == q => factor,
                 _ => {
                     ensure_finite(q, Stage::Prediction, Quantity::ProcessNoise)?;
                     let factor = psd_factor(q, Stage::Prediction).map_err(|_| {
@@ -118,7 +131,7 @@ where
                             quantity: Quantity::ProcessNoise,
                         }
                     })?;
-                    &mut q_cache.insert((q.clone(), factor)).1
+                    &mut q_cache.insert((q.clone(), factor, ())).1
                 }
             };
             fill_normals(normals, &mut rng);
@@ -151,7 +164,7 @@ where
     r: OVector<T, M>,
     noise: OMatrix<T, M, M>,
     /// The last R, its Cholesky factor L and log det(2πR)/2.
-    cache: Option<(OMatrix<T, M, M>, OMatrix<T, M, M>, T)>,
+    cache: Factored<T, M, T>,
     solved: OVector<T, M>,
     mean: OVector<T, M>,
     second: OMatrix<T, M, M>,
@@ -191,7 +204,13 @@ where
         let model = sensor.model();
         self.x.copy_from(&cloud.column(i));
         model.measure_into(&self.x, &mut self.h);
-        ensure_shape(&self.h, z.nrows(), 1, Stage::Update, Quantity::FunctionValue)?;
+        ensure_shape(
+            &self.h,
+            z.nrows(),
+            1,
+            Stage::Update,
+            Quantity::FunctionValue,
+        )?;
         model.residual_into(z, &self.h, &mut self.r);
         model.measurement_noise_into(&self.x, &mut self.noise);
         let custom = sensor.log_likelihood(z, &self.x);
@@ -320,8 +339,13 @@ where
         let ess = effective_sample_size(&self.cloud.log_weights);
         let resample = self.when.fires(ess, count);
         let step = self.cloud.step;
-        self.work
-            .ancestors_from(&self.cloud.log_weights, resample, self.scheme, self.seed, step);
+        self.work.ancestors_from(
+            &self.cloud.log_weights,
+            resample,
+            self.scheme,
+            self.seed,
+            step,
+        );
         for j in 0..count {
             let a = self.work.ancestors[j];
             self.work.x.copy_from(&self.cloud.particles.column(a));
