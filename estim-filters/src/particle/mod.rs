@@ -53,6 +53,8 @@
 //! ```
 
 mod auxiliary;
+#[cfg(feature = "serde")]
+mod checkpoint;
 mod noise;
 mod resample;
 mod rng;
@@ -69,7 +71,7 @@ pub use noise::{
 pub use resample::{ResampleWhen, Resampling, log_sum_exp, resample};
 pub use rng::{ParticleRng, RESAMPLE};
 
-use crate::traits::Estimator;
+use crate::traits::{Estimator, Rollback};
 use resample::effective_sample_size;
 #[cfg(test)]
 use resample::to_f64;
@@ -271,24 +273,6 @@ where
         self.when
     }
 
-    /// Everything the steps change, to [`restore`](Self::restore) later.
-    pub fn snapshot(&self) -> ParticleSnapshot<T, N> {
-        self.cloud.clone()
-    }
-
-    /// [`snapshot`](Self::snapshot) into `snapshot`, reusing its buffers.
-    pub fn snapshot_into(&self, snapshot: &mut ParticleSnapshot<T, N>) {
-        snapshot.copy_from(&self.cloud);
-    }
-
-    /// Puts back a snapshot of this filter (or a clone): every later step gives the same bits
-    /// as it would have at the time of the snapshot.
-    pub fn restore(&mut self, snapshot: &ParticleSnapshot<T, N>) {
-        self.cloud.copy_from(snapshot);
-        let (n, _) = self.cloud.mean.shape_generic();
-        self.work.fit(n, self.count());
-    }
-
     /// Draws the cloud from `prior` with factor S (S Sᵀ = P) from the streams (seed, 0, i);
     /// equal weights, step 1, likelihood 0.
     fn draw(&mut self, prior: &Gaussian<T, N>, factor: &OMatrix<T, N, N>) {
@@ -359,6 +343,52 @@ fn check_trigger(when: ResampleWhen) -> Result<()> {
             value: f,
         }),
         _ => Ok(()),
+    }
+}
+
+/// The snapshot is the cloud, its log-weights, the random step counter (so a restore replays
+/// the same random bits), the weighted moments and the running log-likelihood; not the
+/// configuration (seed, scheme, trigger).
+///
+/// ```
+/// use estim_core::nalgebra::{Matrix1, Vector1};
+/// use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+/// use estim_filters::particle::ParticleFilter;
+/// use estim_filters::{Predict, Rollback, Update};
+///
+/// let process = LinearProcess::without_input(Matrix1::new(1.0f64), Matrix1::new(0.1));
+/// let sensor = LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(0.5) };
+/// let prior = Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0))?;
+/// let mut pf = ParticleFilter::new(prior, 100, 3)?;
+/// let saved = pf.snapshot();
+/// pf.predict(&process, &(), 1.0)?;
+/// pf.update(&sensor, &Vector1::new(0.4))?;
+/// let first = pf.clone();
+/// pf.restore(&saved);
+/// pf.predict(&process, &(), 1.0)?;
+/// pf.update(&sensor, &Vector1::new(0.4))?;
+/// assert_eq!(pf, first); // the same bits, resampling and noise included
+/// # Ok::<(), estim_core::Error>(())
+/// ```
+impl<T: Real, N: Dim> Rollback for ParticleFilter<T, N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Snapshot = ParticleSnapshot<T, N>;
+
+    fn snapshot(&self) -> ParticleSnapshot<T, N> {
+        self.cloud.clone()
+    }
+
+    /// Reuses the snapshot's buffers when the shapes agree.
+    fn snapshot_into(&self, snapshot: &mut ParticleSnapshot<T, N>) {
+        snapshot.copy_from(&self.cloud);
+    }
+
+    fn restore(&mut self, snapshot: &ParticleSnapshot<T, N>) {
+        self.cloud.copy_from(snapshot);
+        let (n, _) = self.cloud.mean.shape_generic();
+        self.work.fit(n, self.count());
     }
 }
 

@@ -13,7 +13,7 @@ use estim_filters::particle::{
     MeasurementLikelihood, NonGaussian, ParticleFilter, ParticleRng, ResampleWhen, Resampling,
     resample,
 };
-use estim_filters::{Estimator, KalmanFilter, Predict, Update};
+use estim_filters::{Estimator, KalmanFilter, Predict, Rollback, Update};
 
 use crate::common::{normal, rng};
 
@@ -543,4 +543,88 @@ fn auxiliary_step_is_atomic_and_reproducible() {
     apf.auxiliary_step(&process, &(), 1.0, &sensor, &Vector1::new(-0.4))
         .unwrap();
     assert_eq!(apf, after);
+}
+
+/// Through the estimator contract: the batch function runs a particle filter bit-identically
+/// to a hand loop, and a failing step restores the whole cloud (not just a Gaussian).
+#[test]
+fn filter_sequence_runs_a_particle_filter_and_restores_the_cloud() {
+    let (process, sensor, prior) = ar1();
+    let zs = readings(6, 21);
+    let mut measurements: Vec<Option<Vector1<f64>>> = vec![None];
+    measurements.extend(zs.iter().map(|&z| Some(Vector1::new(z))));
+    let inputs = vec![(); zs.len()];
+    let start = ParticleFilter::new(prior, 300, 17).unwrap();
+    let mut batch = start.clone();
+    let run =
+        estim_filters::filter_sequence(&mut batch, &process, &inputs, 1.0, &sensor, &measurements)
+            .unwrap();
+    let mut hand = start.clone();
+    particle(&zs, &mut hand);
+    assert_eq!(batch, hand);
+    assert_eq!(
+        run.log_likelihood.to_bits(),
+        hand.log_likelihood().to_bits()
+    );
+    assert_eq!(run.estimates.last().unwrap().mean(), hand.state());
+
+    measurements[4] = Some(Vector1::new(f64::NAN));
+    let mut failing = start.clone();
+    assert!(
+        estim_filters::filter_sequence(
+            &mut failing,
+            &process,
+            &inputs,
+            1.0,
+            &sensor,
+            &measurements
+        )
+        .is_err()
+    );
+    assert_eq!(failing, start);
+}
+
+/// A checkpoint resumes bit-identically (serde_json with `float_roundtrip`), and a corrupt one
+/// is an error, not a panic: unnormalised weights, a weight count that disagrees with the
+/// particles, zero particles, a non-number particle, an invalid trigger, a state of the wrong
+/// dimension.
+#[cfg(feature = "serde")]
+#[test]
+fn checkpoints_resume_bit_identically_and_reject_corrupt_input() {
+    use estim_core::nalgebra::Dyn;
+    let (process, sensor, prior) = ar1();
+    let zs = readings(8, 4);
+    let mut pf = ParticleFilter::new(prior.clone(), 64, 2)
+        .unwrap()
+        .with_resampling(Resampling::Residual);
+    particle(&zs[..4], &mut pf);
+    let saved = serde_json::to_value(&pf).unwrap();
+    let mut resumed: ParticleFilter<f64, U1> = serde_json::from_value(saved.clone()).unwrap();
+    assert_eq!(resumed, pf);
+    particle(&zs[4..], &mut pf);
+    particle(&zs[4..], &mut resumed);
+    assert_eq!(resumed, pf);
+    let _ = (process, sensor);
+
+    let corrupt = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut v = saved.clone();
+        edit(&mut v);
+        serde_json::from_value::<ParticleFilter<f64, U1>>(v).is_err()
+    };
+    assert!(corrupt(&|v| v["log_weights"][3] = serde_json::json!(0.5)));
+    assert!(corrupt(&|v| {
+        let w = v["log_weights"].as_array_mut().unwrap();
+        w.pop();
+    }));
+    assert!(corrupt(&|v| v["log_weights"] = serde_json::json!([])));
+    assert!(corrupt(&|v| v["particles"][0][5] = serde_json::json!(null)));
+    assert!(corrupt(
+        &|v| v["trigger"] = serde_json::json!({ "EssBelow": 2.0 })
+    ));
+    // The wrong state dimension for a dynamic-size filter: a shape error, not a panic.
+    let dynamic: ParticleFilter<f64, Dyn> = ParticleFilter::new(prior.into_dyn(), 8, 1).unwrap();
+    let mut v = serde_json::to_value(&dynamic).unwrap();
+    v["state"] = serde_json::json!([[0.0, 1.0], 2, null]);
+    let e = serde_json::from_value::<ParticleFilter<f64, Dyn>>(v).unwrap_err();
+    assert!(e.to_string().contains("shape"), "{e}");
 }
