@@ -683,3 +683,57 @@ fn fusion_driver_replays_a_late_reading_bit_identically() {
     assert_eq!(late.filter(), ordered.filter());
     assert_ne!(late.filter(), &pf);
 }
+
+/// Runtime sizes and f32: a 2-state filter with `Dyn` dimensions follows the static one (the
+/// same streams, the same operations: equal to round-off), and an f32 filter the f64 one (the
+/// normals are drawn in f64 and rounded, so the clouds differ only by f32 rounding: within
+/// 10⁻⁴ for states of order 1, ~10³ f32 ulps, room for the sums over 300 weights; a resampling
+/// decision could flip on a near-tie of cumulative weights, which these seeds do not hit).
+#[test]
+fn runtime_sizes_and_f32_follow_the_static_f64_filter() {
+    use estim_core::nalgebra::{DMatrix, DVector, Dyn, Matrix1x2, Matrix2, U2, Vector2};
+    let f = Matrix2::new(1.0, 0.1, 0.0, 1.0);
+    let q = Matrix2::new(1e-3, 0.0, 0.0, 1e-2);
+    let h = Matrix1x2::new(1.0, 0.0);
+    let process = LinearProcess::without_input(f, q);
+    let sensor = LinearMeasurement {
+        observation: h,
+        noise: Matrix1::new(0.1),
+    };
+    let prior = Gaussian::new(Vector2::new(0.0, 1.0), Matrix2::identity()).unwrap();
+    let zs = [0.12, 0.18, 0.33];
+    let mut fixed = ParticleFilter::new(prior.clone(), 300, 12).unwrap();
+    let dyn_process = LinearProcess::without_input(
+        DMatrix::from_column_slice(2, 2, f.as_slice()),
+        DMatrix::from_column_slice(2, 2, q.as_slice()),
+    );
+    let dyn_sensor = LinearMeasurement {
+        observation: DMatrix::from_column_slice(1, 2, h.as_slice()),
+        noise: DMatrix::from_element(1, 1, 0.1),
+    };
+    let mut dynamic: ParticleFilter<f64, Dyn> =
+        ParticleFilter::new(prior.clone().into_dyn(), 300, 12).unwrap();
+    let process32 = LinearProcess::without_input(f.cast::<f32>(), q.cast::<f32>());
+    let sensor32 = LinearMeasurement {
+        observation: h.cast::<f32>(),
+        noise: Matrix1::new(0.1f32),
+    };
+    let prior32 = Gaussian::new(Vector2::new(0.0f32, 1.0), Matrix2::identity()).unwrap();
+    let mut single: ParticleFilter<f32, U2> = ParticleFilter::new(prior32, 300, 12).unwrap();
+    for &z in &zs {
+        fixed.predict(&process, &(), 1.0).unwrap();
+        fixed.update(&sensor, &Vector1::new(z)).unwrap();
+        dynamic.predict(&dyn_process, &(), 1.0).unwrap();
+        dynamic
+            .update(&dyn_sensor, &DVector::from_element(1, z))
+            .unwrap();
+        single.predict(&process32, &(), 1.0).unwrap();
+        single.update(&sensor32, &Vector1::new(z as f32)).unwrap();
+    }
+    let spread = fixed.covariance()[(0, 0)].sqrt();
+    for i in 0..2 {
+        assert!((dynamic.state()[i] - fixed.state()[i]).abs() <= 1e-12 * spread);
+        assert!((single.state()[i] as f64 - fixed.state()[i]).abs() <= 1e-4);
+    }
+    assert_eq!(dynamic.particles().shape(), (2, 300));
+}
