@@ -34,7 +34,7 @@ where
 {
     /// One auxiliary-particle-filter step with Gaussian noise from the models' Q and R:
     /// predicts through `process` and updates with `sensor`'s reading `z` (see the
-    /// [module documentation](self) for the math). The report's innovation moments are those
+    /// [module documentation](crate::particle) and Pitt & Shephard 1999 for the math). The report's innovation moments are those
     /// of the predictive cloud (the propagated particles reweighted by 1/η_aⱼ), its
     /// log-likelihood Δℓ. On error (as for a prediction or an update) the filter is unchanged.
     ///

@@ -4,7 +4,9 @@
 //! log Wᵢ (Σ Wᵢ = 1), stored as one n × N matrix (a column per particle). Changing filter is
 //! changing the constructor: any [`ProcessModel`](estim_core::ProcessModel) /
 //! [`MeasurementModel`](estim_core::MeasurementModel) runs with Gaussian noise, and a model
-//! wrapped in [`NonGaussian`] uses its own [`ProcessSampler`] / [`MeasurementLikelihood`].
+//! wrapped in [`NonGaussian`] uses its own [`ProcessSampler`] / [`MeasurementLikelihood`]
+//! ([`NonGaussianFilter`] takes such models through the step traits, for the fusion driver and
+//! the batch functions).
 //!
 //! **Bootstrap (SIR) step** (Gordon, Salmond & Smith 1993; Chopin & Papaspiliopoulos 2020,
 //! ch. 10), with resampling before each propagation:
@@ -24,7 +26,20 @@
 //! Σ Wᵢ (xᵢ − x̂)(xᵢ − x̂)ᵀ.
 //!
 //! The auxiliary particle filter ([`ParticleFilter::auxiliary_step`], Pitt & Shephard 1999)
-//! is a combined predict-and-update step on the same cloud.
+//! is a combined predict-and-update step on the same cloud:
+//!
+//! ```text
+//! first stage:   log ηᵢ = log p(z | μᵢ), μᵢ = f(xᵢ, u, Δt);  log λᵢ = log Wᵢ + log ηᵢ;  L₁ = log Σ λᵢ
+//! resample:      aⱼ ~ λ (always)
+//! propagate:     xⱼ ~ p(· | x_aⱼ, u, Δt)
+//! second stage:  log wⱼ = log p(z | xⱼ) − log η_aⱼ;  L₂ = log Σ wⱼ
+//! likelihood:    Δℓ = L₁ + L₂ − log N        (exp Δℓ unbiased for p(z | z₁..ₖ₋₁))
+//! ```
+//!
+//! With η from R alone, narrower than the true predictive N(h(μ), R + H Q Hᵀ), the weights
+//! g/η are heavy-tailed when the sensor is sharp relative to Q: the estimate stays unbiased but
+//! its variance grows (seen in the tests at R = Q/5); the bootstrap filter is then the safer
+//! choice.
 //!
 //! **Randomness.** All draws come from counter-based streams named by (seed, step, particle)
 //! ([`ParticleRng`]): the random state is one step counter, part of every snapshot and
@@ -56,6 +71,7 @@ mod auxiliary;
 #[cfg(feature = "serde")]
 mod checkpoint;
 mod noise;
+mod own_noise;
 mod resample;
 mod rng;
 mod step;
@@ -68,6 +84,7 @@ pub use noise::{
     AdditiveGaussian, MeasurementLikelihood, NonGaussian, ParticleMeasurement, ParticleProcess,
     ProcessSampler,
 };
+pub use own_noise::NonGaussianFilter;
 pub use resample::{ResampleWhen, Resampling, log_sum_exp, resample};
 pub use rng::{ParticleRng, RESAMPLE};
 

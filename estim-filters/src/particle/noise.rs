@@ -10,7 +10,9 @@
 //! Kalman filters runs unchanged) and [`NonGaussian`] for a model with the opt-in capability
 //! [`ProcessSampler`] / [`MeasurementLikelihood`] (through
 //! [`ParticleFilter::predict_with`](super::ParticleFilter::predict_with) and
-//! [`update_with`](super::ParticleFilter::update_with)). The opt-in traits extend the model
+//! [`update_with`](super::ParticleFilter::update_with), or through the step traits of
+//! [`NonGaussianFilter`](super::NonGaussianFilter), a second filter type for which the step
+//! impls over the opt-in traits do not overlap). The opt-in traits extend the model
 //! traits, so one model runs in a UKF (with its Gaussian approximation Q, R) and in a particle
 //! filter with its true noise; the wrapper at the call site is the only difference.
 
@@ -243,6 +245,53 @@ where
     #[inline(always)]
     fn model(&self) -> &H {
         &self.0
+    }
+
+    #[inline(always)]
+    fn log_likelihood(&self, z: &OVector<T, M>, x: &OVector<T, N>) -> Option<T> {
+        Some(self.0.log_likelihood(z, x))
+    }
+}
+
+/// A borrowed model with its own noise (what [`NonGaussianFilter`](super::NonGaussianFilter)'s
+/// step impls pass on).
+pub(crate) struct Own<'a, M: ?Sized>(pub(crate) &'a M);
+
+impl<T: Real, N: Dim, P: ProcessSampler<T, N> + ?Sized> ParticleProcess<T, N> for Own<'_, P>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Model = P;
+
+    #[inline(always)]
+    fn model(&self) -> &P {
+        self.0
+    }
+
+    #[inline(always)]
+    fn sample_into(
+        &self,
+        x: &OVector<T, N>,
+        u: &P::Input,
+        dt: T,
+        rng: &mut ParticleRng,
+        out: &mut OVector<T, N>,
+    ) -> bool {
+        *out = self.0.sample_transition(x, u, dt, rng);
+        true
+    }
+}
+
+impl<T: Real, N: Dim, M: Dim, H: MeasurementLikelihood<T, N, M> + ?Sized>
+    ParticleMeasurement<T, N, M> for Own<'_, H>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    type Model = H;
+
+    #[inline(always)]
+    fn model(&self) -> &H {
+        self.0
     }
 
     #[inline(always)]
