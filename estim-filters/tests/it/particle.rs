@@ -845,3 +845,40 @@ fn non_gaussian_models_give_the_exact_posterior_and_run_through_the_step_traits(
         hand.log_likelihood().to_bits()
     );
 }
+
+/// Static sizes: after construction a bootstrap step, an auxiliary step and a snapshot round
+/// trip allocate nothing (the cloud, weights, ancestors and resampling scratch are the filter's
+/// own buffers), for every resampling scheme.
+#[test]
+fn static_size_steps_allocate_nothing() {
+    use crate::counting::allocations_during;
+    let (process, sensor, prior) = ar1();
+    for scheme in [
+        Resampling::Multinomial,
+        Resampling::Stratified,
+        Resampling::Systematic,
+        Resampling::Residual,
+    ] {
+        let mut pf = ParticleFilter::new(prior.clone(), 256, 1)
+            .unwrap()
+            .with_resampling(scheme)
+            .with_trigger(ResampleWhen::Always)
+            .unwrap();
+        let mut report = estim_filters::UpdateReport::zeros(U1);
+        let mut snapshot = pf.snapshot();
+        // One warm-up step: the Q factor cache is filled at the first prediction.
+        pf.predict(&process, &(), 1.0).unwrap();
+        let count = allocations_during(|| {
+            for k in 0..3 {
+                pf.predict(&process, &(), 1.0).unwrap();
+                pf.update_into(&sensor, &Vector1::new(0.1 * k as f64), &mut report)
+                    .unwrap();
+                pf.auxiliary_step(&process, &(), 1.0, &sensor, &Vector1::new(0.2))
+                    .unwrap();
+                pf.snapshot_into(&mut snapshot);
+                pf.restore(&snapshot);
+            }
+        });
+        assert_eq!(count, 0, "{scheme:?}");
+    }
+}
