@@ -301,7 +301,11 @@ where
 {
     /// The bootstrap prediction with any [`ParticleProcess`]: a
     /// [`ProcessModel`] (Gaussian noise from Q) or a [`NonGaussian`](super::NonGaussian)
-    /// sampler. Resamples first if the trigger fires. On error the filter is unchanged.
+    /// sampler. Resamples first if the trigger fires. On the Gaussian path Q is evaluated at
+    /// each particle (so a state-dependent Q is exact, not taken at the mean) and factorised
+    /// again only when it differs from the last one factorised. On error (Δt negative or not
+    /// finite, Q not finite or not PSD, f or the sampler giving a non-finite state) the filter
+    /// is unchanged.
     ///
     /// ```
     /// use estim_core::nalgebra::{Matrix1, Vector1, U1};
@@ -365,9 +369,35 @@ where
 
     /// The bootstrap update with any [`ParticleMeasurement`]: a [`MeasurementModel`]
     /// (weights from N(z ⊖ h(x); 0, R)) or a [`NonGaussian`](super::NonGaussian) likelihood.
-    /// The report holds the innovation moments over the predicted cloud, their NIS, and the
-    /// step's log-likelihood estimate Δℓ = log Σ Wᵢ p(z | xᵢ). On error (non-finite z, a
-    /// NaN log-density, every weight zero) the filter is unchanged.
+    /// The report holds the innovation moments over the predicted cloud (ν = Σ Wᵢ (z ⊖ h(xᵢ)),
+    /// S = the weighted covariance of those residuals + Σ Wᵢ R(xᵢ)), the NIS νᵀ S⁻¹ ν (+∞ if S
+    /// is singular, possible only with a [`NonGaussian`](super::NonGaussian) model whose R is
+    /// singular), and the step's log-likelihood estimate Δℓ = log Σ Wᵢ p(z | xᵢ); the outcome
+    /// is always [`Applied`](crate::UpdateOutcome::Applied) (no gate). Runtime-size
+    /// measurements allocate their per-update buffers. On error (non-finite z, h(x) of the
+    /// wrong length, R not finite or, on the Gaussian path, not positive definite, a NaN or
+    /// +∞ log-density, every weight zero) the filter is unchanged.
+    ///
+    /// ```
+    /// use estim_core::nalgebra::{Matrix1, Vector1};
+    /// use estim_core::{Error, Gaussian, LinearMeasurement, Quantity};
+    /// use estim_filters::particle::{AdditiveGaussian, ParticleFilter};
+    ///
+    /// let model = LinearMeasurement { observation: Matrix1::new(1.0f64), noise: Matrix1::new(1e-4) };
+    /// let sensor = AdditiveGaussian(&model); // what `Update::update` passes for any model
+    /// let mut pf = ParticleFilter::new(Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0))?, 500, 1)?;
+    /// let report = pf.update_with(&sensor, &Vector1::new(0.5))?;
+    /// assert!(report.log_likelihood < 0.0 && pf.effective_sample_size() < 50.0);
+    /// // A reading 10⁴ σ away: exp would underflow every weight to 0, the log-weights do not,
+    /// // so the cloud survives (on its nearest particles).
+    /// assert!(pf.update_with(&sensor, &Vector1::new(100.0)).is_ok());
+    /// // A NaN reading is refused and changes nothing.
+    /// let before = pf.clone();
+    /// let e = pf.update_with(&sensor, &Vector1::new(f64::NAN));
+    /// assert!(matches!(e, Err(Error::NonFinite { quantity: Quantity::Measurement, .. })));
+    /// assert_eq!(pf, before);
+    /// # Ok::<(), estim_core::Error>(())
+    /// ```
     pub fn update_with<M: Dim, H: ParticleMeasurement<T, N, M> + ?Sized>(
         &mut self,
         sensor: &H,
