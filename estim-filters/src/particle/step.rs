@@ -124,6 +124,8 @@ where
             let factor = match q_cache {
                 Some((cached, factor, ())) if cached == q => factor,
                 _ => {
+                    let n = x.nrows();
+                    ensure_shape(q, n, n, Stage::Prediction, Quantity::ProcessNoise)?;
                     ensure_finite(q, Stage::Prediction, Quantity::ProcessNoise)?;
                     let factor = psd_factor(q, Stage::Prediction).map_err(|_| {
                         Error::NotPositiveSemiDefinite {
@@ -220,7 +222,9 @@ where
                 let (_, factor, half_log_det) = match &self.cache {
                     Some((cached, ..)) if *cached == self.noise => self.cache.as_ref().unwrap(),
                     _ => {
-                        ensure_finite(&self.noise, Stage::Update, Quantity::MeasurementNoise)?;
+                        let (m, stage) = (z.nrows(), Stage::Update);
+                        ensure_shape(&self.noise, m, m, stage, Quantity::MeasurementNoise)?;
+                        ensure_finite(&self.noise, stage, Quantity::MeasurementNoise)?;
                         let not_pd = Error::NotPositiveDefinite {
                             stage: Stage::Update,
                             quantity: Quantity::MeasurementNoise,

@@ -882,3 +882,49 @@ fn static_size_steps_allocate_nothing() {
         assert_eq!(count, 0, "{scheme:?}");
     }
 }
+
+/// Runtime sizes: a model whose Q, R or h(x) has the wrong shape is a typed error (not a
+/// panic in a product), and the filter is unchanged.
+#[test]
+fn runtime_shape_errors_are_typed_and_atomic() {
+    use estim_core::nalgebra::{DMatrix, DVector, Dyn};
+    let prior = Gaussian::new(DVector::from_element(2, 0.0), DMatrix::identity(2, 2)).unwrap();
+    let mut pf: ParticleFilter<f64, Dyn> = ParticleFilter::new(prior, 50, 1).unwrap();
+    let before = pf.clone();
+    let wrong_q = LinearProcess::without_input(DMatrix::identity(2, 2), DMatrix::identity(3, 3));
+    let e = pf.predict(&wrong_q, &(), 1.0);
+    assert!(
+        matches!(
+            e,
+            Err(Error::DimensionMismatch {
+                quantity: Quantity::ProcessNoise,
+                ..
+            })
+        ),
+        "{e:?}"
+    );
+    assert_eq!(pf, before);
+    let wrong_r = LinearMeasurement {
+        observation: DMatrix::from_row_slice(1, 2, &[1.0, 0.0]),
+        noise: DMatrix::identity(2, 2),
+    };
+    let e = pf.update(&wrong_r, &DVector::from_element(1, 0.0));
+    assert!(
+        matches!(
+            e,
+            Err(Error::DimensionMismatch {
+                quantity: Quantity::MeasurementNoise,
+                ..
+            })
+        ),
+        "{e:?}"
+    );
+    assert_eq!(pf, before);
+    let wrong_h = LinearMeasurement {
+        observation: DMatrix::from_row_slice(1, 2, &[1.0, 0.0]),
+        noise: DMatrix::identity(1, 1),
+    };
+    let e = pf.update(&wrong_h, &DVector::from_element(2, 0.0));
+    assert!(matches!(e, Err(Error::DimensionMismatch { .. })), "{e:?}");
+    assert_eq!(pf, before);
+}
