@@ -66,6 +66,9 @@ pub enum Quantity {
     ModeProbabilities,
     /// The Markov transition matrix Π of a multiple-model estimator.
     TransitionMatrix,
+    /// A particle filter's (log-)weights: a NaN weight, or all weights zero (a measurement
+    /// that no particle explains).
+    Weights,
 }
 
 /// A parameter that failed validation.
@@ -216,6 +219,7 @@ impl fmt::Display for Quantity {
             Quantity::Residual => "residual",
             Quantity::ModeProbabilities => "mode probabilities",
             Quantity::TransitionMatrix => "transition matrix",
+            Quantity::Weights => "particle weights",
         })
     }
 }

@@ -12,6 +12,7 @@
 //! | [`Iekf`] | linearised, update iterated (Gauss–Newton) | [`ProcessJacobian`](estim_core::ProcessJacobian) | [`MeasurementJacobian`](estim_core::MeasurementJacobian) |
 //! | [`FadingMemoryRls`] | — (update only) | — | [`MeasurementJacobian`](estim_core::MeasurementJacobian) |
 //! | [`SrKalmanFilter`], [`SrEkf`], [`SrUkf`] | as KF, EKF, UKF, on the Cholesky factor ([`square_root`]) | as KF, EKF, UKF | as KF, EKF, UKF |
+//! | [`ParticleFilter`](particle::ParticleFilter) | sampled (bootstrap SIR, auxiliary) | [`ProcessModel`](estim_core::ProcessModel), or a [`ProcessSampler`](particle::ProcessSampler) | [`MeasurementModel`](estim_core::MeasurementModel), or a [`MeasurementLikelihood`](particle::MeasurementLikelihood) |
 //!
 //! The Kalman-family filters are one type, [`GaussianFilter`], parameterised by the
 //! [`MomentPropagator`](estim_core::MomentPropagator); they differ only in how the predicted
@@ -88,6 +89,8 @@ mod iterated;
 pub mod monte_carlo;
 #[cfg(feature = "std")]
 pub mod noise_id;
+#[cfg(feature = "std")]
+pub mod particle;
 #[cfg(feature = "proptest-support")]
 pub mod proptest_support;
 mod report;

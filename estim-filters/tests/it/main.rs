@@ -41,6 +41,7 @@ mod noise_id_em;
 #[cfg(feature = "likelihood")]
 mod noise_id_likelihood;
 mod noise_policy;
+mod particle;
 mod rls;
 mod second_order;
 #[cfg(feature = "serde")]
