@@ -38,11 +38,16 @@
 //!   gain and two vectors once per call, and two n × n temporaries per step (the covariance
 //!   expression). [`Rts::smooth_with_cross_covariances`] adds the `len()` returned matrices.
 //! - [`filter_sequence`] / [`smooth_sequence`]: the [`Sequence`]'s vectors (reserved once),
-//!   one copy of the starting estimate (to put it back on an error), and what the filter's own
-//!   steps allocate; the smoothing forms add an [`Rts`] record of the whole sequence.
+//!   one [`Rollback`] snapshot of the filter at the start (put back on an error), and what
+//!   the filter's own steps allocate; the smoothing forms add an [`Rts`] record of the whole sequence.
 //!
-//! Nothing the caller passes is modified on an error: the record, the filter (its estimate is
-//! restored by the sequence functions) and the data are as before the call.
+//! Nothing the caller passes is modified on an error: the record, the filter (restored from
+//! its snapshot by the sequence functions, bit for bit) and the data are as before the call.
+//!
+//! A square-root run is smoothed in this covariance form: the backward pass factorises
+//! P⁻ = S⁻S⁻ᵀ, so it does not inherit the square-root filter's robustness (an `f32` or
+//! ill-conditioned run the filter survives can still fail here with
+//! [`Error::NotPositiveDefinite`] at its step).
 //!
 //! ```
 //! use estim_filters::{KalmanFilter, Update};
@@ -462,7 +467,7 @@ where
     N: Dim,
     M: Dim,
     F: PredictCross<T, N, P> + Update<T, N, M, H> + Rollback,
-    P: ProcessInput<T, N>,
+    P: ProcessInput<T, N> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
     smoothed(filter, process, inputs, dt, measurement, measurements, None)
@@ -506,7 +511,7 @@ where
     N: Dim,
     M: Dim,
     F: PredictCross<T, N, P> + Update<T, N, M, H> + Rollback,
-    P: ProcessInput<T, N>,
+    P: ProcessInput<T, N> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
     let mut cross = Vec::with_capacity(inputs.len());
@@ -538,7 +543,7 @@ where
     N: Dim,
     M: Dim,
     F: PredictCross<T, N, P> + Update<T, N, M, H> + Rollback,
-    P: ProcessInput<T, N>,
+    P: ProcessInput<T, N> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
     restoring_on_error(filter, |filter| {

@@ -62,7 +62,7 @@ struct Component<T, F> {
     weight: T,
 }
 
-/// The GPB2 estimator over a `Vec` of mode filters (see the [module docs](self)).
+/// The GPB2 estimator over a `Vec` of mode filters (see [`imm`](crate::imm)).
 #[derive(Clone, Debug)]
 pub struct Gpb2<T: Real, N: Dim, F>
 where

@@ -16,11 +16,13 @@ use super::{Estimate, finite, innovation_into, noise_factor, statistics};
 use crate::report::UpdateReport;
 
 /// The sigma-point deviations of y = g(x) at (x̂, S): g(x̂), Dₚ = [g(x̂ + γSⱼ) ⊖ g(x̂)]ⱼ,
-/// Dₘ = [g(x̂ − γSⱼ) ⊖ g(x̂)]ⱼ (m × n each), d̄ = w Σ dᵢ and w = 1/(2c).
+/// Dₘ = [g(x̂ − γSⱼ) ⊖ g(x̂)]ⱼ (m × n each), d̄ = w Σ dᵢ and w = 1/(2c), with the offsets
+/// γS (γ = √c) they were taken at.
 struct Deviations<T: Real, N: Dim, M: Dim>
 where
     DefaultAllocator: Alloc<N, M>,
 {
+    offsets: OMatrix<T, N, N>,
     value: OVector<T, M>,
     plus: OMatrix<T, M, N>,
     minus: OMatrix<T, M, N>,
@@ -79,6 +81,7 @@ where
     }
     mean *= weight;
     Ok(Deviations {
+        offsets,
         value,
         plus,
         minus,
@@ -149,9 +152,9 @@ where
     finite(&mean, stage, Quantity::Mean)?;
     if let Some(cross) = cross {
         // C = Σ wᵢ (χᵢ − x̂)(yᵢ − ȳ)ᵀ over χ = x̂ ± γSⱼ, γ = √c, w = 1/(2c): the constant ȳ
-        // cancels between the ± pairs, leaving w γ S (Dₚ − Dₘ)ᵀ.
-        let gamma_w = dev.weight * (T::one() / (dev.weight + dev.weight)).sqrt();
-        cross.copy_from(&(factor * (&dev.plus - &dev.minus).transpose() * gamma_w));
+        // cancels between the ± pairs, leaving w (γS) (Dₚ − Dₘ)ᵀ, with the offsets γS the
+        // sigma points were taken at (as the full-covariance propagator forms it).
+        cross.copy_from(&(&dev.offsets * (&dev.plus - &dev.minus).transpose() * dev.weight));
         finite(cross, stage, Quantity::CrossCovariance)?;
     }
     deviation_factor(ut, &mut dev, &mut s).map_err(|()| Error::NotPositiveSemiDefinite {
