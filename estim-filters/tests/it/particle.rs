@@ -668,7 +668,7 @@ fn fusion_driver_replays_a_late_reading_bit_identically() {
             (),
             One(sensor.clone()),
             0.0,
-            settings.clone(),
+            settings,
             SensorSettings::default(),
         )
         .unwrap()
