@@ -325,6 +325,7 @@ where
     /// A filter whose estimate is x̂ = `state` and S = `factor` exactly as given (no
     /// refactorisation; how a checkpoint resumes bit for bit). S must be square of x̂'s
     /// length, finite, lower triangular with a non-negative diagonal, and S Sᵀ finite.
+    #[cfg(feature = "serde")]
     pub(crate) fn from_factor(
         state: OVector<T, N>,
         factor: OMatrix<T, N, N>,
