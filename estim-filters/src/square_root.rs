@@ -553,18 +553,21 @@ where
     finite(&report.innovation, stage, Quantity::Innovation)
 }
 
-/// The report's statistics from the lower factor `l` of S_zz (`report.innovation` holds ν;
-/// `threshold` is the gate's NIS threshold for this m, if any):
-/// S_zz = L Lᵀ, NIS = |L⁻¹ν|², ln p = −½ (NIS + 2 Σ ln Lᵢᵢ + m ln 2π), and the gate. Returns
-/// L⁻¹ν if the update applies, `None` if gated. A zero (or non-finite) pivot of L is a
-/// singular (non-finite) S_zz.
-fn statistics<T: Real, M: Dim>(
+/// The tail both array-form updates share: from the lower factor `l` of S_zz
+/// (`report.innovation` holds ν), the whitened gain K̄ = P_xz L⁻ᵀ and the posterior factor,
+/// the report's statistics (S_zz = L Lᵀ; NIS, log-likelihood and gate as every update forms
+/// them) and, unless gated, x̂⁺ = x̂ + K̄ L⁻¹ν. A zero (or non-finite) pivot of L is a singular
+/// (non-finite) S_zz; a non-finite posterior is an error.
+fn finish_update<T: Real, N: Dim, M: Dim>(
+    state: &OVector<T, N>,
     l: &OMatrix<T, M, M>,
+    kbar: &OMatrix<T, N, M>,
+    posterior: OMatrix<T, N, N>,
     threshold: Option<T>,
     report: &mut UpdateReport<T, M>,
-) -> Result<Option<OVector<T, M>>>
+) -> Result<Option<Estimate<T, N>>>
 where
-    DefaultAllocator: Alloc<M>,
+    DefaultAllocator: Alloc<N, M>,
 {
     let stage = Stage::Update;
     let quantity = Quantity::InnovationCovariance;
@@ -577,7 +580,14 @@ where
     let mut whitened = report.innovation.clone();
     kernel::solve_lower_in_place(l, &mut whitened);
     let nis = whitened.norm_squared();
-    Ok(report_statistics(l, nis, threshold, report).then_some(whitened))
+    if !report_statistics(l, nis, threshold, report) {
+        return Ok(None);
+    }
+    finite(&posterior, stage, Quantity::Covariance)?;
+    let mut new_state = state.clone();
+    kernel::mul(&mut new_state, Accum::Add, T::one(), kbar, &whitened);
+    finite(&new_state, stage, Quantity::Mean)?;
+    Ok(Some((new_state, posterior)))
 }
 
 // ---------------------------------------------------------------------------------------

@@ -10,7 +10,7 @@ use estim_core::{
 };
 
 use super::triangular::{Block, lower_triangularize};
-use super::{Estimate, finite, innovation_into, noise_factor, statistics};
+use super::{Estimate, finish_update, finite, innovation_into, noise_factor};
 use crate::report::UpdateReport;
 
 /// x̂⁻ = f(x̂), S⁻ from [F S | S_Q]: the predicted state and factor; C = S (F S)ᵀ into
@@ -104,12 +104,5 @@ where
             Block::new(hs.as_mut_slice(), posterior.as_mut_slice(), n),
         ],
     );
-    let Some(whitened) = statistics(&l, threshold, report)? else {
-        return Ok(None);
-    };
-    finite(&posterior, stage, Quantity::Covariance)?;
-    let mut new_state = state.clone();
-    kernel::mul(&mut new_state, Accum::Add, T::one(), &kbar, &whitened);
-    finite(&new_state, stage, Quantity::Mean)?;
-    Ok(Some((new_state, posterior)))
+    finish_update(state, &l, &kbar, posterior, threshold, report)
 }

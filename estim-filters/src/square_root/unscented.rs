@@ -2,7 +2,6 @@
 //! triangularised with the noise factor, and the array-form update.
 
 use estim_core::checks::ensure_shape;
-use estim_core::kernel::{self, Accum};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::Unscented;
 use estim_core::scalar::real;
@@ -12,7 +11,7 @@ use estim_core::{
 };
 
 use super::triangular::{Block, lower_triangularize, rank_one_downdate};
-use super::{Estimate, finite, innovation_into, noise_factor, statistics};
+use super::{Estimate, finish_update, finite, innovation_into, noise_factor};
 use crate::report::UpdateReport;
 
 /// The sigma-point deviations of y = g(x) at (x̂, S): g(x̂), Dₚ = [g(x̂ + γSⱼ) ⊖ g(x̂)]ⱼ,
@@ -254,12 +253,5 @@ where
             Block::new(odd.as_mut_slice(), prior.as_mut_slice(), n),
         ],
     );
-    let Some(whitened) = statistics(&l, threshold, report)? else {
-        return Ok(None);
-    };
-    finite(&posterior, stage, Quantity::Covariance)?;
-    let mut new_state = state.clone();
-    kernel::mul(&mut new_state, Accum::Add, T::one(), &kbar, &whitened);
-    finite(&new_state, stage, Quantity::Mean)?;
-    Ok(Some((new_state, posterior)))
+    finish_update(state, &l, &kbar, posterior, threshold, report)
 }
