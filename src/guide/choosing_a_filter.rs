@@ -54,3 +54,24 @@
 //! ([`with_gate`](crate::filters::GaussianFilter::with_gate)), and a state space for angles
 //! ([`with_state_space`](crate::filters::GaussianFilter::with_state_space)). The unscented
 //! spread is chosen with `Ukf::with_propagator(prior, Unscented::new(α, β, κ)?)`.
+//!
+//! # When one Gaussian is not enough
+//!
+//! Every filter above carries one Gaussian. Two estimators go beyond it through the same
+//! step traits, so they take the same models and go into the fusion driver, the sequence
+//! functions and checkpoints:
+//!
+//! - [`ParticleFilter`](crate::filters::particle::ParticleFilter) (bootstrap and auxiliary,
+//!   four resampling schemes, an unbiased likelihood estimate) for multimodal posteriors: an
+//!   ambiguous start, range-only localisation, the growth model. A model written for the
+//!   Kalman filters runs in it by changing the constructor; non-Gaussian noise is opt-in
+//!   ([`NonGaussianFilter`](crate::filters::particle::NonGaussianFilter)).
+//! - [`Imm`](crate::filters::imm::Imm) (and GPB1, GPB2, the static bank) for a target that
+//!   switches between models: each mode is any filter of this family with its own process
+//!   model, mixed through a Markov transition matrix.
+//!
+//! What lets them share the tools is [`Rollback`](crate::filters::Rollback): every estimator
+//! saves and restores exactly what its estimate depends on (a square-root factor, a particle
+//! cloud, mode probabilities), which is how the fusion driver replays late readings and how a
+//! failed sequence is undone. A generic function over "a filter that can be smoothed" bounds
+//! its filter by [`PredictCross`](crate::filters::PredictCross).
