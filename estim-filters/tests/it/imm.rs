@@ -699,6 +699,44 @@ fn a_checkpoint_resumes_bit_identically() {
     assert!(serde_json::from_str::<Imm<f64, U2, Modes>>(&edited).is_err());
 }
 
+/// The field `name`'s runtime shape in a JSON checkpoint `[[entries], rows, cols]` with its
+/// row count replaced by `rows`.
+#[cfg(feature = "serde")]
+fn with_rows(json: &str, name: &str, rows: &str) -> String {
+    let key = format!("\"{name}\":[[");
+    let start = json.find(&key).expect("the field is in the checkpoint") + key.len();
+    let end = start + json[start..].find(']').expect("the entries close");
+    let (head, tail) = json.split_at(end + 1);
+    let tail = tail
+        .strip_prefix(",2,")
+        .expect("the shape follows the entries");
+    format!("{head},{rows},{tail}")
+}
+
+#[cfg(feature = "serde")]
+#[test]
+fn a_checkpoint_with_a_corrupted_shape_is_an_error_not_a_panic() {
+    type Modes = (KalmanFilter<f64, U2>, Ukf<f64, U2>);
+    let modes = (KalmanFilter::new(prior()), Ukf::new(prior()));
+    let imm = Imm::new(modes, two_by_two(0.1, 0.2), DVector::from_element(2, 0.5)).unwrap();
+    let saved = serde_json::to_string(&imm).unwrap();
+    // The untouched checkpoint reads back (so the edits below are what is refused).
+    assert!(serde_json::from_str::<Imm<f64, U2, Modes>>(&saved).is_ok());
+    // 2⁶³ − 1 rows: nalgebra would build (or overflow on) a matrix larger than its entries.
+    for field in ["transition", "probabilities", "initial_probabilities"] {
+        let corrupted = with_rows(&saved, field, "9223372036854775807");
+        assert_ne!(corrupted, saved);
+        let read = std::panic::catch_unwind(|| {
+            serde_json::from_str::<Imm<f64, U2, Modes>>(&corrupted).is_err()
+        });
+        assert_eq!(
+            read.ok(),
+            Some(true),
+            "a corrupted {field} shape is an error"
+        );
+    }
+}
+
 /// The two constant-velocity modes (quiet, agile) as one model for the `Predict` trait.
 #[derive(Clone, Debug)]
 struct QuietAgile((Process, Process));
