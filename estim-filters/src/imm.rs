@@ -403,7 +403,9 @@ where
     /// One IMM prediction (see the [module docs](self)): mixing, then mode j predicts through
     /// its model in `models` (the tuple `(P0, P1, …)` for a tuple of modes, a slice for a
     /// `Vec`), then μ ← c̄ = Πᵀ μ and the combined estimate is the predicted mixture's. On an
-    /// error (any mode's prediction) every mode, μ and the estimate are as before.
+    /// error (any mode's prediction, or fewer models than modes in a `Vec` mode set:
+    /// [`Error::DimensionMismatch`], quantity [`ModeProbabilities`](Quantity::ModeProbabilities))
+    /// every mode, μ and the estimate are as before.
     pub fn predict_modes<P: ?Sized>(&mut self, models: &P, input: &F::Input, dt: T) -> Result<()>
     where
         F: PredictModes<T, N, P>,

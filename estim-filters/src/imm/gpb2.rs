@@ -155,14 +155,17 @@ where
     /// One GPB2 prediction: merge per mode, then m² components (i, j), mode j's filter from
     /// the merged gᵢ predicted with `models[j]`. On an error nothing changes.
     ///
-    /// # Panics
-    /// If `models` has fewer entries than there are modes.
+    /// Errors: fewer models than modes ([`Error::DimensionMismatch`], quantity
+    /// [`ModeProbabilities`](Quantity::ModeProbabilities)); any component's prediction error.
     pub fn predict_modes<P>(&mut self, models: &[P], input: &P::Input, dt: T) -> Result<()>
     where
         P: ProcessInput<T, N>,
         F: Predict<T, N, P>,
     {
         let m = self.bases.len();
+        if m > 0 {
+            super::modes::model_of(models, m - 1, m)?;
+        }
         let pi = &self.transition;
         let mut next = Vec::with_capacity(m * m);
         let mut spread = self.state.clone();

@@ -616,6 +616,62 @@ fn a_failed_step_leaves_the_estimator_bit_identical() {
 }
 
 #[test]
+fn fewer_models_than_modes_is_an_error_and_changes_nothing() {
+    let sensor = position(0.5);
+    let modes = vec![KalmanFilter::new(prior()); 3];
+    let pi = DMatrix::from_row_slice(3, 3, &[0.8, 0.1, 0.1, 0.1, 0.8, 0.1, 0.1, 0.1, 0.8]);
+    let mu = DVector::from_vec(vec![0.5, 0.3, 0.2]);
+    let mut imm = Imm::new(modes.clone(), pi.clone(), mu.clone()).unwrap();
+    let models = vec![cv(0.01), cv(0.1), cv(1.0)];
+    for z in manoeuvre(12, 3) {
+        imm.predict_modes(&models, &u0(), DT).unwrap();
+        imm.update_modes(&sensor, &Vector1::new(z)).unwrap();
+    }
+    let before = imm.snapshot();
+    // Modes 0 and 1 are mixed and predicted before mode 2 finds no model: all put back.
+    let short = vec![cv(0.01), cv(0.1)];
+    let expected = Error::DimensionMismatch {
+        stage: estim_core::Stage::Prediction,
+        quantity: Quantity::ModeProbabilities,
+        expected_rows: 3,
+        expected_cols: 1,
+        found_rows: 2,
+        found_cols: 1,
+    };
+    assert_eq!(imm.predict_modes(&short, &u0(), DT), Err(expected));
+    assert_eq!(imm.predict_modes(&short[..], &u0(), DT), Err(expected));
+    assert_eq!(
+        imm.predict_modes(&[cv(0.01), cv(0.1)], &u0(), DT),
+        Err(expected)
+    );
+    let now = imm.snapshot();
+    for j in 0..3 {
+        assert_bitwise_eq(now.modes[j].state(), before.modes[j].state(), "mode x̂");
+        assert_bitwise_eq(
+            now.modes[j].covariance(),
+            before.modes[j].covariance(),
+            "mode P",
+        );
+    }
+    assert_bitwise_eq(&now.probabilities, &before.probabilities, "μ");
+    assert_bitwise_eq(&now.state, &before.state, "combined x̂");
+    assert_bitwise_eq(&now.covariance, &before.covariance, "combined P");
+    // GPB2 checks the list before its loop.
+    let mut gpb2 = estim_filters::imm::Gpb2::new(modes, pi, mu).unwrap();
+    gpb2.predict_modes(&models, &u0(), DT).unwrap();
+    let (x, p, mu) = (
+        *gpb2.state(),
+        *gpb2.covariance(),
+        gpb2.probabilities().clone(),
+    );
+    assert_eq!(gpb2.predict_modes(&short, &u0(), DT), Err(expected));
+    assert_eq!(gpb2.hypotheses(), 9);
+    assert_bitwise_eq(gpb2.state(), &x, "GPB2 x̂");
+    assert_bitwise_eq(gpb2.covariance(), &p, "GPB2 P");
+    assert_bitwise_eq(gpb2.probabilities(), &mu, "GPB2 μ");
+}
+
+#[test]
 fn a_measurement_only_some_modes_refuse_restores_the_others() {
     // The sensor has R = 0: fine for the first mode (P = I, S = 1), but the second mode
     // starts from P = 0, so its S = H·0·Hᵀ + 0 is singular and it refuses, after the first
