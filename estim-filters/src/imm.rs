@@ -402,7 +402,8 @@ where
 
     /// One IMM prediction (see the [module docs](self)): mixing, then mode j predicts through
     /// its model in `models` (the tuple `(P0, P1, …)` for a tuple of modes, a slice for a
-    /// `Vec`), then μ ← c̄ = Πᵀ μ and the combined estimate is the predicted mixture's. On an
+    /// `Vec`), then μ ← c̄ = Πᵀ μ (divided by its sum, which rounding in Π may move off 1 by
+    /// a few ulps) and the combined estimate is the predicted mixture's. On an
     /// error (any mode's prediction, or fewer models than modes in a `Vec` mode set:
     /// [`Error::DimensionMismatch`], quantity [`ModeProbabilities`](Quantity::ModeProbabilities))
     /// every mode, μ and the estimate are as before.
@@ -423,7 +424,12 @@ where
                 return Err(e);
             }
         }
+        // c̄ / Σ c̄: Π's rows sum to 1 only within the rounding `new` accepts, so without this
+        // Σ μ would drift from 1 over predictions without an update (and a checkpoint of the
+        // IMM would no longer read back). Σ c̄ > 0: μ sums to 1 and Π is row-stochastic.
+        let total = self.work.predicted.sum();
         self.probabilities.copy_from(&self.work.predicted);
+        self.probabilities /= total;
         self.combine();
         Ok(())
     }

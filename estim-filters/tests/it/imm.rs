@@ -793,6 +793,26 @@ fn a_checkpoint_with_a_corrupted_shape_is_an_error_not_a_panic() {
     }
 }
 
+#[cfg(feature = "serde")]
+#[test]
+fn many_predictions_without_an_update_keep_mu_normalised_and_checkpointable() {
+    type Modes = (KalmanFilter<f64, U2>, KalmanFilter<f64, U2>);
+    // Row 0 sums to 1 + 1e-14, within the 64 m ulps (2.8e-14) `new` accepts: each
+    // prediction without renormalising would grow Σ μ by about μ₀ · 1e-14.
+    let pi = DMatrix::from_row_slice(2, 2, &[0.5, 0.5 + 1e-14, 0.3, 0.7]);
+    let modes = (KalmanFilter::new(prior()), KalmanFilter::new(prior()));
+    let mut imm = Imm::new(modes, pi, DVector::from_vec(vec![0.5, 0.5])).unwrap();
+    let models = (cv(0.01), cv(0.1));
+    for _ in 0..20 {
+        imm.predict_modes(&models, &u0(), DT).unwrap();
+        // A few ulps of the division by the sum of two entries.
+        assert!((imm.probabilities().sum() - 1.0).abs() <= 4.0 * f64::EPSILON);
+    }
+    let saved = serde_json::to_string(&imm).unwrap();
+    let resumed: Imm<f64, U2, Modes> = serde_json::from_str(&saved).unwrap();
+    assert_eq!(resumed.snapshot(), imm.snapshot());
+}
+
 /// The two constant-velocity modes (quiet, agile) as one model for the `Predict` trait.
 #[derive(Clone, Debug)]
 struct QuietAgile((Process, Process));
