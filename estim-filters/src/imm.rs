@@ -149,19 +149,59 @@ where
 }
 
 /// What an [`Imm`] step changes: every mode filter's snapshot, μ and the combined estimate.
+/// Read-only: take it with [`Rollback::snapshot`], give it to [`Rollback::restore`] (which
+/// trusts it, so it cannot be edited into a μ of another length).
+///
+/// ```
+/// use estim_core::nalgebra::{DMatrix, DVector, Matrix2, Vector2};
+/// use estim_core::Gaussian;
+/// use estim_filters::imm::Imm;
+/// use estim_filters::{KalmanFilter, Rollback};
+///
+/// let prior = Gaussian::new(Vector2::zeros(), Matrix2::identity())?;
+/// let modes = vec![KalmanFilter::new(prior.clone()), KalmanFilter::new(prior)];
+/// let imm = Imm::new(modes, DMatrix::identity(2, 2), DVector::from_vec(vec![0.25, 0.75]))?;
+/// let saved = imm.snapshot();
+/// assert_eq!(saved.probabilities(), imm.probabilities());
+/// assert_eq!(saved.modes().len(), 2);
+/// assert_eq!(saved.state(), &Vector2::zeros());
+/// assert_eq!(saved.covariance(), &Matrix2::identity());
+/// # Ok::<(), estim_core::Error>(())
+/// ```
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImmSnapshot<T: Real, N: Dim, S>
 where
     DefaultAllocator: Alloc<N>,
 {
+    pub(crate) modes: S,
+    pub(crate) probabilities: DVector<T>,
+    pub(crate) state: OVector<T, N>,
+    pub(crate) covariance: OMatrix<T, N, N>,
+}
+
+impl<T: Real, N: Dim, S> ImmSnapshot<T, N, S>
+where
+    DefaultAllocator: Alloc<N>,
+{
     /// The mode filters' snapshot.
-    pub modes: S,
-    /// The mode probabilities μ.
-    pub probabilities: DVector<T>,
-    /// The combined mean.
-    pub state: OVector<T, N>,
-    /// The combined covariance.
-    pub covariance: OMatrix<T, N, N>,
+    pub fn modes(&self) -> &S {
+        &self.modes
+    }
+
+    /// The mode probabilities μ saved.
+    pub fn probabilities(&self) -> &DVector<T> {
+        &self.probabilities
+    }
+
+    /// The combined mean x̂ = Σⱼ μⱼ x̂ⱼ saved.
+    pub fn state(&self) -> &OVector<T, N> {
+        &self.state
+    }
+
+    /// The combined covariance P = Σⱼ μⱼ (Pⱼ + (x̂ⱼ − x̂)(x̂ⱼ − x̂)ᵀ) saved.
+    pub fn covariance(&self) -> &OMatrix<T, N, N> {
+        &self.covariance
+    }
 }
 
 impl<T: Real, N: Dim, F: Modes<T, N>> Imm<T, N, F>

@@ -476,9 +476,13 @@ fn snapshot_and_restore_continue_bit_identically() {
     assert_eq!(imm.snapshot(), saved);
     let second = run(&mut imm);
     for (a, b) in first.iter().zip(&second) {
-        assert_bitwise_eq(&a.0.state, &b.0.state, "state after restore");
-        assert_bitwise_eq(&a.0.covariance, &b.0.covariance, "covariance after restore");
-        assert_bitwise_eq(&a.0.probabilities, &b.0.probabilities, "μ after restore");
+        assert_bitwise_eq(a.0.state(), b.0.state(), "state after restore");
+        assert_bitwise_eq(
+            a.0.covariance(),
+            b.0.covariance(),
+            "covariance after restore",
+        );
+        assert_bitwise_eq(a.0.probabilities(), b.0.probabilities(), "μ after restore");
         assert_eq!(a.1.log_likelihood.to_bits(), b.1.log_likelihood.to_bits());
     }
 }
@@ -586,13 +590,21 @@ fn a_failed_step_leaves_the_estimator_bit_identical() {
     type Modes = (KalmanFilter<f64, U2>, SrKalmanFilter<f64, U2>);
     let unchanged = |imm: &Imm<f64, U2, Modes>, what: &str| {
         let now = imm.snapshot();
-        assert_bitwise_eq(&now.state, &before.state, what);
-        assert_bitwise_eq(&now.covariance, &before.covariance, what);
-        assert_bitwise_eq(&now.probabilities, &before.probabilities, what);
-        assert_bitwise_eq(now.modes.0.state(), before.modes.0.state(), what);
-        assert_bitwise_eq(now.modes.0.covariance(), before.modes.0.covariance(), what);
-        assert_bitwise_eq(now.modes.1.state(), before.modes.1.state(), what);
-        assert_bitwise_eq(now.modes.1.covariance(), before.modes.1.covariance(), what);
+        assert_bitwise_eq(now.state(), before.state(), what);
+        assert_bitwise_eq(now.covariance(), before.covariance(), what);
+        assert_bitwise_eq(now.probabilities(), before.probabilities(), what);
+        assert_bitwise_eq(now.modes().0.state(), before.modes().0.state(), what);
+        assert_bitwise_eq(
+            now.modes().0.covariance(),
+            before.modes().0.covariance(),
+            what,
+        );
+        assert_bitwise_eq(now.modes().1.state(), before.modes().1.state(), what);
+        assert_bitwise_eq(
+            now.modes().1.covariance(),
+            before.modes().1.covariance(),
+            what,
+        );
     };
     // A measurement every mode refuses (not finite).
     assert!(imm.update_modes(&sensor, &Vector1::new(f64::NAN)).is_err());
@@ -646,16 +658,16 @@ fn fewer_models_than_modes_is_an_error_and_changes_nothing() {
     );
     let now = imm.snapshot();
     for j in 0..3 {
-        assert_bitwise_eq(now.modes[j].state(), before.modes[j].state(), "mode x̂");
+        assert_bitwise_eq(now.modes()[j].state(), before.modes()[j].state(), "mode x̂");
         assert_bitwise_eq(
-            now.modes[j].covariance(),
-            before.modes[j].covariance(),
+            now.modes()[j].covariance(),
+            before.modes()[j].covariance(),
             "mode P",
         );
     }
-    assert_bitwise_eq(&now.probabilities, &before.probabilities, "μ");
-    assert_bitwise_eq(&now.state, &before.state, "combined x̂");
-    assert_bitwise_eq(&now.covariance, &before.covariance, "combined P");
+    assert_bitwise_eq(now.probabilities(), before.probabilities(), "μ");
+    assert_bitwise_eq(now.state(), before.state(), "combined x̂");
+    assert_bitwise_eq(now.covariance(), before.covariance(), "combined P");
     // GPB2 checks the list before its loop.
     let mut gpb2 = estim_filters::imm::Gpb2::new(modes, pi, mu).unwrap();
     gpb2.predict_modes(&models, &u0(), DT).unwrap();
@@ -690,17 +702,17 @@ fn a_measurement_only_some_modes_refuse_restores_the_others() {
     assert!(imm.update_modes(&sensor, &Vector1::new(0.3)).is_err());
     let now = imm.snapshot();
     assert_bitwise_eq(
-        now.modes[0].state(),
-        before.modes[0].state(),
+        now.modes()[0].state(),
+        before.modes()[0].state(),
         "mode 0 state",
     );
     assert_bitwise_eq(
-        now.modes[0].covariance(),
-        before.modes[0].covariance(),
+        now.modes()[0].covariance(),
+        before.modes()[0].covariance(),
         "mode 0 P",
     );
-    assert_bitwise_eq(&now.probabilities, &before.probabilities, "μ");
-    assert_bitwise_eq(&now.state, &before.state, "combined state");
+    assert_bitwise_eq(now.probabilities(), before.probabilities(), "μ");
+    assert_bitwise_eq(now.state(), before.state(), "combined state");
 }
 
 #[test]
@@ -929,9 +941,13 @@ mod in_the_fusion_driver {
         }
         assert!(replayed > 0);
         let (a, b) = (ordered.filter().snapshot(), late.filter().snapshot());
-        assert_bitwise_eq(&a.probabilities, &b.probabilities, "μ after the replay");
-        assert_bitwise_eq(&a.state, &b.state, "state after the replay");
-        assert_bitwise_eq(&a.covariance, &b.covariance, "covariance after the replay");
+        assert_bitwise_eq(a.probabilities(), b.probabilities(), "μ after the replay");
+        assert_bitwise_eq(a.state(), b.state(), "state after the replay");
+        assert_bitwise_eq(
+            a.covariance(),
+            b.covariance(),
+            "covariance after the replay",
+        );
         assert_eq!(a, b);
     }
 }
