@@ -89,6 +89,7 @@ pub use gpb2::{Gpb2, Gpb2Snapshot};
 pub use modes::{ModeModels, Modes, PredictModes, UpdateModes};
 
 use crate::report::{UpdateOutcome, UpdateReport};
+use crate::snapshot::copy_matrix;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
 use mixture::{RunningMoments, mixture_into};
 
@@ -624,16 +625,16 @@ where
 
     fn snapshot_into(&self, snapshot: &mut Self::Snapshot) {
         self.modes.snapshot_into(&mut snapshot.modes);
-        snapshot.probabilities.clone_from(&self.probabilities);
-        snapshot.state.clone_from(&self.state);
-        snapshot.covariance.clone_from(&self.covariance);
+        copy_matrix(&mut snapshot.probabilities, &self.probabilities);
+        copy_matrix(&mut snapshot.state, &self.state);
+        copy_matrix(&mut snapshot.covariance, &self.covariance);
     }
 
     fn restore(&mut self, snapshot: &Self::Snapshot) {
         self.modes.restore(&snapshot.modes);
-        self.probabilities.clone_from(&snapshot.probabilities);
-        self.state.clone_from(&snapshot.state);
-        self.covariance.clone_from(&snapshot.covariance);
+        copy_matrix(&mut self.probabilities, &snapshot.probabilities);
+        copy_matrix(&mut self.state, &snapshot.state);
+        copy_matrix(&mut self.covariance, &snapshot.covariance);
     }
 }
 

@@ -52,6 +52,7 @@ use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 use super::ModeModels;
 use super::mixture::{self, RunningMoments, mixture_into};
 use crate::report::{UpdateOutcome, UpdateReport};
+use crate::snapshot::copy_matrix;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
 
 /// One hypothesis: its current mode, its filter and its weight.
@@ -351,11 +352,18 @@ where
         }
     }
 
+    fn snapshot_into(&self, snapshot: &mut Self::Snapshot) {
+        snapshot.components.clone_from(&self.components);
+        copy_matrix(&mut snapshot.probabilities, &self.probabilities);
+        copy_matrix(&mut snapshot.state, &self.state);
+        copy_matrix(&mut snapshot.covariance, &self.covariance);
+    }
+
     fn restore(&mut self, snapshot: &Self::Snapshot) {
         self.components.clone_from(&snapshot.components);
-        self.probabilities.clone_from(&snapshot.probabilities);
-        self.state.clone_from(&snapshot.state);
-        self.covariance.clone_from(&snapshot.covariance);
+        copy_matrix(&mut self.probabilities, &snapshot.probabilities);
+        copy_matrix(&mut self.state, &snapshot.state);
+        copy_matrix(&mut self.covariance, &snapshot.covariance);
     }
 }
 

@@ -1213,11 +1213,13 @@ mod gpb2 {
         let mut gpb2 =
             Gpb2::new(modes, two_by_two(0.1, 0.2), DVector::from_element(2, 0.5)).unwrap();
         let zs = manoeuvre(16, 10);
+        // Taken with m hypotheses, overwritten below with m² (snapshot_into reuses it).
+        let mut saved = gpb2.snapshot();
         for z in &zs[..4] {
             Predict::predict(&mut gpb2, &bank, &u0(), DT).unwrap();
             Update::update(&mut gpb2, &sensor, &Vector1::new(*z)).unwrap();
         }
-        let saved = gpb2.snapshot();
+        gpb2.snapshot_into(&mut saved);
         let run = |g: &mut Gpb2<f64, U2, KalmanFilter<f64, U2>>| {
             zs[4..]
                 .iter()
