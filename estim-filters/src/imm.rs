@@ -13,6 +13,7 @@
 //!           mode j restarts from N(x̂⁰ⱼ, P⁰ⱼ) and predicts with model j;  μ ← c̄
 //! update:   every mode updates with z;  ℓⱼ = its report's log-likelihood
 //!           μⱼ ← c̄ⱼ exp(ℓⱼ) / Σₖ c̄ₖ exp(ℓₖ)                    (in logs: no underflow)
+//! (a mode with c̄ⱼ = 0, or μⱼ = 0 at an update, is skipped: see below)
 //! both:     x̂ = Σⱼ μⱼ x̂ⱼ,  P = Σⱼ μⱼ (Pⱼ + (x̂ⱼ − x̂)(x̂ⱼ − x̂)ᵀ)  (the combined estimate)
 //! ```
 //!
@@ -31,6 +32,12 @@
 //! bit. Otherwise mixing restarts the mode filter from the mixed Gaussian with
 //! [`Estimator::reset`]; a square-root filter refactorises P⁰ⱼ there, which costs it nothing it
 //! had: mixing makes a new Gaussian anyway.
+//!
+//! A mode with zero probability (c̄ⱼ = 0 at a prediction, μⱼ = 0 at an update) is neither
+//! predicted nor updated: its weight in every mixture is 0, so its filter keeps its last
+//! estimate (stale, and read by [`Imm::mode_estimate`] as such) and cannot fail the step, say
+//! by diverging under a model that no longer fits. Once c̄ⱼ > 0 again, the probability flows
+//! in from other modes, and mixing restarts the mode from their mixture.
 //!
 //! The IMM implements the step traits and the contract: [`Predict`] over a set of per-mode
 //! models the user names ([`ModeModels`]), [`Update`] with any measurement model every mode
@@ -455,6 +462,9 @@ where
         self.mix();
         self.modes.snapshot_into(&mut self.work.undo);
         for j in 0..self.modes.count() {
+            if self.work.predicted[j] == T::zero() {
+                continue; // No weight: left as it is (re-seeded by mixing once c̄ⱼ > 0).
+            }
             if self.work.mixing[j] {
                 let (x, p) = &self.work.mixed[j];
                 let mixed = Gaussian::new_unchecked(x.clone(), p.clone());
@@ -490,7 +500,7 @@ where
         Ok(report)
     }
 
-    /// One IMM update: every mode updates with `model` and `z`, μ by Bayes' rule on their
+    /// One IMM update: every mode with μⱼ > 0 updates with `model` and `z`, μ by Bayes' rule on their
     /// log-likelihoods, then the combined estimate is the posterior mixture's.
     ///
     /// The report is the mixture's: ν̄ = Σ c̄ⱼ νⱼ (= z − ẑ for ẑ the mixture's predicted
@@ -498,7 +508,8 @@ where
     /// moment-matched Gaussian), and the exact log-likelihood of z under the predicted
     /// mixture, ln Σⱼ c̄ⱼ exp(ℓⱼ). `Gated` when every mode gated it (nothing changes then).
     ///
-    /// Errors (everything as before): any mode's update error; a NaN log-likelihood, or z
+    /// Errors (everything as before): any mode's update error; a NaN log-likelihood (of a
+    /// mode with μⱼ > 0: the others are not updated), or z
     /// impossible under every mode with c̄ⱼ > 0 ([`Error::NonFinite`],
     /// [`ModeProbabilities`](Quantity::ModeProbabilities)).
     pub fn update_modes_into<M: Dim, H: ?Sized>(
@@ -533,6 +544,12 @@ where
         let mut moments = RunningMoments::<T, M>::new(z.shape_generic().0);
         let mut applied = false;
         for j in 0..self.modes.count() {
+            if self.probabilities[j] == T::zero() {
+                // Not updated (see the module docs); ℓⱼ = −∞ stands for "no evidence": μⱼ
+                // stays 0 whatever it is, and a NaN it might give is never seen.
+                self.work.log_weights[j] = -(T::one() / T::zero());
+                continue;
+            }
             self.modes.update_mode(j, model, z, report)?;
             self.work.log_weights[j] = report.log_likelihood;
             applied |= report.applied();

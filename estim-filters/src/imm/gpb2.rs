@@ -254,6 +254,12 @@ where
         let mut log_likelihoods = weights.clone();
         let mut applied = false;
         for (c, l) in updated.iter_mut().zip(log_likelihoods.iter_mut()) {
+            if c.weight == T::zero() {
+                // No weight left (an underflow at an earlier update): not updated, as in
+                // the IMM, so it cannot fail the step; its weight stays 0.
+                *l = -(T::one() / T::zero());
+                continue;
+            }
             c.filter.update_into(model, z, report)?;
             *l = report.log_likelihood;
             applied |= report.applied();

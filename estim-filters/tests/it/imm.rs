@@ -684,6 +684,69 @@ fn fewer_models_than_modes_is_an_error_and_changes_nothing() {
 }
 
 #[test]
+fn a_mode_with_zero_probability_is_neither_predicted_nor_updated() {
+    // Mode 1 would fail both steps: its model's noise is NaN, and with P = 0 under a sensor
+    // with R = 0 its S = 0 is singular. With μ₁ = 0 and Π = I it never gets weight, so the
+    // IMM is mode 0's filter alone, bit for bit.
+    let sensor = position(0.0);
+    let degenerate = Gaussian::new(Vector2::zeros(), Matrix2::zeros()).unwrap();
+    let modes = vec![
+        KalmanFilter::new(prior()),
+        KalmanFilter::new(degenerate.clone()),
+    ];
+    let mut imm = Imm::new(
+        modes,
+        DMatrix::identity(2, 2),
+        DVector::from_vec(vec![1.0, 0.0]),
+    )
+    .unwrap();
+    let mut bad = cv(0.1);
+    bad.noise[(0, 0)] = f64::NAN;
+    let mut alone = KalmanFilter::new(prior());
+    for z in manoeuvre(13, 6) {
+        let z = Vector1::new(z);
+        imm.predict_modes(&[cv(0.01), bad.clone()], &u0(), DT)
+            .unwrap();
+        alone.predict(&cv(0.01), &u0(), DT).unwrap();
+        let report = imm.update_modes(&sensor, &z).unwrap();
+        let expected = alone.update(&sensor, &z).unwrap();
+        assert_eq!(report.outcome, UpdateOutcome::Applied);
+        assert_eq!(report.innovation, expected.innovation);
+        assert_eq!(imm.probabilities(), &DVector::from_vec(vec![1.0, 0.0]));
+        assert_bitwise_eq(imm.state(), alone.state(), "combined x̂");
+        assert_bitwise_eq(imm.covariance(), alone.covariance(), "combined P");
+        assert_eq!(imm.mode_estimate(1), degenerate, "mode 1 untouched");
+    }
+    // Once probability flows in, mixing re-seeds mode 1 from mode 0 (its only source:
+    // weight 0.1 · 1 / 0.1 = 1 exactly, a copy) and it predicts with its own model.
+    imm.set_transition(two_by_two(0.1, 0.1)).unwrap();
+    let seed = imm.mode_estimate(0);
+    imm.predict_modes(&[cv(0.01), cv(0.1)], &u0(), DT).unwrap();
+    let mut reseeded = KalmanFilter::new(seed);
+    reseeded.predict(&cv(0.1), &u0(), DT).unwrap();
+    assert_eq!(imm.mode_estimate(1), reseeded.estimate());
+    assert!(imm.probabilities()[1] > 0.0);
+    let sensor = position(0.5);
+    imm.update_modes(&sensor, &Vector1::new(7.0)).unwrap();
+    assert!(imm.probabilities()[1] > 0.0 && imm.probabilities()[1] < 1.0);
+    // GPB2 holds a hypothesis of weight 0 for mode 1 from construction: not updated either.
+    let modes = vec![KalmanFilter::new(prior()), KalmanFilter::new(degenerate)];
+    let mut gpb2 = estim_filters::imm::Gpb2::new(
+        modes,
+        DMatrix::identity(2, 2),
+        DVector::from_vec(vec![1.0, 0.0]),
+    )
+    .unwrap();
+    let mut alone = KalmanFilter::new(prior());
+    let z = Vector1::new(0.3);
+    let report = gpb2.update_modes(&position(0.0), &z).unwrap();
+    let expected = alone.update(&position(0.0), &z).unwrap();
+    assert_eq!(report.innovation, expected.innovation);
+    assert_bitwise_eq(gpb2.state(), alone.state(), "GPB2 x̂");
+    assert_bitwise_eq(gpb2.covariance(), alone.covariance(), "GPB2 P");
+}
+
+#[test]
 fn a_measurement_only_some_modes_refuse_restores_the_others() {
     // The sensor has R = 0: fine for the first mode (P = I, S = 1), but the second mode
     // starts from P = 0, so its S = H·0·Hᵀ + 0 is singular and it refuses, after the first
