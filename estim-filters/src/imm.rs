@@ -111,6 +111,8 @@ where
     transition: DMatrix<T>,
     mixing: Mixing,
     probabilities: DVector<T>,
+    /// μ₀ as given to `new`, kept only to be written in a checkpoint.
+    #[cfg(feature = "serde")]
     initial: DVector<T>,
     state: OVector<T, N>,
     covariance: OMatrix<T, N, N>,
@@ -287,6 +289,7 @@ where
             },
             state: zeros,
             covariance: OMatrix::zeros_generic(rows, rows),
+            #[cfg(feature = "serde")]
             initial: probabilities.clone(),
             probabilities,
             transition,
@@ -590,7 +593,9 @@ where
 }
 
 /// The combined estimate; [`reset`](Estimator::reset) restarts every mode from the prior and
-/// μ from the initial probabilities given at construction.
+/// keeps μ: a reset re-initialises the state (the fusion driver's covariance reset gives it
+/// the combined Gaussian with inflated variances), not the belief in the modes. (μ₀ as given
+/// at construction is kept in [`Imm`]'s checkpoint; [`Gpb2`] resets the same way.)
 impl<T: Real, N: Dim, F: Modes<T, N>> Estimator<T, N> for Imm<T, N, F>
 where
     DefaultAllocator: Alloc<N>,
@@ -607,7 +612,6 @@ where
         for j in 0..self.modes.count() {
             self.modes.reset_mode(j, prior.clone());
         }
-        self.probabilities.copy_from(&self.initial);
         let (n, _) = prior.mean().shape_generic();
         if self.work.spread.nrows() != n.value() {
             let zeros = OVector::zeros_generic(n, estim_core::nalgebra::U1);

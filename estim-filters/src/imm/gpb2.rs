@@ -297,7 +297,8 @@ where
 }
 
 /// The combined estimate: the mixture of every hypothesis. [`reset`](Estimator::reset)
-/// restarts from one component per mode at `prior`, with μ as it is.
+/// restarts from one component per mode at `prior`, with μ as it is (a re-initialisation of
+/// the state, as [`Imm`](super::Imm)'s reset).
 impl<T: Real, N: Dim, F: Estimator<T, N> + Clone> Estimator<T, N> for Gpb2<T, N, F>
 where
     DefaultAllocator: Alloc<N>,

@@ -1125,7 +1125,7 @@ fn the_update_report_is_the_predicted_mixtures_and_a_partly_gated_update_weighs_
 }
 
 #[test]
-fn reset_restarts_every_mode_and_the_initial_probabilities() {
+fn reset_restarts_every_mode_and_keeps_the_probabilities() {
     let sensor = position(0.5);
     let mut imm = pair_imm();
     let [quiet, agile] = models();
@@ -1134,16 +1134,36 @@ fn reset_restarts_every_mode_and_the_initial_probabilities() {
             .unwrap();
         imm.update_modes(&sensor, &Vector1::new(z)).unwrap();
     }
+    let mu = imm.probabilities().clone();
+    assert_ne!(mu, DVector::from_vec(vec![0.8, 0.2]), "μ has moved from μ₀");
     let restart = Gaussian::new(Vector2::new(5.0, -1.0), Matrix2::identity() * 3.0).unwrap();
     imm.reset(restart.clone());
-    assert_eq!(imm.probabilities(), &DVector::from_vec(vec![0.8, 0.2]));
+    assert_bitwise_eq(imm.probabilities(), &mu, "μ kept by the reset");
     for j in 0..2 {
         assert_eq!(imm.mode_estimate(j).mean(), restart.mean());
     }
     // The mixture of two copies of one Gaussian is that Gaussian (to the rounding of
-    // 0.8 x + 0.2 x).
+    // μ₀ x + μ₁ x: a few ulps of the largest entry).
     assert!((imm.state() - restart.mean()).amax() < 4.0 * f64::EPSILON * 5.0);
     assert!((imm.covariance() - restart.covariance()).amax() < 4.0 * f64::EPSILON * 3.0);
+    // GPB2 resets the same way.
+    let modes = vec![KalmanFilter::new(prior()); 2];
+    let mut gpb2 = estim_filters::imm::Gpb2::new(
+        modes,
+        two_by_two(0.1, 0.2),
+        DVector::from_vec(vec![0.8, 0.2]),
+    )
+    .unwrap();
+    for z in manoeuvre(13, 5) {
+        gpb2.predict_modes(&[quiet.clone(), agile.clone()], &u0(), DT)
+            .unwrap();
+        gpb2.update_modes(&sensor, &Vector1::new(z)).unwrap();
+    }
+    let mu = gpb2.probabilities().clone();
+    gpb2.reset(restart.clone());
+    // One hypothesis per mode, weighted μⱼ: re-added onto 0, μ is the same bits.
+    assert_bitwise_eq(gpb2.probabilities(), &mu, "GPB2 μ kept by the reset");
+    assert_eq!(gpb2.hypotheses(), 2);
 }
 
 mod gpb2 {
