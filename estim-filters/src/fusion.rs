@@ -28,7 +28,8 @@
 //! per event, and a rejected, excluded or replayed measurement puts one back bit for bit, a
 //! square-root factor included (the filter's own gate is not needed; leave it unset). Only a
 //! covariance reset ([`ResetSettings`]) re-initialises the filter from a new Gaussian, through
-//! [`Estimator::reset`](crate::Estimator::reset). Any estimator implementing [`Predict`],
+//! [`Estimator::reset`](crate::Estimator::reset) (a multiple-model estimator restarts every
+//! mode from it and keeps its mode probabilities μ). Any estimator implementing [`Predict`],
 //! the sensors' updates and [`Rollback`](crate::Rollback) goes in: a multiple-model estimator's "process" is
 //! whatever its `Predict` takes (its set of per-mode models).
 //!

@@ -13,6 +13,7 @@
 //!           mode j restarts from N(x̂⁰ⱼ, P⁰ⱼ) and predicts with model j;  μ ← c̄
 //! update:   every mode updates with z;  ℓⱼ = its report's log-likelihood
 //!           μⱼ ← c̄ⱼ exp(ℓⱼ) / Σₖ c̄ₖ exp(ℓₖ)                    (in logs: no underflow)
+//! (a mode with c̄ⱼ = 0, or μⱼ = 0 at an update, is skipped: see below)
 //! both:     x̂ = Σⱼ μⱼ x̂ⱼ,  P = Σⱼ μⱼ (Pⱼ + (x̂ⱼ − x̂)(x̂ⱼ − x̂)ᵀ)  (the combined estimate)
 //! ```
 //!
@@ -31,6 +32,12 @@
 //! bit. Otherwise mixing restarts the mode filter from the mixed Gaussian with
 //! [`Estimator::reset`]; a square-root filter refactorises P⁰ⱼ there, which costs it nothing it
 //! had: mixing makes a new Gaussian anyway.
+//!
+//! A mode with zero probability (c̄ⱼ = 0 at a prediction, μⱼ = 0 at an update) is neither
+//! predicted nor updated: its weight in every mixture is 0, so its filter keeps its last
+//! estimate (stale, and read by [`Imm::mode_estimate`] as such) and cannot fail the step, say
+//! by diverging under a model that no longer fits. Once c̄ⱼ > 0 again, the probability flows
+//! in from other modes, and mixing restarts the mode from their mixture.
 //!
 //! The IMM implements the step traits and the contract: [`Predict`] over a set of per-mode
 //! models the user names ([`ModeModels`]), [`Update`] with any measurement model every mode
@@ -89,6 +96,7 @@ pub use gpb2::{Gpb2, Gpb2Snapshot};
 pub use modes::{ModeModels, Modes, PredictModes, UpdateModes};
 
 use crate::report::{UpdateOutcome, UpdateReport};
+use crate::snapshot::copy_matrix;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
 use mixture::{RunningMoments, mixture_into};
 
@@ -103,6 +111,8 @@ where
     transition: DMatrix<T>,
     mixing: Mixing,
     probabilities: DVector<T>,
+    /// μ₀ as given to `new`, kept only to be written in a checkpoint.
+    #[cfg(feature = "serde")]
     initial: DVector<T>,
     state: OVector<T, N>,
     covariance: OMatrix<T, N, N>,
@@ -149,19 +159,59 @@ where
 }
 
 /// What an [`Imm`] step changes: every mode filter's snapshot, μ and the combined estimate.
+/// Read-only: take it with [`Rollback::snapshot`], give it to [`Rollback::restore`] (which
+/// trusts it, so it cannot be edited into a μ of another length).
+///
+/// ```
+/// use estim_core::nalgebra::{DMatrix, DVector, Matrix2, Vector2};
+/// use estim_core::Gaussian;
+/// use estim_filters::imm::Imm;
+/// use estim_filters::{KalmanFilter, Rollback};
+///
+/// let prior = Gaussian::new(Vector2::zeros(), Matrix2::identity())?;
+/// let modes = vec![KalmanFilter::new(prior.clone()), KalmanFilter::new(prior)];
+/// let imm = Imm::new(modes, DMatrix::identity(2, 2), DVector::from_vec(vec![0.25, 0.75]))?;
+/// let saved = imm.snapshot();
+/// assert_eq!(saved.probabilities(), imm.probabilities());
+/// assert_eq!(saved.modes().len(), 2);
+/// assert_eq!(saved.state(), &Vector2::zeros());
+/// assert_eq!(saved.covariance(), &Matrix2::identity());
+/// # Ok::<(), estim_core::Error>(())
+/// ```
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImmSnapshot<T: Real, N: Dim, S>
 where
     DefaultAllocator: Alloc<N>,
 {
+    pub(crate) modes: S,
+    pub(crate) probabilities: DVector<T>,
+    pub(crate) state: OVector<T, N>,
+    pub(crate) covariance: OMatrix<T, N, N>,
+}
+
+impl<T: Real, N: Dim, S> ImmSnapshot<T, N, S>
+where
+    DefaultAllocator: Alloc<N>,
+{
     /// The mode filters' snapshot.
-    pub modes: S,
-    /// The mode probabilities μ.
-    pub probabilities: DVector<T>,
-    /// The combined mean.
-    pub state: OVector<T, N>,
-    /// The combined covariance.
-    pub covariance: OMatrix<T, N, N>,
+    pub fn modes(&self) -> &S {
+        &self.modes
+    }
+
+    /// The mode probabilities μ saved.
+    pub fn probabilities(&self) -> &DVector<T> {
+        &self.probabilities
+    }
+
+    /// The combined mean x̂ = Σⱼ μⱼ x̂ⱼ saved.
+    pub fn state(&self) -> &OVector<T, N> {
+        &self.state
+    }
+
+    /// The combined covariance P = Σⱼ μⱼ (Pⱼ + (x̂ⱼ − x̂)(x̂ⱼ − x̂)ᵀ) saved.
+    pub fn covariance(&self) -> &OMatrix<T, N, N> {
+        &self.covariance
+    }
 }
 
 impl<T: Real, N: Dim, F: Modes<T, N>> Imm<T, N, F>
@@ -239,6 +289,7 @@ where
             },
             state: zeros,
             covariance: OMatrix::zeros_generic(rows, rows),
+            #[cfg(feature = "serde")]
             initial: probabilities.clone(),
             probabilities,
             transition,
@@ -402,8 +453,11 @@ where
 
     /// One IMM prediction (see the [module docs](self)): mixing, then mode j predicts through
     /// its model in `models` (the tuple `(P0, P1, …)` for a tuple of modes, a slice for a
-    /// `Vec`), then μ ← c̄ = Πᵀ μ and the combined estimate is the predicted mixture's. On an
-    /// error (any mode's prediction) every mode, μ and the estimate are as before.
+    /// `Vec`), then μ ← c̄ = Πᵀ μ (divided by its sum, which rounding in Π may move off 1 by
+    /// a few ulps) and the combined estimate is the predicted mixture's. On an
+    /// error (any mode's prediction, or fewer models than modes in a `Vec` mode set:
+    /// [`Error::DimensionMismatch`], quantity [`ModeProbabilities`](Quantity::ModeProbabilities))
+    /// every mode, μ and the estimate are as before.
     pub fn predict_modes<P: ?Sized>(&mut self, models: &P, input: &F::Input, dt: T) -> Result<()>
     where
         F: PredictModes<T, N, P>,
@@ -411,6 +465,9 @@ where
         self.mix();
         self.modes.snapshot_into(&mut self.work.undo);
         for j in 0..self.modes.count() {
+            if self.work.predicted[j] == T::zero() {
+                continue; // No weight: left as it is (re-seeded by mixing once c̄ⱼ > 0).
+            }
             if self.work.mixing[j] {
                 let (x, p) = &self.work.mixed[j];
                 let mixed = Gaussian::new_unchecked(x.clone(), p.clone());
@@ -421,7 +478,12 @@ where
                 return Err(e);
             }
         }
+        // c̄ / Σ c̄: Π's rows sum to 1 only within the rounding `new` accepts, so without this
+        // Σ μ would drift from 1 over predictions without an update (and a checkpoint of the
+        // IMM would no longer read back). Σ c̄ > 0: μ sums to 1 and Π is row-stochastic.
+        let total = self.work.predicted.sum();
         self.probabilities.copy_from(&self.work.predicted);
+        self.probabilities /= total;
         self.combine();
         Ok(())
     }
@@ -441,7 +503,7 @@ where
         Ok(report)
     }
 
-    /// One IMM update: every mode updates with `model` and `z`, μ by Bayes' rule on their
+    /// One IMM update: every mode with μⱼ > 0 updates with `model` and `z`, μ by Bayes' rule on their
     /// log-likelihoods, then the combined estimate is the posterior mixture's.
     ///
     /// The report is the mixture's: ν̄ = Σ c̄ⱼ νⱼ (= z − ẑ for ẑ the mixture's predicted
@@ -449,7 +511,8 @@ where
     /// moment-matched Gaussian), and the exact log-likelihood of z under the predicted
     /// mixture, ln Σⱼ c̄ⱼ exp(ℓⱼ). `Gated` when every mode gated it (nothing changes then).
     ///
-    /// Errors (everything as before): any mode's update error; a NaN log-likelihood, or z
+    /// Errors (everything as before): any mode's update error; a NaN log-likelihood (of a
+    /// mode with μⱼ > 0: the others are not updated), or z
     /// impossible under every mode with c̄ⱼ > 0 ([`Error::NonFinite`],
     /// [`ModeProbabilities`](Quantity::ModeProbabilities)).
     pub fn update_modes_into<M: Dim, H: ?Sized>(
@@ -484,6 +547,12 @@ where
         let mut moments = RunningMoments::<T, M>::new(z.shape_generic().0);
         let mut applied = false;
         for j in 0..self.modes.count() {
+            if self.probabilities[j] == T::zero() {
+                // Not updated (see the module docs); ℓⱼ = −∞ stands for "no evidence": μⱼ
+                // stays 0 whatever it is, and a NaN it might give is never seen.
+                self.work.log_weights[j] = -(T::one() / T::zero());
+                continue;
+            }
             self.modes.update_mode(j, model, z, report)?;
             self.work.log_weights[j] = report.log_likelihood;
             applied |= report.applied();
@@ -524,7 +593,9 @@ where
 }
 
 /// The combined estimate; [`reset`](Estimator::reset) restarts every mode from the prior and
-/// μ from the initial probabilities given at construction.
+/// keeps μ: a reset re-initialises the state (the fusion driver's covariance reset gives it
+/// the combined Gaussian with inflated variances), not the belief in the modes. (μ₀ as given
+/// at construction is kept in [`Imm`]'s checkpoint; [`Gpb2`] resets the same way.)
 impl<T: Real, N: Dim, F: Modes<T, N>> Estimator<T, N> for Imm<T, N, F>
 where
     DefaultAllocator: Alloc<N>,
@@ -541,7 +612,6 @@ where
         for j in 0..self.modes.count() {
             self.modes.reset_mode(j, prior.clone());
         }
-        self.probabilities.copy_from(&self.initial);
         let (n, _) = prior.mean().shape_generic();
         if self.work.spread.nrows() != n.value() {
             let zeros = OVector::zeros_generic(n, estim_core::nalgebra::U1);
@@ -576,16 +646,16 @@ where
 
     fn snapshot_into(&self, snapshot: &mut Self::Snapshot) {
         self.modes.snapshot_into(&mut snapshot.modes);
-        snapshot.probabilities.clone_from(&self.probabilities);
-        snapshot.state.clone_from(&self.state);
-        snapshot.covariance.clone_from(&self.covariance);
+        copy_matrix(&mut snapshot.probabilities, &self.probabilities);
+        copy_matrix(&mut snapshot.state, &self.state);
+        copy_matrix(&mut snapshot.covariance, &self.covariance);
     }
 
     fn restore(&mut self, snapshot: &Self::Snapshot) {
         self.modes.restore(&snapshot.modes);
-        self.probabilities.clone_from(&snapshot.probabilities);
-        self.state.clone_from(&snapshot.state);
-        self.covariance.clone_from(&snapshot.covariance);
+        copy_matrix(&mut self.probabilities, &snapshot.probabilities);
+        copy_matrix(&mut self.state, &snapshot.state);
+        copy_matrix(&mut self.covariance, &snapshot.covariance);
     }
 }
 

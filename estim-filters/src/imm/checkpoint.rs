@@ -2,9 +2,12 @@
 //! serialises, e.g. a [`GaussianFilter`](crate::GaussianFilter) as in
 //! [`checkpoint`](crate::checkpoint)), Π, the [`Mixing`](super::Mixing), μ and the initial μ₀. The combined estimate is not
 //! written: it is a function of the modes and μ, recomputed on the way in to the same bits.
-//! On the way in Π and μ are checked as by [`Imm::new`] (an error otherwise).
+//! On the way in Π and μ are read through [`ShapeChecked`] (a corrupted runtime shape is an
+//! error before nalgebra builds the matrix) and checked as by [`Imm::new`] (an error
+//! otherwise).
 
-use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim};
+use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, U1};
+use estim_core::serialize::ShapeChecked;
 use estim_core::{Alloc, Real};
 use serde::de::Error as _;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -45,13 +48,15 @@ where
     T: Deserialize<'de>,
 {
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        let f = Fields::<F, DMatrix<T>, DVector<T>>::deserialize(deserializer)?;
-        let mut imm = Imm::new(f.modes, f.transition, f.initial_probabilities)
+        let f = Fields::<F, ShapeChecked<T, Dyn, Dyn>, ShapeChecked<T, Dyn, U1>>::deserialize(
+            deserializer,
+        )?;
+        let mut imm = Imm::new(f.modes, f.transition.0, f.initial_probabilities.0)
             .map_err(D::Error::custom)?
             .with_mixing(f.mixing);
-        mixture::check_probabilities(&f.probabilities, imm.modes.count())
+        mixture::check_probabilities(&f.probabilities.0, imm.modes.count())
             .map_err(D::Error::custom)?;
-        imm.probabilities = f.probabilities;
+        imm.probabilities = f.probabilities.0;
         imm.combine();
         Ok(imm)
     }

@@ -52,6 +52,7 @@ use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 use super::ModeModels;
 use super::mixture::{self, RunningMoments, mixture_into};
 use crate::report::{UpdateOutcome, UpdateReport};
+use crate::snapshot::copy_matrix;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
 
 /// One hypothesis: its current mode, its filter and its weight.
@@ -155,14 +156,17 @@ where
     /// One GPB2 prediction: merge per mode, then m² components (i, j), mode j's filter from
     /// the merged gᵢ predicted with `models[j]`. On an error nothing changes.
     ///
-    /// # Panics
-    /// If `models` has fewer entries than there are modes.
+    /// Errors: fewer models than modes ([`Error::DimensionMismatch`], quantity
+    /// [`ModeProbabilities`](Quantity::ModeProbabilities)); any component's prediction error.
     pub fn predict_modes<P>(&mut self, models: &[P], input: &P::Input, dt: T) -> Result<()>
     where
         P: ProcessInput<T, N>,
         F: Predict<T, N, P>,
     {
         let m = self.bases.len();
+        if m > 0 {
+            super::modes::model_of(models, m - 1, m)?;
+        }
         let pi = &self.transition;
         let mut next = Vec::with_capacity(m * m);
         let mut spread = self.state.clone();
@@ -250,6 +254,12 @@ where
         let mut log_likelihoods = weights.clone();
         let mut applied = false;
         for (c, l) in updated.iter_mut().zip(log_likelihoods.iter_mut()) {
+            if c.weight == T::zero() {
+                // No weight left (an underflow at an earlier update): not updated, as in
+                // the IMM, so it cannot fail the step; its weight stays 0.
+                *l = -(T::one() / T::zero());
+                continue;
+            }
             c.filter.update_into(model, z, report)?;
             *l = report.log_likelihood;
             applied |= report.applied();
@@ -287,7 +297,8 @@ where
 }
 
 /// The combined estimate: the mixture of every hypothesis. [`reset`](Estimator::reset)
-/// restarts from one component per mode at `prior`, with μ as it is.
+/// restarts from one component per mode at `prior`, with μ as it is (a re-initialisation of
+/// the state, as [`Imm`](super::Imm)'s reset).
 impl<T: Real, N: Dim, F: Estimator<T, N> + Clone> Estimator<T, N> for Gpb2<T, N, F>
 where
     DefaultAllocator: Alloc<N>,
@@ -348,11 +359,18 @@ where
         }
     }
 
+    fn snapshot_into(&self, snapshot: &mut Self::Snapshot) {
+        snapshot.components.clone_from(&self.components);
+        copy_matrix(&mut snapshot.probabilities, &self.probabilities);
+        copy_matrix(&mut snapshot.state, &self.state);
+        copy_matrix(&mut snapshot.covariance, &self.covariance);
+    }
+
     fn restore(&mut self, snapshot: &Self::Snapshot) {
         self.components.clone_from(&snapshot.components);
-        self.probabilities.clone_from(&snapshot.probabilities);
-        self.state.clone_from(&snapshot.state);
-        self.covariance.clone_from(&snapshot.covariance);
+        copy_matrix(&mut self.probabilities, &snapshot.probabilities);
+        copy_matrix(&mut self.state, &snapshot.state);
+        copy_matrix(&mut self.covariance, &snapshot.covariance);
     }
 }
 

@@ -25,7 +25,7 @@
 //! another shape (modes that own extra state, say) implements these three traits.
 
 use estim_core::nalgebra::{DefaultAllocator, Dim, OVector};
-use estim_core::{Alloc, Gaussian, Real, error::Result};
+use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 
 use crate::report::UpdateReport;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
@@ -130,6 +130,20 @@ where
         z: &OVector<T, M>,
         report: &mut UpdateReport<T, M>,
     ) -> Result<()>;
+}
+
+/// Mode `i`'s model in `models`, or a [`Error::DimensionMismatch`] (quantity
+/// [`ModeProbabilities`](Quantity::ModeProbabilities): one model per mode, `count` of them)
+/// when the list is too short.
+pub(crate) fn model_of<P>(models: &[P], i: usize, count: usize) -> Result<&P> {
+    models.get(i).ok_or(Error::DimensionMismatch {
+        stage: Stage::Prediction,
+        quantity: Quantity::ModeProbabilities,
+        expected_rows: count,
+        expected_cols: 1,
+        found_rows: models.len(),
+        found_cols: 1,
+    })
 }
 
 #[track_caller]
@@ -271,8 +285,8 @@ where
     }
 }
 
-/// # Panics
-/// If `models` has fewer entries than there are modes.
+/// Errors: fewer models than modes ([`Error::DimensionMismatch`], quantity
+/// [`ModeProbabilities`](Quantity::ModeProbabilities)).
 impl<T: Real, N: Dim, F, P> PredictModes<T, N, [P]> for Vec<F>
 where
     F: Predict<T, N, P> + Rollback,
@@ -283,12 +297,13 @@ where
 
     #[track_caller]
     fn predict_mode(&mut self, i: usize, models: &[P], input: &P::Input, dt: T) -> Result<()> {
-        self[i].predict(&models[i], input, dt)
+        let model = model_of(models, i, self.len())?;
+        self[i].predict(model, input, dt)
     }
 }
 
-/// # Panics
-/// If `models` has fewer entries than there are modes.
+/// Errors: fewer models than modes ([`Error::DimensionMismatch`], quantity
+/// [`ModeProbabilities`](Quantity::ModeProbabilities)).
 impl<T: Real, N: Dim, F, P> PredictModes<T, N, Vec<P>> for Vec<F>
 where
     F: Predict<T, N, P> + Rollback,
@@ -299,12 +314,13 @@ where
 
     #[track_caller]
     fn predict_mode(&mut self, i: usize, models: &Vec<P>, input: &P::Input, dt: T) -> Result<()> {
-        self[i].predict(&models[i], input, dt)
+        let model = model_of(&models[..], i, self.len())?;
+        self[i].predict(model, input, dt)
     }
 }
 
-/// # Panics
-/// If `K` is less than the number of modes.
+/// Errors: fewer models than modes ([`Error::DimensionMismatch`], quantity
+/// [`ModeProbabilities`](Quantity::ModeProbabilities)).
 impl<T: Real, N: Dim, F, P, const K: usize> PredictModes<T, N, [P; K]> for Vec<F>
 where
     F: Predict<T, N, P> + Rollback,
@@ -315,7 +331,8 @@ where
 
     #[track_caller]
     fn predict_mode(&mut self, i: usize, models: &[P; K], input: &P::Input, dt: T) -> Result<()> {
-        self[i].predict(&models[i], input, dt)
+        let model = model_of(&models[..], i, self.len())?;
+        self[i].predict(model, input, dt)
     }
 }
 

@@ -476,9 +476,13 @@ fn snapshot_and_restore_continue_bit_identically() {
     assert_eq!(imm.snapshot(), saved);
     let second = run(&mut imm);
     for (a, b) in first.iter().zip(&second) {
-        assert_bitwise_eq(&a.0.state, &b.0.state, "state after restore");
-        assert_bitwise_eq(&a.0.covariance, &b.0.covariance, "covariance after restore");
-        assert_bitwise_eq(&a.0.probabilities, &b.0.probabilities, "μ after restore");
+        assert_bitwise_eq(a.0.state(), b.0.state(), "state after restore");
+        assert_bitwise_eq(
+            a.0.covariance(),
+            b.0.covariance(),
+            "covariance after restore",
+        );
+        assert_bitwise_eq(a.0.probabilities(), b.0.probabilities(), "μ after restore");
         assert_eq!(a.1.log_likelihood.to_bits(), b.1.log_likelihood.to_bits());
     }
 }
@@ -586,13 +590,21 @@ fn a_failed_step_leaves_the_estimator_bit_identical() {
     type Modes = (KalmanFilter<f64, U2>, SrKalmanFilter<f64, U2>);
     let unchanged = |imm: &Imm<f64, U2, Modes>, what: &str| {
         let now = imm.snapshot();
-        assert_bitwise_eq(&now.state, &before.state, what);
-        assert_bitwise_eq(&now.covariance, &before.covariance, what);
-        assert_bitwise_eq(&now.probabilities, &before.probabilities, what);
-        assert_bitwise_eq(now.modes.0.state(), before.modes.0.state(), what);
-        assert_bitwise_eq(now.modes.0.covariance(), before.modes.0.covariance(), what);
-        assert_bitwise_eq(now.modes.1.state(), before.modes.1.state(), what);
-        assert_bitwise_eq(now.modes.1.covariance(), before.modes.1.covariance(), what);
+        assert_bitwise_eq(now.state(), before.state(), what);
+        assert_bitwise_eq(now.covariance(), before.covariance(), what);
+        assert_bitwise_eq(now.probabilities(), before.probabilities(), what);
+        assert_bitwise_eq(now.modes().0.state(), before.modes().0.state(), what);
+        assert_bitwise_eq(
+            now.modes().0.covariance(),
+            before.modes().0.covariance(),
+            what,
+        );
+        assert_bitwise_eq(now.modes().1.state(), before.modes().1.state(), what);
+        assert_bitwise_eq(
+            now.modes().1.covariance(),
+            before.modes().1.covariance(),
+            what,
+        );
     };
     // A measurement every mode refuses (not finite).
     assert!(imm.update_modes(&sensor, &Vector1::new(f64::NAN)).is_err());
@@ -616,6 +628,125 @@ fn a_failed_step_leaves_the_estimator_bit_identical() {
 }
 
 #[test]
+fn fewer_models_than_modes_is_an_error_and_changes_nothing() {
+    let sensor = position(0.5);
+    let modes = vec![KalmanFilter::new(prior()); 3];
+    let pi = DMatrix::from_row_slice(3, 3, &[0.8, 0.1, 0.1, 0.1, 0.8, 0.1, 0.1, 0.1, 0.8]);
+    let mu = DVector::from_vec(vec![0.5, 0.3, 0.2]);
+    let mut imm = Imm::new(modes.clone(), pi.clone(), mu.clone()).unwrap();
+    let models = vec![cv(0.01), cv(0.1), cv(1.0)];
+    for z in manoeuvre(12, 3) {
+        imm.predict_modes(&models, &u0(), DT).unwrap();
+        imm.update_modes(&sensor, &Vector1::new(z)).unwrap();
+    }
+    let before = imm.snapshot();
+    // Modes 0 and 1 are mixed and predicted before mode 2 finds no model: all put back.
+    let short = vec![cv(0.01), cv(0.1)];
+    let expected = Error::DimensionMismatch {
+        stage: estim_core::Stage::Prediction,
+        quantity: Quantity::ModeProbabilities,
+        expected_rows: 3,
+        expected_cols: 1,
+        found_rows: 2,
+        found_cols: 1,
+    };
+    assert_eq!(imm.predict_modes(&short, &u0(), DT), Err(expected));
+    assert_eq!(imm.predict_modes(&short[..], &u0(), DT), Err(expected));
+    assert_eq!(
+        imm.predict_modes(&[cv(0.01), cv(0.1)], &u0(), DT),
+        Err(expected)
+    );
+    let now = imm.snapshot();
+    for j in 0..3 {
+        assert_bitwise_eq(now.modes()[j].state(), before.modes()[j].state(), "mode x̂");
+        assert_bitwise_eq(
+            now.modes()[j].covariance(),
+            before.modes()[j].covariance(),
+            "mode P",
+        );
+    }
+    assert_bitwise_eq(now.probabilities(), before.probabilities(), "μ");
+    assert_bitwise_eq(now.state(), before.state(), "combined x̂");
+    assert_bitwise_eq(now.covariance(), before.covariance(), "combined P");
+    // GPB2 checks the list before its loop.
+    let mut gpb2 = estim_filters::imm::Gpb2::new(modes, pi, mu).unwrap();
+    gpb2.predict_modes(&models, &u0(), DT).unwrap();
+    let (x, p, mu) = (
+        *gpb2.state(),
+        *gpb2.covariance(),
+        gpb2.probabilities().clone(),
+    );
+    assert_eq!(gpb2.predict_modes(&short, &u0(), DT), Err(expected));
+    assert_eq!(gpb2.hypotheses(), 9);
+    assert_bitwise_eq(gpb2.state(), &x, "GPB2 x̂");
+    assert_bitwise_eq(gpb2.covariance(), &p, "GPB2 P");
+    assert_bitwise_eq(gpb2.probabilities(), &mu, "GPB2 μ");
+}
+
+#[test]
+fn a_mode_with_zero_probability_is_neither_predicted_nor_updated() {
+    // Mode 1 would fail both steps: its model's noise is NaN, and with P = 0 under a sensor
+    // with R = 0 its S = 0 is singular. With μ₁ = 0 and Π = I it never gets weight, so the
+    // IMM is mode 0's filter alone, bit for bit.
+    let sensor = position(0.0);
+    let degenerate = Gaussian::new(Vector2::zeros(), Matrix2::zeros()).unwrap();
+    let modes = vec![
+        KalmanFilter::new(prior()),
+        KalmanFilter::new(degenerate.clone()),
+    ];
+    let mut imm = Imm::new(
+        modes,
+        DMatrix::identity(2, 2),
+        DVector::from_vec(vec![1.0, 0.0]),
+    )
+    .unwrap();
+    let mut bad = cv(0.1);
+    bad.noise[(0, 0)] = f64::NAN;
+    let mut alone = KalmanFilter::new(prior());
+    for z in manoeuvre(13, 6) {
+        let z = Vector1::new(z);
+        imm.predict_modes(&[cv(0.01), bad.clone()], &u0(), DT)
+            .unwrap();
+        alone.predict(&cv(0.01), &u0(), DT).unwrap();
+        let report = imm.update_modes(&sensor, &z).unwrap();
+        let expected = alone.update(&sensor, &z).unwrap();
+        assert_eq!(report.outcome, UpdateOutcome::Applied);
+        assert_eq!(report.innovation, expected.innovation);
+        assert_eq!(imm.probabilities(), &DVector::from_vec(vec![1.0, 0.0]));
+        assert_bitwise_eq(imm.state(), alone.state(), "combined x̂");
+        assert_bitwise_eq(imm.covariance(), alone.covariance(), "combined P");
+        assert_eq!(imm.mode_estimate(1), degenerate, "mode 1 untouched");
+    }
+    // Once probability flows in, mixing re-seeds mode 1 from mode 0 (its only source:
+    // weight 0.1 · 1 / 0.1 = 1 exactly, a copy) and it predicts with its own model.
+    imm.set_transition(two_by_two(0.1, 0.1)).unwrap();
+    let seed = imm.mode_estimate(0);
+    imm.predict_modes(&[cv(0.01), cv(0.1)], &u0(), DT).unwrap();
+    let mut reseeded = KalmanFilter::new(seed);
+    reseeded.predict(&cv(0.1), &u0(), DT).unwrap();
+    assert_eq!(imm.mode_estimate(1), reseeded.estimate());
+    assert!(imm.probabilities()[1] > 0.0);
+    let sensor = position(0.5);
+    imm.update_modes(&sensor, &Vector1::new(7.0)).unwrap();
+    assert!(imm.probabilities()[1] > 0.0 && imm.probabilities()[1] < 1.0);
+    // GPB2 holds a hypothesis of weight 0 for mode 1 from construction: not updated either.
+    let modes = vec![KalmanFilter::new(prior()), KalmanFilter::new(degenerate)];
+    let mut gpb2 = estim_filters::imm::Gpb2::new(
+        modes,
+        DMatrix::identity(2, 2),
+        DVector::from_vec(vec![1.0, 0.0]),
+    )
+    .unwrap();
+    let mut alone = KalmanFilter::new(prior());
+    let z = Vector1::new(0.3);
+    let report = gpb2.update_modes(&position(0.0), &z).unwrap();
+    let expected = alone.update(&position(0.0), &z).unwrap();
+    assert_eq!(report.innovation, expected.innovation);
+    assert_bitwise_eq(gpb2.state(), alone.state(), "GPB2 x̂");
+    assert_bitwise_eq(gpb2.covariance(), alone.covariance(), "GPB2 P");
+}
+
+#[test]
 fn a_measurement_only_some_modes_refuse_restores_the_others() {
     // The sensor has R = 0: fine for the first mode (P = I, S = 1), but the second mode
     // starts from P = 0, so its S = H·0·Hᵀ + 0 is singular and it refuses, after the first
@@ -634,17 +765,17 @@ fn a_measurement_only_some_modes_refuse_restores_the_others() {
     assert!(imm.update_modes(&sensor, &Vector1::new(0.3)).is_err());
     let now = imm.snapshot();
     assert_bitwise_eq(
-        now.modes[0].state(),
-        before.modes[0].state(),
+        now.modes()[0].state(),
+        before.modes()[0].state(),
         "mode 0 state",
     );
     assert_bitwise_eq(
-        now.modes[0].covariance(),
-        before.modes[0].covariance(),
+        now.modes()[0].covariance(),
+        before.modes()[0].covariance(),
         "mode 0 P",
     );
-    assert_bitwise_eq(&now.probabilities, &before.probabilities, "μ");
-    assert_bitwise_eq(&now.state, &before.state, "combined state");
+    assert_bitwise_eq(now.probabilities(), before.probabilities(), "μ");
+    assert_bitwise_eq(now.state(), before.state(), "combined state");
 }
 
 #[test]
@@ -697,6 +828,64 @@ fn a_checkpoint_resumes_bit_identically() {
     let edited = saved.replace("\"transition\":[[0.9,", "\"transition\":[[0.5,");
     assert_ne!(edited, saved);
     assert!(serde_json::from_str::<Imm<f64, U2, Modes>>(&edited).is_err());
+}
+
+/// The field `name`'s runtime shape in a JSON checkpoint `[[entries], rows, cols]` with its
+/// row count replaced by `rows`.
+#[cfg(feature = "serde")]
+fn with_rows(json: &str, name: &str, rows: &str) -> String {
+    let key = format!("\"{name}\":[[");
+    let start = json.find(&key).expect("the field is in the checkpoint") + key.len();
+    let end = start + json[start..].find(']').expect("the entries close");
+    let (head, tail) = json.split_at(end + 1);
+    let tail = tail
+        .strip_prefix(",2,")
+        .expect("the shape follows the entries");
+    format!("{head},{rows},{tail}")
+}
+
+#[cfg(feature = "serde")]
+#[test]
+fn a_checkpoint_with_a_corrupted_shape_is_an_error_not_a_panic() {
+    type Modes = (KalmanFilter<f64, U2>, Ukf<f64, U2>);
+    let modes = (KalmanFilter::new(prior()), Ukf::new(prior()));
+    let imm = Imm::new(modes, two_by_two(0.1, 0.2), DVector::from_element(2, 0.5)).unwrap();
+    let saved = serde_json::to_string(&imm).unwrap();
+    // The untouched checkpoint reads back (so the edits below are what is refused).
+    assert!(serde_json::from_str::<Imm<f64, U2, Modes>>(&saved).is_ok());
+    // 2⁶³ − 1 rows: nalgebra would build (or overflow on) a matrix larger than its entries.
+    for field in ["transition", "probabilities", "initial_probabilities"] {
+        let corrupted = with_rows(&saved, field, "9223372036854775807");
+        assert_ne!(corrupted, saved);
+        let read = std::panic::catch_unwind(|| {
+            serde_json::from_str::<Imm<f64, U2, Modes>>(&corrupted).is_err()
+        });
+        assert_eq!(
+            read.ok(),
+            Some(true),
+            "a corrupted {field} shape is an error"
+        );
+    }
+}
+
+#[cfg(feature = "serde")]
+#[test]
+fn many_predictions_without_an_update_keep_mu_normalised_and_checkpointable() {
+    type Modes = (KalmanFilter<f64, U2>, KalmanFilter<f64, U2>);
+    // Row 0 sums to 1 + 1e-14, within the 64 m ulps (2.8e-14) `new` accepts: each
+    // prediction without renormalising would grow Σ μ by about μ₀ · 1e-14.
+    let pi = DMatrix::from_row_slice(2, 2, &[0.5, 0.5 + 1e-14, 0.3, 0.7]);
+    let modes = (KalmanFilter::new(prior()), KalmanFilter::new(prior()));
+    let mut imm = Imm::new(modes, pi, DVector::from_vec(vec![0.5, 0.5])).unwrap();
+    let models = (cv(0.01), cv(0.1));
+    for _ in 0..20 {
+        imm.predict_modes(&models, &u0(), DT).unwrap();
+        // A few ulps of the division by the sum of two entries.
+        assert!((imm.probabilities().sum() - 1.0).abs() <= 4.0 * f64::EPSILON);
+    }
+    let saved = serde_json::to_string(&imm).unwrap();
+    let resumed: Imm<f64, U2, Modes> = serde_json::from_str(&saved).unwrap();
+    assert_eq!(resumed.snapshot(), imm.snapshot());
 }
 
 /// The two constant-velocity modes (quiet, agile) as one model for the `Predict` trait.
@@ -815,9 +1004,13 @@ mod in_the_fusion_driver {
         }
         assert!(replayed > 0);
         let (a, b) = (ordered.filter().snapshot(), late.filter().snapshot());
-        assert_bitwise_eq(&a.probabilities, &b.probabilities, "μ after the replay");
-        assert_bitwise_eq(&a.state, &b.state, "state after the replay");
-        assert_bitwise_eq(&a.covariance, &b.covariance, "covariance after the replay");
+        assert_bitwise_eq(a.probabilities(), b.probabilities(), "μ after the replay");
+        assert_bitwise_eq(a.state(), b.state(), "state after the replay");
+        assert_bitwise_eq(
+            a.covariance(),
+            b.covariance(),
+            "covariance after the replay",
+        );
         assert_eq!(a, b);
     }
 }
@@ -932,7 +1125,7 @@ fn the_update_report_is_the_predicted_mixtures_and_a_partly_gated_update_weighs_
 }
 
 #[test]
-fn reset_restarts_every_mode_and_the_initial_probabilities() {
+fn reset_restarts_every_mode_and_keeps_the_probabilities() {
     let sensor = position(0.5);
     let mut imm = pair_imm();
     let [quiet, agile] = models();
@@ -941,16 +1134,36 @@ fn reset_restarts_every_mode_and_the_initial_probabilities() {
             .unwrap();
         imm.update_modes(&sensor, &Vector1::new(z)).unwrap();
     }
+    let mu = imm.probabilities().clone();
+    assert_ne!(mu, DVector::from_vec(vec![0.8, 0.2]), "μ has moved from μ₀");
     let restart = Gaussian::new(Vector2::new(5.0, -1.0), Matrix2::identity() * 3.0).unwrap();
     imm.reset(restart.clone());
-    assert_eq!(imm.probabilities(), &DVector::from_vec(vec![0.8, 0.2]));
+    assert_bitwise_eq(imm.probabilities(), &mu, "μ kept by the reset");
     for j in 0..2 {
         assert_eq!(imm.mode_estimate(j).mean(), restart.mean());
     }
     // The mixture of two copies of one Gaussian is that Gaussian (to the rounding of
-    // 0.8 x + 0.2 x).
+    // μ₀ x + μ₁ x: a few ulps of the largest entry).
     assert!((imm.state() - restart.mean()).amax() < 4.0 * f64::EPSILON * 5.0);
     assert!((imm.covariance() - restart.covariance()).amax() < 4.0 * f64::EPSILON * 3.0);
+    // GPB2 resets the same way.
+    let modes = vec![KalmanFilter::new(prior()); 2];
+    let mut gpb2 = estim_filters::imm::Gpb2::new(
+        modes,
+        two_by_two(0.1, 0.2),
+        DVector::from_vec(vec![0.8, 0.2]),
+    )
+    .unwrap();
+    for z in manoeuvre(13, 5) {
+        gpb2.predict_modes(&[quiet.clone(), agile.clone()], &u0(), DT)
+            .unwrap();
+        gpb2.update_modes(&sensor, &Vector1::new(z)).unwrap();
+    }
+    let mu = gpb2.probabilities().clone();
+    gpb2.reset(restart.clone());
+    // One hypothesis per mode, weighted μⱼ: re-added onto 0, μ is the same bits.
+    assert_bitwise_eq(gpb2.probabilities(), &mu, "GPB2 μ kept by the reset");
+    assert_eq!(gpb2.hypotheses(), 2);
 }
 
 mod gpb2 {
@@ -1083,11 +1296,13 @@ mod gpb2 {
         let mut gpb2 =
             Gpb2::new(modes, two_by_two(0.1, 0.2), DVector::from_element(2, 0.5)).unwrap();
         let zs = manoeuvre(16, 10);
+        // Taken with m hypotheses, overwritten below with m² (snapshot_into reuses it).
+        let mut saved = gpb2.snapshot();
         for z in &zs[..4] {
             Predict::predict(&mut gpb2, &bank, &u0(), DT).unwrap();
             Update::update(&mut gpb2, &sensor, &Vector1::new(*z)).unwrap();
         }
-        let saved = gpb2.snapshot();
+        gpb2.snapshot_into(&mut saved);
         let run = |g: &mut Gpb2<f64, U2, KalmanFilter<f64, U2>>| {
             zs[4..]
                 .iter()
