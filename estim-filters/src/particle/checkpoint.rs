@@ -28,7 +28,8 @@
 //! ```
 
 use estim_core::checks::{all_finite, ensure_finite, ensure_shape};
-use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector};
+use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
+use estim_core::serialize::ShapeChecked;
 use estim_core::{Alloc, Error, Parameter, Quantity, Real, Stage};
 use serde::de::Error as _;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -85,10 +86,27 @@ where
     T: Deserialize<'de>,
 {
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        let f =
-            Fields::<OMatrix<T, N, Dyn>, Vec<T>, OVector<T, N>, OMatrix<T, N, N>, T>::deserialize(
-                deserializer,
-            )?;
+        // The matrices through `ShapeChecked`: a corrupted runtime shape is an error before
+        // nalgebra multiplies rows × columns unchecked (issue 41).
+        type Checked<T, N> = Fields<
+            ShapeChecked<T, N, Dyn>,
+            Vec<T>,
+            ShapeChecked<T, N, U1>,
+            ShapeChecked<T, N, N>,
+            T,
+        >;
+        let f = Checked::<T, N>::deserialize(deserializer)?;
+        let f = Fields {
+            seed: f.seed,
+            resampling: f.resampling,
+            trigger: f.trigger,
+            particles: f.particles.0,
+            log_weights: f.log_weights,
+            step: f.step,
+            state: f.state.0,
+            covariance: f.covariance.0,
+            log_likelihood: f.log_likelihood,
+        };
         validate(&f).map_err(D::Error::custom)?;
         let (n, _) = f.state.shape_generic();
         let count = f.log_weights.len();

@@ -627,6 +627,12 @@ fn checkpoints_resume_bit_identically_and_reject_corrupt_input() {
     v["state"] = serde_json::json!([[0.0, 1.0], 2, null]);
     let e = serde_json::from_value::<ParticleFilter<f64, Dyn>>(v).unwrap_err();
     assert!(e.to_string().contains("shape"), "{e}");
+    // A cloud claiming 2⁶³ − 1 particles: nalgebra would multiply rows × columns unchecked
+    // (issue 41, defect 5); read through `ShapeChecked`, it is an error, not a panic.
+    let mut v = serde_json::to_value(&dynamic).unwrap();
+    v["particles"][2] = serde_json::json!(i64::MAX);
+    let e = serde_json::from_value::<ParticleFilter<f64, Dyn>>(v).unwrap_err();
+    assert!(e.to_string().contains("entries"), "{e}");
 }
 
 /// The fusion driver rolls a particle filter back for a late reading (the cloud, its weights
