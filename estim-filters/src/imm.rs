@@ -95,7 +95,7 @@ use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 pub use gpb2::{Gpb2, Gpb2Snapshot};
 pub use modes::{ModeModels, Modes, PredictModes, UpdateModes};
 
-use crate::report::{UpdateOutcome, UpdateReport};
+use crate::report::UpdateReport;
 use crate::snapshot::copy_matrix;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
 use mixture::{RunningMoments, mixture_into};
@@ -566,24 +566,7 @@ where
         self.work.predicted.copy_from(&self.probabilities);
         let log_likelihood =
             mixture::bayes_in_logs(&mut self.work.predicted, &mut self.work.log_weights)?;
-        let mut factor = moments.covariance.clone();
-        let mut whitened = moments.mean.clone();
-        let nis = estim_core::linalg::inverse_quadratic_form(&mut factor, &mut whitened).ok_or(
-            Error::NotPositiveDefinite {
-                stage: Stage::Update,
-                quantity: Quantity::InnovationCovariance,
-            },
-        )?;
-        report.innovation = moments.mean;
-        report.innovation_covariance = moments.covariance;
-        report.nis = nis;
-        report.log_likelihood = log_likelihood;
-        report.iterations = None;
-        report.outcome = if applied {
-            UpdateOutcome::Applied
-        } else {
-            UpdateOutcome::Gated
-        };
+        moments.into_report(log_likelihood, applied, report)?;
         if applied {
             core::mem::swap(&mut self.probabilities, &mut self.work.predicted);
             self.combine();

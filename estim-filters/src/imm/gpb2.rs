@@ -51,7 +51,7 @@ use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 
 use super::ModeModels;
 use super::mixture::{self, RunningMoments, mixture_into};
-use crate::report::{UpdateOutcome, UpdateReport};
+use crate::report::UpdateReport;
 use crate::snapshot::copy_matrix;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
 
@@ -267,24 +267,7 @@ where
         }
         moments.finish();
         let log_likelihood = mixture::bayes_in_logs(&mut weights, &mut log_likelihoods)?;
-        let mut factor = moments.covariance.clone();
-        let mut whitened = moments.mean.clone();
-        let nis = estim_core::linalg::inverse_quadratic_form(&mut factor, &mut whitened).ok_or(
-            Error::NotPositiveDefinite {
-                stage: Stage::Update,
-                quantity: Quantity::InnovationCovariance,
-            },
-        )?;
-        report.innovation = moments.mean;
-        report.innovation_covariance = moments.covariance;
-        report.nis = nis;
-        report.log_likelihood = log_likelihood;
-        report.iterations = None;
-        report.outcome = if applied {
-            UpdateOutcome::Applied
-        } else {
-            UpdateOutcome::Gated
-        };
+        moments.into_report(log_likelihood, applied, report)?;
         if applied {
             for (c, w) in updated.iter_mut().zip(weights.iter()) {
                 c.weight = *w;

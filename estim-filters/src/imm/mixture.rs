@@ -5,6 +5,8 @@ use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVe
 use estim_core::scalar::real;
 use estim_core::{Alloc, Error, Parameter, Quantity, Real, Stage, error::Result};
 
+use crate::report::{UpdateOutcome, UpdateReport};
+
 /// How far a row of Π (or μ) may sum from 1: 64 m ulps, room for the rounding of m entries
 /// typed as decimals (0.95 + 0.05 is 1 within one ulp) and nothing that is a real mistake.
 fn sum_tolerance<T: Real>(m: usize) -> T {
@@ -223,6 +225,37 @@ where
         if self.total > T::zero() && self.total != T::one() {
             self.covariance /= self.total;
         }
+    }
+
+    /// The mixture's update report from the finished moments: ν̄, S̄, NIS = ν̄ᵀ S̄⁻¹ ν̄,
+    /// `log_likelihood` (the mixture's, from [`bayes_in_logs`]) and the outcome (`Applied`
+    /// if any component applied the update, else `Gated`). A singular S̄ is
+    /// `NotPositiveDefinite` (`InnovationCovariance`), the report then unspecified.
+    pub(crate) fn into_report(
+        self,
+        log_likelihood: T,
+        applied: bool,
+        report: &mut UpdateReport<T, M>,
+    ) -> Result<()> {
+        let mut factor = self.covariance.clone();
+        let mut whitened = self.mean.clone();
+        let nis = estim_core::linalg::inverse_quadratic_form(&mut factor, &mut whitened).ok_or(
+            Error::NotPositiveDefinite {
+                stage: Stage::Update,
+                quantity: Quantity::InnovationCovariance,
+            },
+        )?;
+        report.innovation = self.mean;
+        report.innovation_covariance = self.covariance;
+        report.nis = nis;
+        report.log_likelihood = log_likelihood;
+        report.iterations = None;
+        report.outcome = if applied {
+            UpdateOutcome::Applied
+        } else {
+            UpdateOutcome::Gated
+        };
+        Ok(())
     }
 }
 
