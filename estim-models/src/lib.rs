@@ -10,6 +10,17 @@
 //! - [`lv2`]: minimum-variance fusion of redundant accelerometer axes.
 //! - [`lu`]: accelerometer bias calibration from GPS, with Monte Carlo validation.
 //!
+//! And the models every tracker needs, so that a user does not write them by hand:
+//!
+//! - [`motion`]: constant velocity and acceleration (1-3 D), coordinated turn (known or
+//!   estimated rate), unicycle/odometry, random walk, first-order Gauss-Markov; the exact
+//!   discretisation of continuous-time noise (closed forms, Van Loan).
+//! - [`sensors`]: position, range, bearing, range-bearing.
+//!
+//! They live here rather than in estim-core because they are models, like the papers', and
+//! estim-core stays the traits and the machinery; like the papers' models they are static-size
+//! and generic over the scalar.
+//!
 //! Every model's analytic derivatives pass the estim-core derivative checker, and every
 //! closed form taken from a paper is tested against an independent route. Where a paper is
 //! wrong, the module's *Errata* section says what it prints, what estim uses and which test
@@ -26,3 +37,5 @@ pub mod lee_huang;
 pub mod limits;
 pub mod lu;
 pub mod lv2;
+pub mod motion;
+pub mod sensors;

@@ -21,3 +21,5 @@ mod lv2_fusion;
 mod lv2_monte_carlo;
 mod lv2_stats;
 mod lv2_support;
+mod motion_derivatives;
+mod motion_discretization;
