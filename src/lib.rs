@@ -10,7 +10,8 @@
 //!   moment propagators (linearised, second order after Papoulis/Boje, Gaussian second order,
 //!   unscented, sampled) and the derivative checker.
 //! - [`filters`] (`estim-filters`): the filters and their step traits.
-//! - `models` (`estim-models`, default feature `models`): the paper models. A program that
+//! - `models` (`estim-models`, default feature `models`): the paper models, and the common
+//!   motion and sensor models with the exact discretisation of continuous noise. A program that
 //!   needs only the filters depends on `estim` with `default-features = false` and never
 //!   compiles them.
 //!
