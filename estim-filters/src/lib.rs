@@ -39,6 +39,13 @@
 //! Models are passed to each call, never stored, so one filter serves several sensors at
 //! several rates. [`Estimator`] is object safe: `Box<dyn Estimator<f64, U6>>` holds any of them.
 //!
+//! ## Outliers and consider states
+//!
+//! Beside the gate ([`Gate`]: reject), [`robust`] down-weights an outlier (Huber or Student-t
+//! weights, the step bounded in prior standard deviations, the filter's own update when the
+//! innovation is inside the threshold), and [`consider`] carries states without correcting
+//! them (the Schmidt-Kalman update).
+//!
 //! ## Multiple models
 //!
 //! [`imm`]: the interacting multiple model estimator over any of these filters as modes (a
@@ -76,6 +83,7 @@
 pub mod checkpoint;
 #[cfg(feature = "std")]
 mod chi_square;
+pub mod consider;
 #[cfg(feature = "std")]
 pub mod consistency;
 mod correlated;
@@ -95,6 +103,7 @@ pub mod particle;
 pub mod proptest_support;
 mod report;
 mod rls;
+pub mod robust;
 mod scratch;
 #[cfg(feature = "std")]
 pub mod smoother;

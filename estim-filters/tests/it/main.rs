@@ -15,6 +15,7 @@ mod counting;
 
 mod adapters;
 mod atomicity;
+mod consider;
 mod consistency_monte_carlo;
 mod consistency_proptest;
 mod consistency_statistics;
@@ -43,6 +44,7 @@ mod noise_id_likelihood;
 mod noise_policy;
 mod particle;
 mod rls;
+mod robust;
 mod second_order;
 #[cfg(feature = "serde")]
 mod serde_checkpoint;
