@@ -16,6 +16,7 @@
 //!   estimated rate), unicycle/odometry, random walk, first-order Gauss-Markov; the exact
 //!   discretisation of continuous-time noise (closed forms, Van Loan).
 //! - [`sensors`]: position, range, bearing, range-bearing.
+//! - [`augment`]: a model with bias / Gauss-Markov states appended, a sensor reading them.
 //!
 //! They live here rather than in estim-core because they are models, like the papers', and
 //! estim-core stays the traits and the machinery; like the papers' models they are static-size
@@ -32,6 +33,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod augment;
 pub mod boje;
 pub mod lee_huang;
 pub mod limits;

@@ -23,3 +23,4 @@ mod lv2_stats;
 mod lv2_support;
 mod motion_derivatives;
 mod motion_discretization;
+mod motion_filtering;

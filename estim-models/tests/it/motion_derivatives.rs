@@ -396,3 +396,70 @@ fn sensors_at_their_origin_and_across_pi() {
     assert!((d[1] - (6.2 - 2.0 * std::f64::consts::PI)).abs() < 1e-15);
     assert_eq!(d[0], 0.0);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Augmentation
+// ---------------------------------------------------------------------------------------------
+
+use estim_core::nalgebra::{SVector as Sv, U7};
+use estim_models::augment::{Augmented, Biased};
+
+type TurnWithBiases = Augmented<CoordinatedTurnRate<f64>, GaussMarkov<f64, 2>, 5, 2>;
+
+/// The coordinated turn (5 states) with two Gauss-Markov biases appended, written out.
+struct GenericAugmented(TurnWithBiases);
+
+impl AutoDiffProcess<f64, U7> for GenericAugmented {
+    type Input = ();
+    fn transition<E: AdScalar<f64>>(&self, x: &Sv<E, 7>, _: &(), dt: f64) -> Sv<E, 7> {
+        let y = turn([x[0], x[1], x[2], x[3]], x[4], dt);
+        let tau = self.0.augment.time_constant;
+        Sv::<E, 7>::from_column_slice(&[
+            y[0],
+            y[1],
+            y[2],
+            y[3],
+            x[4],
+            x[5] * (-dt / tau[0]).exp(),
+            x[6] * (-dt / tau[1]).exp(),
+        ])
+    }
+    fn process_noise(&self, x: &Sv<f64, 7>, u: &(), dt: f64) -> SMatrix<f64, 7, 7> {
+        self.0.process_noise(x, u, dt)
+    }
+}
+
+/// Range and bearing with the two biases added: z = (r + b₁, β + b₂).
+struct GenericBiasedRangeBearing(Vector2<f64>);
+
+impl AutoDiffMeasurement<f64, U7, U2> for GenericBiasedRangeBearing {
+    fn measure<E: AdScalar<f64>>(&self, x: &Sv<E, 7>) -> Vector2<E> {
+        let (dx, dy) = (x[0] - self.0[0], x[1] - self.0[1]);
+        Vector2::new((dx * dx + dy * dy).sqrt() + x[5], dy.atan2(dx) + x[6])
+    }
+    fn measurement_noise(&self, _: &Sv<f64, 7>) -> Matrix2<f64> {
+        Matrix2::identity()
+    }
+}
+
+proptest! {
+    #![proptest_config(config(0xa6))]
+
+    /// The augmented models' derivatives are the blocks' (the same tolerance as above).
+    #[test]
+    fn augmented_models(p in values(9), dt in 0.001..0.5f64) {
+        let model: TurnWithBiases = Augmented {
+            model: CoordinatedTurnRate { accel_psd: 0.3, rate_psd: 0.01 },
+            augment: GaussMarkov { time_constant: Vector2::new(5.0, 60.0), variance: Vector2::new(0.1, 0.01) },
+        };
+        let x = Sv::<f64, 7>::from_column_slice(&p[..7]);
+        assert_accurate(compare_process_models(&model, &AutoDiff::new(GenericAugmented(model)), &x, &(), &(), dt)?);
+        let o = Vector2::new(p[7], p[8]);
+        prop_assume!((x.fixed_rows::<2>(0) - o).norm() > 0.5);
+        let sensor = Biased::<_, f64, 5, 2, 2> {
+            model: RangeBearing { origin: o, range_variance: 1.0, bearing_variance: 1.0 },
+            coupling: Matrix2::identity(),
+        };
+        assert_accurate(compare_measurement_models(&sensor, &AutoDiff::new(GenericBiasedRangeBearing(o)), &x)?);
+    }
+}
