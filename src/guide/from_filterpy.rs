@@ -38,6 +38,9 @@
 //! | the robot `move(x, dt, u)` of the EKF chapter | `Unicycle` (input (v, ω), the exact arc) |
 //! | a bias state with `Q = q·dt` / a Gauss-Markov `exp(-dt/tau)` | `RandomWalk<f64, N>`, `GaussMarkov<f64, N>` |
 //! | `H_of`, `Hx` of a range / bearing / radar sensor | `sensors::Range`, `sensors::Bearing`, `sensors::RangeBearing` (residual wrapped), `sensors::Position` |
+//! | a state vector extended by hand with bias states | `augment::Augmented` (process) and `augment::Biased` (sensor) |
+//! | (no equivalent) consider / Schmidt states | [`filters::consider::schmidt_update`](crate::filters::consider::schmidt_update) |
+//! | (no equivalent) outlier-robust update | [`filters::robust::robust_update`](crate::filters::robust::robust_update) (Huber, Student-t), beside gating |
 //!
 //! ```
 //! # #[cfg(feature = "models")]
