@@ -173,8 +173,16 @@ pub fn discrete_white_noise<T: Real, const K: usize>(
 }
 
 /// Φ = e^{FΔt} and Q_d = ∫₀^Δt e^{Fs} G Q_c Gᵀ e^{Fᵀs} ds for the continuous system
-/// ẋ = F x + G w, E[w wᵀ] = Q_c δ, by Van Loan's method (see the [module docs](self)).
-/// Q_d is returned symmetrised, (Q + Qᵀ)/2.
+/// ẋ = F x + G w, E[w(t) w(s)ᵀ] = Q_c δ(t − s), by Van Loan's method (1978), one matrix
+/// exponential of a 2n × 2n block matrix:
+///
+/// ```text
+/// M = [ −F   G Q_c Gᵀ ] Δt,   e^M = [ ·   Φ⁻¹ Q_d ],   so Φ = (e^M)₂₂ᵀ,  Q_d = Φ (e^M)₁₂.
+///     [  0   Fᵀ       ]             [ 0   Φᵀ      ]
+/// ```
+///
+/// Q_d is returned symmetrised, (Q + Qᵀ)/2. The exponential is nalgebra's `Matrix::exp`
+/// (scaling and squaring with a Padé approximant).
 ///
 /// Works for any sizes, static or runtime: the 2n × 2n exponential is computed on a
 /// runtime-sized matrix (one allocation per call). For a time-invariant system with a fixed

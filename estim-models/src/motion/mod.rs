@@ -15,7 +15,8 @@
 //! which also carry the [`LinearProcessModel`](estim_core::LinearProcessModel) marker), and
 //! its derivatives are checked against automatic differentiation in the crate's tests. The
 //! state always starts with the position, so the [`sensors`](crate::sensors) read any of
-//! them.
+//! them: the kinematic states are ordered **by block**, (p₁..p_D, v₁..v_D[, a₁..a_D]), not
+//! per axis as FilterPy's examples do (x, vₓ, y, v_y).
 //!
 //! **Why one type per model, generic over the dimension.** `ConstantVelocity<f64, 2>` names the
 //! model by its physics; the state size 2D is derived (a `Const`), per D by a macro, because

@@ -34,7 +34,21 @@ use estim_core::{LinearProcessModel, ProcessHessian, ProcessJacobian, ProcessMod
 use super::trig::{cosc, d2cosc1_over_theta, d2sinc, dcosc1, dsinc_over_theta, sinc, sinc3};
 
 /// Coordinated turn at a known rate ω (rad/s, counter-clockwise positive): state (x, y, vₓ,
-/// v_y); linear, with the exact Q of the [module docs](self).
+/// v_y); linear. With θ = ωΔt, c = cos θ, s = sin θ:
+///
+/// ```text
+/// p⁺ = p + [A −B; B A] v,   v⁺ = [c −s; s c] v,   A = Δt·sin θ/θ,   B = Δt·(1 − cos θ)/θ
+/// ```
+///
+/// (θ-functions by their series for |θ| < 1: exact at ω = 0, where it is the
+/// constant-velocity model). The noise, continuous white acceleration of density q on each
+/// axis, is discretised exactly (Q = ∫₀^Δt e^{Fs} G q Gᵀ e^{Fᵀs} ds, G = [0; I]):
+///
+/// ```text
+/// Q_pp = 2Δt³ (θ − sin θ)/θ³ · q I,   Q_vv = Δt q I,
+/// Q_pv = Δt² q [ (1−cos θ)/θ²    (θ − sin θ)/θ² ]
+///              [ −(θ − sin θ)/θ²  (1−cos θ)/θ²  ]
+/// ```
 ///
 /// ```
 /// use estim_core::nalgebra::Vector4;
@@ -115,8 +129,10 @@ impl<T: Real> ProcessHessian<T, U4> for CoordinatedTurn<T> {
 
 impl<T: Real> LinearProcessModel<T, U4> for CoordinatedTurn<T> {}
 
-/// Coordinated turn with the rate estimated: state (x, y, vₓ, v_y, ω), ω a random walk.
-/// Nonlinear (the rotation depends on ω), with analytic Jacobian and Hessians; exact at ω = 0.
+/// Coordinated turn with the rate estimated: state (x, y, vₓ, v_y, ω), ω a random walk of
+/// density q_ω. The motion is [`CoordinatedTurn`]'s at the state's ω; Q is its Q at the
+/// estimated ω plus q_ω Δt for ω (the cross-terms through the ω noise, O(q_ω Δt³ |v|²), are
+/// neglected). Nonlinear (the rotation depends on ω), with analytic Jacobian and Hessians; exact at ω = 0.
 ///
 /// With A′ = ∂A/∂ω = Δt² sinc′(θ), B′ = ∂B/∂ω = Δt² b′(θ), b(θ) = (1 − cos θ)/θ:
 ///
