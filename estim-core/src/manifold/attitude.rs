@@ -32,7 +32,8 @@ use crate::scalar::{Real, real};
 /// Exp: the unit quaternion of the rotation vector v (angle |v| about v/|v|).
 ///
 /// Accurate to rounding for every |v| (a series for |v|² below √ε, where sin ½|v| / |v|
-/// would lose digits).
+/// would lose digits). For a model written over a dual-number scalar (automatic
+/// derivatives), use its generic twin `estim_core::autodiff::so3_exp` (feature `autodiff`).
 ///
 /// ```
 /// use estim_core::manifold::{so3_exp, so3_log};
@@ -59,7 +60,8 @@ pub fn so3_exp<T: Real>(v: &Vector3<T>) -> UnitQuaternion<T> {
 }
 
 /// Log: the rotation vector of q (angle in [0, π]), the inverse of [`so3_exp`]. q and −q
-/// give the same vector.
+/// give the same vector. Generic twin over a dual-number scalar: `estim_core::autodiff::so3_log`
+/// (feature `autodiff`).
 ///
 /// ```
 /// use estim_core::manifold::{so3_exp, so3_log};
