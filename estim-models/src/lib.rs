@@ -26,3 +26,4 @@ pub mod lee_huang;
 pub mod limits;
 pub mod lu;
 pub mod lv2;
+pub mod nav;

@@ -21,3 +21,4 @@ mod lv2_fusion;
 mod lv2_monte_carlo;
 mod lv2_stats;
 mod lv2_support;
+mod nav;
