@@ -127,7 +127,7 @@ impl MeasurementModel<f64, N, Const<3>> for Magnetometer {
 }
 
 impl MeasurementJacobian<f64, N, Const<3>> for Magnetometer {
-    /// (R Exp(δθ))ᵀ m ≈ Rᵀm + [Rᵀm]× δθ.
+    /// (R Exp(δθ))ᵀ m ≈ Rᵀm + \[Rᵀm\]× δθ.
     fn measurement_jacobian(&self, x: &State) -> SMatrix<f64, 3, STATE> {
         let mut h = SMatrix::<f64, 3, STATE>::zeros();
         h.fixed_view_mut::<3, 3>(0, ATTITUDE)
@@ -151,7 +151,7 @@ impl MeasurementModel<f64, N, Const<1>> for Heading {
 }
 
 impl MeasurementJacobian<f64, N, Const<1>> for Heading {
-    /// c = R e₀ moves by −R [e₀]× δθ, and dψ = (c₀ dc₁ − c₁ dc₀) / (c₀² + c₁²).
+    /// c = R e₀ moves by −R \[e₀\]× δθ, and dψ = (c₀ dc₁ − c₁ dc₀) / (c₀² + c₁²).
     fn measurement_jacobian(&self, x: &State) -> SMatrix<f64, 1, STATE> {
         let r = attitude(x).to_rotation_matrix().into_inner();
         let g = -(r * Vector3::x().cross_matrix());
