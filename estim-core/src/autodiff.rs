@@ -71,7 +71,10 @@ use crate::scalar::Real;
 
 pub use cache::InputKey;
 use cache::{HessianCache, Kind};
-pub use rotation::{rotation_exp, rotation_matrix};
+pub use rotation::{
+    quaternion_conjugate, quaternion_lift, quaternion_product, quaternion_rotate, rotation_exp,
+    rotation_matrix, so3_exp, so3_log,
+};
 
 /// The dual-number crate the adapter is built on, re-exported so users name the same version.
 pub use num_dual;

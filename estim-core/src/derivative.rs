@@ -44,6 +44,7 @@ use crate::alloc::Alloc;
 use crate::checks::{ensure_finite, ensure_shape};
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
 use crate::function::{Differentiable, TwiceDifferentiable};
+use crate::manifold::StateSpace;
 use crate::model::{
     MeasurementHessian, MeasurementJacobian, Observation, ProcessHessian, ProcessJacobian,
     Transition,
@@ -290,6 +291,14 @@ impl<T: Real> DerivativeCheck<T> {
 
     /// Compares g's analytic Jacobian at `x` with central differences of its values.
     ///
+    /// On a state space (a function whose [`input_plus_into`](crate::VectorFunction::input_plus_into)
+    /// is not +, such as [`Transition::on`] or [`Observation::on`] with an
+    /// [`AttitudeError`](crate::manifold::AttitudeError)), the differences are taken on the
+    /// manifold, as the filters use the Jacobian: column j against
+    /// ((g(x ⊞ hⱼeⱼ) ⊟ g(x)) − (g(x ⊞ (−hⱼeⱼ)) ⊟ g(x))) / (2hⱼ), ⊟ the function's
+    /// [`difference`](crate::VectorFunction::difference). A Jacobian that is correct on the manifold
+    /// is then not flagged for differing from the derivative of the coordinates.
+    ///
     /// Errors: non-finite values or a runtime shape mismatch.
     pub fn jacobian<N, M, G>(&self, g: &G, x: &OVector<T, N>) -> Result<DerivativeReport<T>>
     where
@@ -307,6 +316,10 @@ impl<T: Real> DerivativeCheck<T> {
         ensure_shape(&jac, m, n, stage, Quantity::Jacobian)?;
         ensure_finite(&jac, stage, Quantity::Jacobian)?;
         let mut report = DerivativeReport::empty();
+        if !G::VECTOR_SPACES {
+            self.manifold_columns(g, x, &y, &jac, &mut report)?;
+            return Ok(report);
+        }
         let mut xp = x.clone();
         for j in 0..n {
             let h = self.step(x, j);
@@ -332,9 +345,54 @@ impl<T: Real> DerivativeCheck<T> {
         Ok(report)
     }
 
+    /// The Jacobian columns of a function on a state space (see [`jacobian`](Self::jacobian)):
+    /// column j against ((g(x ⊞ hⱼeⱼ) ⊟ g(x)) − (g(x ⊞ (−hⱼeⱼ)) ⊟ g(x))) / (2hⱼ).
+    fn manifold_columns<N, M, G>(
+        &self,
+        g: &G,
+        x: &OVector<T, N>,
+        y: &OVector<T, M>,
+        jac: &nalgebra::OMatrix<T, M, N>,
+        report: &mut DerivativeReport<T>,
+    ) -> Result<()>
+    where
+        N: Dim,
+        M: Dim,
+        G: Differentiable<T, N, M> + ?Sized,
+        DefaultAllocator: Alloc<N, M>,
+    {
+        let stage = Stage::DerivativeCheck;
+        let (n, m) = (x.nrows(), y.nrows());
+        let (mut delta, mut xp) = (x.clone(), x.clone());
+        let mut side = |h: T, j: usize| -> Result<OVector<T, M>> {
+            delta.fill(T::zero());
+            delta[j] = h;
+            g.input_plus_into(x, &delta, &mut xp);
+            let value = g.eval(&xp);
+            ensure_shape(&value, m, 1, stage, Quantity::FunctionValue)?;
+            let d = g.difference(&value, y);
+            ensure_shape(&d, m, 1, stage, Quantity::FunctionValue)?;
+            ensure_finite(&d, stage, Quantity::FunctionValue)?;
+            Ok(d)
+        };
+        for j in 0..n {
+            let h = self.step(x, j);
+            let (dp, dm) = (side(h, j)?, side(-h, j)?);
+            for i in 0..m {
+                report.record(Comparison {
+                    entry: Entry::Jacobian { row: i, col: j },
+                    analytic: jac[(i, j)],
+                    numeric: (dp[i] - dm[i]) / (h + h),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// Compares g's analytic Hessians at `x` with central differences of its analytic
     /// Jacobian. Run [`jacobian`](Self::jacobian) too (or use [`derivatives`](Self::derivatives)):
-    /// this check trusts the Jacobian.
+    /// this check trusts the Jacobian. The Hessians are differenced in the coordinates of x,
+    /// whatever the function's state space.
     pub fn hessian<N, M, G>(&self, g: &G, x: &OVector<T, N>) -> Result<DerivativeReport<T>>
     where
         N: Dim,
@@ -482,6 +540,77 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     check_derivatives(&Observation::new(model), x)
+}
+
+/// Checks a process model's Jacobian ∂f/∂x at (x, u, Δt) on the state space `space`: the
+/// Jacobian a filter built with that space uses, F = ∂(f(x ⊞ δ) ⊟ f(x))/∂δ at δ = 0 (see
+/// [`DerivativeCheck::jacobian`]). With [`Euclidean`](crate::Euclidean) this is
+/// [`check_process_jacobian`].
+///
+/// ```
+/// use estim_core::derivative::{check_process_jacobian, check_process_jacobian_on};
+/// use estim_core::manifold::{AttitudeError, so3_exp, so3_log};
+/// use estim_core::nalgebra::{Matrix3, U3, Vector3};
+/// use estim_core::{ProcessJacobian, ProcessModel};
+///
+/// /// The attitude (its rotation vector) turned by a body rate ω over Δt: Log(Exp(θ) Exp(ω Δt)).
+/// struct Gyro;
+/// impl ProcessModel<f64, U3> for Gyro {
+///     type Input = Vector3<f64>;
+///     fn transition(&self, x: &Vector3<f64>, w: &Vector3<f64>, dt: f64) -> Vector3<f64> {
+///         so3_log(&(so3_exp(x) * so3_exp(&(w * dt))))
+///     }
+///     fn process_noise(&self, _: &Vector3<f64>, _: &Vector3<f64>, dt: f64) -> Matrix3<f64> {
+///         Matrix3::identity() * (1e-6 * dt)
+///     }
+/// }
+/// impl ProcessJacobian<f64, U3> for Gyro {
+///     // A body-frame error δ before the step is R(ω Δt)ᵀ δ after it.
+///     fn transition_jacobian(&self, _: &Vector3<f64>, w: &Vector3<f64>, dt: f64) -> Matrix3<f64> {
+///         so3_exp(&(w * dt)).inverse().to_rotation_matrix().into_inner()
+///     }
+/// }
+/// let (x, w) = (Vector3::new(0.4, -1.0, 2.0), Vector3::new(3.0, 0.5, -1.0));
+/// let space = AttitudeError::at(0);
+/// assert!(check_process_jacobian_on(&space, &Gyro, &x, &w, 0.1)?.is_accurate(1e-6));
+/// // In the coordinates (the embedding) the same, correct, Jacobian is flagged.
+/// assert!(!check_process_jacobian(&Gyro, &x, &w, 0.1)?.is_accurate(1e-2));
+/// # Ok::<(), estim_core::Error>(())
+/// ```
+pub fn check_process_jacobian_on<T, N, P, S>(
+    space: &S,
+    model: &P,
+    x: &OVector<T, N>,
+    u: &P::Input,
+    dt: T,
+) -> Result<DerivativeReport<T>>
+where
+    T: Real,
+    N: Dim,
+    P: ProcessJacobian<T, N>,
+    S: StateSpace<T, N>,
+    DefaultAllocator: Alloc<N>,
+{
+    check_jacobian(&Transition::on(space, model, u, dt), x)
+}
+
+/// Checks a measurement model's Jacobian ∂h/∂x at x on the state space `space`:
+/// H = ∂(h(x ⊞ δ) ⊖ h(x))/∂δ at δ = 0, ⊖ the model's residual (see
+/// [`DerivativeCheck::jacobian`], and [`check_process_jacobian_on`] for an example).
+pub fn check_measurement_jacobian_on<T, N, M, H, S>(
+    space: &S,
+    model: &H,
+    x: &OVector<T, N>,
+) -> Result<DerivativeReport<T>>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: MeasurementJacobian<T, N, M>,
+    S: StateSpace<T, N>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    check_jacobian(&Observation::on(space, model), x)
 }
 
 /// Compares g's value, Jacobian and Hessians at `x` with those of `reference`, an independent

@@ -35,6 +35,11 @@
 //!
 //! [`Predict`]: crate::Predict
 //!
+//! Everything an estimate depends on must be in the filter for this to hold: a quantity kept
+//! beside it (say an attitude reference that is recentred after each step) is not in the
+//! snapshots and is not rolled back. Keep an attitude in the state as its rotation vector
+//! under `estim_core::manifold::AttitudeError` (see the note in `estim_core::manifold::attitude`).
+//!
 //! # Registering sensors
 //!
 //! The sensors are one user type implementing [`SensorSet`]: a *reading* type (typically an
@@ -129,9 +134,12 @@
 //! # Time
 //!
 //! Timestamps are `f64` seconds whatever the filter's scalar (an `f32` timestamp loses
-//! milliseconds after a few hours). The process input is piecewise constant: it is held from
-//! [`FusionDriver::set_input`]'s time on, and recorded so that replays use the input that was
-//! in force. [`FusionDriver::advance_to`] predicts to a time with no measurement (the real-time
+//! milliseconds after a few hours). The process input is piecewise constant and recorded, so
+//! that replays use the input that was in force. By default it is held from
+//! [`FusionDriver::set_input`]'s time on; a sampled input that covers the interval *before*
+//! its timestamp (an IMU sample) is [`InputConvention::Preceding`]
+//! ([`FusionDriver::with_input_convention`]): no queue of samples is needed in front of the
+//! driver. [`FusionDriver::advance_to`] predicts to a time with no measurement (the real-time
 //! estimate); it is recorded too, so a replay splits the prediction at the same times.
 //!
 //! # Reference
@@ -157,4 +165,6 @@ pub use outcome::{
     ExclusionReason, Fused, Innovation, MAX_REPORTED_COMPONENTS, Outcome, ResetReason,
 };
 pub use sensors::SensorSet;
-pub use settings::{FusionSettings, MonitorSettings, ResetSettings, SensorSettings};
+pub use settings::{
+    FusionSettings, InputConvention, MonitorSettings, ResetSettings, SensorSettings,
+};

@@ -41,3 +41,4 @@ pub mod lu;
 pub mod lv2;
 pub mod motion;
 pub mod sensors;
+pub mod nav;

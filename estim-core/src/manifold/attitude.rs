@@ -21,6 +21,18 @@
 //!
 //! The quaternion stays unit: Exp and the products are renormalised, and recentring means
 //! the estimate is never accumulated in a non-unit form.
+//!
+//! **Keep the attitude in the filter's state when something rolls the filter back.** A
+//! reference held next to the filter is state the filter's snapshots do not contain: the
+//! fusion driver (estim-filters' `fusion::FusionDriver`), which restores snapshots to reject
+//! a measurement or to replay late ones, would restore the filter but not q_ref. Use the
+//! block as the attitude itself instead: q_ref = identity, never recentred, so
+//! q = Exp(δθ) and δθ is the rotation vector of the attitude (|δθ| ≤ π; ⊞ and ⊟ above keep
+//! it there and stay smooth across the fold). P is still the covariance of the body-frame
+//! error q̂⁻¹ ⊗ q, because ⊞ composes on the right; only the Jacobians must be those of the
+//! tangent, which [`check_process_jacobian_on`](crate::derivative::check_process_jacobian_on)
+//! checks. Everything the estimate depends on is then in the filter, and a replay is
+//! bit-identical to time-ordered processing (tested in estim-filters, `fusion_inputs`).
 
 use nalgebra::{DefaultAllocator, Dim, OVector, Quaternion, UnitQuaternion, Vector3};
 
@@ -32,7 +44,8 @@ use crate::scalar::{Real, real};
 /// Exp: the unit quaternion of the rotation vector v (angle |v| about v/|v|).
 ///
 /// Accurate to rounding for every |v| (a series for |v|² below √ε, where sin ½|v| / |v|
-/// would lose digits).
+/// would lose digits). For a model written over a dual-number scalar (automatic
+/// derivatives), use its generic twin `estim_core::autodiff::so3_exp` (feature `autodiff`).
 ///
 /// ```
 /// use estim_core::manifold::{so3_exp, so3_log};
@@ -59,7 +72,8 @@ pub fn so3_exp<T: Real>(v: &Vector3<T>) -> UnitQuaternion<T> {
 }
 
 /// Log: the rotation vector of q (angle in [0, π]), the inverse of [`so3_exp`]. q and −q
-/// give the same vector.
+/// give the same vector. Generic twin over a dual-number scalar: `estim_core::autodiff::so3_log`
+/// (feature `autodiff`).
 ///
 /// ```
 /// use estim_core::manifold::{so3_exp, so3_log};
@@ -209,6 +223,10 @@ where
 
 /// The reference attitude q_ref of a multiplicative error state (see the
 /// [module docs](self)): the attitude is q = q_ref ⊗ Exp(δθ).
+///
+/// It lives outside the filter: a component that restores the filter's snapshots (the fusion
+/// driver) does not restore it. With such a component, keep the attitude in the state instead
+/// (q_ref = identity, no recentring; see the [module docs](self)).
 ///
 /// ```
 /// use estim_core::manifold::{AttitudeReference, so3_exp};

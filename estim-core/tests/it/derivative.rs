@@ -627,3 +627,103 @@ fn static_hessians_are_symmetric() {
         }
     }
 }
+
+/// The checker on a state space (issue 38): an attitude held as the rotation vector θ of
+/// q = Exp(θ) under [`AttitudeError`], with a scale s. The filters use the Jacobian on the
+/// manifold, F = ∂(f(x ⊞ δ) ⊟ f(x))/∂δ, which differs from ∂f/∂x of the coordinates wherever
+/// θ ≠ 0: the state-space check passes the correct one and flags a corrupted entry; the
+/// coordinate check flags the correct one.
+mod on_a_state_space {
+    use super::*;
+    use estim_core::derivative::{check_measurement_jacobian_on, check_process_jacobian_on};
+    use estim_core::manifold::{AttitudeError, so3_exp, so3_log};
+    use estim_core::nalgebra::{Matrix3x4, Matrix4, Vector4};
+
+    /// θ⁺ = Log(Exp(θ) Exp(ω Δt)), s⁺ = s.
+    struct Turn {
+        wrong: f64,
+    }
+    impl ProcessModel<f64, U4> for Turn {
+        type Input = Vector3<f64>;
+        fn transition(&self, x: &Vector4<f64>, w: &Vector3<f64>, dt: f64) -> Vector4<f64> {
+            let theta = so3_log(&(so3_exp(&x.xyz()) * so3_exp(&(w * dt))));
+            Vector4::new(theta[0], theta[1], theta[2], x[3])
+        }
+        fn process_noise(&self, _: &Vector4<f64>, _: &Vector3<f64>, _: f64) -> Matrix4<f64> {
+            Matrix4::identity() * 1e-6
+        }
+    }
+    impl ProcessJacobian<f64, U4> for Turn {
+        /// A body-frame error δ before the step is R(ω Δt)ᵀ δ after it.
+        fn transition_jacobian(&self, _: &Vector4<f64>, w: &Vector3<f64>, dt: f64) -> Matrix4<f64> {
+            let r = so3_exp(&(w * dt)).to_rotation_matrix().into_inner();
+            let mut f = Matrix4::identity();
+            f.fixed_view_mut::<3, 3>(0, 0).copy_from(&r.transpose());
+            f[(1, 2)] += self.wrong;
+            f
+        }
+    }
+
+    /// z = (1 + s) R(q)ᵀ m: a scaled magnetometer.
+    struct Field {
+        m: Vector3<f64>,
+        wrong: f64,
+    }
+    impl MeasurementModel<f64, U4, U3> for Field {
+        fn measure(&self, x: &Vector4<f64>) -> Vector3<f64> {
+            (so3_exp(&x.xyz()).inverse() * self.m) * (1.0 + x[3])
+        }
+        fn measurement_noise(&self, _: &Vector4<f64>) -> Matrix3<f64> {
+            Matrix3::identity() * 1e-4
+        }
+    }
+    impl MeasurementJacobian<f64, U4, U3> for Field {
+        /// (R Exp(δ))ᵀ m ≈ Rᵀm + [Rᵀm]× δ.
+        fn measurement_jacobian(&self, x: &Vector4<f64>) -> Matrix3x4<f64> {
+            let b = so3_exp(&x.xyz()).inverse() * self.m;
+            let mut h = Matrix3x4::zeros();
+            h.fixed_view_mut::<3, 3>(0, 0)
+                .copy_from(&(b.cross_matrix() * (1.0 + x[3])));
+            h.set_column(3, &b);
+            h[(0, 1)] += self.wrong;
+            h
+        }
+    }
+
+    fn ball(radius: f64) -> impl Strategy<Value = Vector3<f64>> {
+        prop::array::uniform3(-1.0..1.0f64)
+            .prop_filter("inside the unit ball", |v| Vector3::from(*v).norm() <= 1.0)
+            .prop_map(move |v| Vector3::from(v) * radius)
+    }
+
+    proptest! {
+        #![proptest_config(config(64, 0x38d3))]
+
+        #[test]
+        fn manifold_jacobians_pass_on_the_space_and_fail_in_coordinates(
+            theta in ball(2.5), w in ball(4.0), s in -0.2..0.2f64,
+        ) {
+            // |θ| ≥ 0.3 so that the coordinate Jacobian differs by O(|θ| |ω Δt|) ≫ TOL.
+            prop_assume!(theta.norm() > 0.3 && w.norm() > 1.0);
+            let x = Vector4::new(theta[0], theta[1], theta[2], s);
+            let space = AttitudeError::at(0);
+            let dt = 0.1;
+            let m = Vector3::new(0.2, -0.05, 0.45);
+            let right = check_process_jacobian_on(&space, &Turn { wrong: 0.0 }, &x, &w, dt).unwrap();
+            prop_assert!(right.is_accurate(TOL), "{right}");
+            let wrong = check_process_jacobian_on(&space, &Turn { wrong: 1e-3 }, &x, &w, dt).unwrap();
+            prop_assert!(!wrong.is_accurate(TOL), "{wrong}");
+            prop_assert_eq!(wrong.worst_mixed.unwrap().entry, Entry::Jacobian { row: 1, col: 2 });
+            let embedded = derivative::check_process_jacobian(&Turn { wrong: 0.0 }, &x, &w, dt).unwrap();
+            prop_assert!(!embedded.is_accurate(1e-3), "{embedded}");
+
+            let right = check_measurement_jacobian_on(&space, &Field { m, wrong: 0.0 }, &x).unwrap();
+            prop_assert!(right.is_accurate(TOL), "{right}");
+            let wrong = check_measurement_jacobian_on(&space, &Field { m, wrong: 1e-3 }, &x).unwrap();
+            prop_assert_eq!(wrong.worst_mixed.unwrap().entry, Entry::Jacobian { row: 0, col: 1 });
+            prop_assert!(!wrong.is_accurate(TOL), "{wrong}");
+            let embedded = derivative::check_measurement_jacobian(&Field { m, wrong: 0.0 }, &x).unwrap();
+            prop_assert!(!embedded.is_accurate(1e-3), "{embedded}");
+        }
+    }
+}

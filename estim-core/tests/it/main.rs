@@ -24,5 +24,7 @@ mod no_alloc;
 mod nonlinear;
 mod papoulis;
 mod quadratic;
+#[cfg(feature = "autodiff")]
+mod rotation_ad;
 mod sigma_points;
 mod ukf_region;

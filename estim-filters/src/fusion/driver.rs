@@ -8,7 +8,7 @@ use super::history::{Event, History, Record};
 use super::monitor::{Health, SensorHealth};
 use super::outcome::{ExclusionReason, Fused, Innovation, Outcome, ResetReason};
 use super::sensors::SensorSet;
-use super::settings::{FusionSettings, Resolved, SensorSettings};
+use super::settings::{FusionSettings, InputConvention, Resolved, SensorSettings};
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback};
 
 /// A filter `F` of the family, its process model `P` with its input, and the sensors `S`,
@@ -31,6 +31,7 @@ where
     process: P,
     sensors: S,
     settings: FusionSettings,
+    convention: InputConvention,
     resolved: Vec<Resolved<T>>,
     input: P::Input,
     health: Health<T>,
@@ -119,10 +120,61 @@ where
             process,
             sensors,
             settings,
+            convention: InputConvention::HoldForward,
             resolved,
             input,
             health,
         })
+    }
+
+    /// The same driver with inputs read by `convention` ([`InputConvention`]; the default is
+    /// [`InputConvention::HoldForward`]). With [`InputConvention::Preceding`], the input given
+    /// to [`new`](Self::new) is held forward until the first sample arrives, and the first
+    /// sample covers the time from the start to its timestamp.
+    ///
+    /// Errors: [`FusionError::InvalidSetting`] ([`FusionSetting::InputConvention`]) once an
+    /// event has been recorded: the history would mix the two readings.
+    ///
+    /// ```
+    /// # use estim_core::nalgebra::{Matrix1, U1, Vector1};
+    /// # use estim_core::{Gaussian, LinearMeasurement, LinearProcess, error::Result};
+    /// # use estim_filters::fusion::{FusionDriver, FusionSettings, InputConvention, Innovation, SensorSet, SensorSettings};
+    /// # use estim_filters::{Estimator, KalmanFilter, Update};
+    /// # struct One(LinearMeasurement<f64, U1, U1>);
+    /// # impl<F: Update<f64, U1, U1, LinearMeasurement<f64, U1, U1>>> SensorSet<f64, U1, F> for One {
+    /// #     type Reading = Vector1<f64>;
+    /// #     fn count(&self) -> usize { 1 }
+    /// #     fn sensor(&self, _: &Vector1<f64>) -> usize { 0 }
+    /// #     fn dimension(&self, _: usize) -> usize { 1 }
+    /// #     fn update(&self, f: &mut F, z: &Vector1<f64>) -> Result<Innovation<f64>> { f.update(&self.0, z).map(|r| Innovation::of(&r)) }
+    /// # }
+    /// // A speed integrated from accelerometer samples: each covers the 10 ms before it.
+    /// let speed = LinearProcess { transition: Matrix1::new(1.0), input: Matrix1::new(0.01), noise: Matrix1::new(1e-6) };
+    /// let sensor = One(LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(0.01) });
+    /// let filter = KalmanFilter::new(Gaussian::new(Vector1::zeros(), Matrix1::new(1.0))?);
+    /// let settings = FusionSettings { max_step: 0.01, ..FusionSettings::default() };
+    /// let mut driver = FusionDriver::new(filter, speed, Vector1::new(0.0), sensor, 0.0, settings, SensorSettings::default())?
+    ///     .with_input_convention(InputConvention::Preceding)?;
+    /// for k in 1..=100 {
+    ///     // 2 m/s² over (0, 0.5 s], then 0.
+    ///     let a = if k <= 50 { 2.0 } else { 0.0 };
+    ///     driver.set_input(0.01 * k as f64, Vector1::new(a))?;
+    /// }
+    /// assert!((driver.filter().state()[0] - 1.0).abs() < 1e-9);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn with_input_convention(
+        mut self,
+        convention: InputConvention,
+    ) -> Result<Self, FusionError> {
+        if self.history.len() > 1 || !matches!(self.history.latest().event, Event::Start) {
+            return Err(FusionError::setting(
+                FusionSetting::InputConvention,
+                self.history.len() as f64,
+            ));
+        }
+        self.convention = convention;
+        Ok(self)
     }
 
     /// The same driver with `settings` for `sensor`. That sensor's health restarts (counters
@@ -239,13 +291,73 @@ where
         })
     }
 
-    /// Predicts to `time` with the input in force, then holds `input` from `time` on. Inputs
-    /// come in time order: `time` ≥ the latest event.
+    /// A new input at `time`, read by the driver's [`InputConvention`]:
+    ///
+    /// - [`HoldForward`](InputConvention::HoldForward): predicts to `time` with the input in
+    ///   force, then holds `input` from `time` on. `time` ≥ the latest event.
+    /// - [`Preceding`](InputConvention::Preceding): `input` covers the interval from the
+    ///   previous input's time to `time`: the events after the previous input (measurements
+    ///   fused at their time, marks) are re-run with it, and it is held forward after `time`
+    ///   until the next one arrives. `time` ≥ the previous input's time (inputs come in time
+    ///   order; measurements may be ahead of them) and within the horizon.
     ///
     /// Errors (driver unchanged): [`FusionError::NonFiniteTime`], [`FusionError::NotMonotone`],
-    /// [`FusionError::GapTooLong`], [`FusionError::Filter`].
+    /// [`FusionError::TooOld`] (preceding inputs only), [`FusionError::GapTooLong`],
+    /// [`FusionError::Filter`].
     pub fn set_input(&mut self, time: f64, input: P::Input) -> Result<(), FusionError> {
-        self.append(time, Event::Input(input))
+        match self.convention {
+            InputConvention::HoldForward => self.append(time, Event::Input(input)),
+            InputConvention::Preceding => self.insert_sample(time, input),
+        }
+    }
+
+    /// [`set_input`](Self::set_input) for [`InputConvention::Preceding`].
+    fn insert_sample(&mut self, time: f64, input: P::Input) -> Result<(), FusionError> {
+        if !time.is_finite() {
+            return Err(FusionError::NonFiniteTime { time });
+        }
+        let len = self.history.len();
+        let previous = (0..len)
+            .rev()
+            .find(|&i| matches!(self.history.get(i).event, Event::Input(_)));
+        if let Some(i) = previous {
+            let latest = self.history.get(i).time;
+            if time < latest {
+                return Err(FusionError::NotMonotone { time, latest });
+            }
+        }
+        let latest = self.history.latest().time;
+        let oldest = self
+            .history
+            .oldest()
+            .time
+            .max(latest - self.settings.horizon);
+        if time < oldest {
+            return Err(FusionError::TooOld { time, oldest });
+        }
+        // After every record at or before `time`: never 0, the oldest record is at or before.
+        let mut at = len;
+        while at > 0 && self.history.get(at - 1).time > time {
+            at -= 1;
+        }
+        if at == 0 {
+            return Err(FusionError::TooOld { time, oldest });
+        }
+        if at == len {
+            substeps(time - latest, &self.settings)?;
+        }
+        // The events since the previous input were predicted with it held forward; they are
+        // re-run with this one.
+        let start = previous.map_or(1, |i| i + 1).min(at);
+        self.history.insert(at, time, Event::Input(input));
+        let restore = start + 1 < self.history.len();
+        if let Err(e) = self.run_from(start, restore) {
+            self.history.remove(at);
+            let _ = self.run_from(start, true);
+            return Err(e);
+        }
+        self.history.trim();
+        Ok(())
     }
 
     /// Predicts to `time` (≥ the latest event) with the input in force: the filter then holds
@@ -292,6 +404,7 @@ where
             process,
             sensors,
             settings,
+            convention,
             resolved,
             input,
             health,
@@ -307,9 +420,24 @@ where
             health.copy_from(&checkpoint.health);
         }
         let mut previous = checkpoint.time;
-        for j in start..history.len() {
+        let preceding = *convention == InputConvention::Preceding;
+        let len = history.len();
+        // Preceding inputs: the index of the first input record at or after j (`len`: none,
+        // the latest input is held forward), found once per input, not once per record.
+        let mut next = 0;
+        for j in start..len {
+            let time = history.get(j).time;
+            if preceding && next < j {
+                next = (j..len)
+                    .find(|&k| matches!(history.get(k).event, Event::Input(_)))
+                    .unwrap_or(len);
+            }
+            let span_input = match (preceding && next < len).then(|| &history.get(next).event) {
+                Some(Event::Input(u)) => u,
+                _ => &*input,
+            };
+            predict_span(filter, process, span_input, time - previous, settings)?;
             let record = history.get_mut(j);
-            predict_span(filter, process, input, record.time - previous, settings)?;
             match &record.event {
                 Event::Input(u) => input.clone_from(u),
                 Event::Start | Event::Mark => {}

@@ -35,6 +35,9 @@ pub enum FusionSetting {
     Sensor,
     /// A sensor's dimension ([`SensorSet::dimension`](super::SensorSet::dimension)): at least 1.
     SensorDimension,
+    /// The input convention, changed after events were recorded (value: the number of
+    /// records).
+    InputConvention,
 }
 
 impl fmt::Display for FusionSetting {
@@ -53,6 +56,7 @@ impl fmt::Display for FusionSetting {
             FusionSetting::MonitorProbability => "monitor probability",
             FusionSetting::Sensor => "sensor index",
             FusionSetting::SensorDimension => "sensor dimension",
+            FusionSetting::InputConvention => "input convention (set it before the first event)",
         })
     }
 }

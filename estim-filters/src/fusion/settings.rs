@@ -64,6 +64,30 @@ impl FusionSettings {
     }
 }
 
+/// Which interval a sampled input covers: how [`FusionDriver::set_input`](super::FusionDriver::set_input)
+/// reads the time it is given.
+///
+/// With inputs u₁, u₂, … at times t₁ < t₂ < …:
+///
+/// - [`HoldForward`](Self::HoldForward) (the default): uₖ is held from tₖ on, over
+///   \[tₖ, tₖ₊₁): a command, a setpoint, a value that takes effect when it is set.
+/// - [`Preceding`](Self::Preceding): uₖ covers the interval **before** its timestamp,
+///   (tₖ₋₁, tₖ\]: an IMU sample (an increment or an average over the last sample period), a
+///   wheel-odometry count. The prediction up to tₖ uses uₖ, also for a measurement taken
+///   inside (tₖ₋₁, tₖ) that was fused before uₖ arrived: until uₖ arrives, the driver
+///   predicts past tₖ₋₁ with uₖ₋₁ held forward (the real-time estimate), and when uₖ arrives
+///   every event after tₖ₋₁ is re-run with it (from the history, as for a late
+///   measurement), so the result does not depend on whether the measurement or the sample
+///   came first, to the bit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum InputConvention {
+    /// An input is held from its timestamp on.
+    #[default]
+    HoldForward,
+    /// An input covers the interval from the previous input's timestamp to its own.
+    Preceding,
+}
+
 /// How one sensor's measurements are judged. Each part is optional; [`SensorSettings::default`]
 /// accepts everything (no gate, no reset, no monitor).
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -26,6 +26,7 @@ mod dynamic;
 mod equivalence;
 mod fusion_errors;
 mod fusion_gating;
+mod fusion_inputs;
 mod fusion_replay;
 mod fusion_sizes;
 mod fusion_support;

@@ -24,3 +24,4 @@ mod lv2_support;
 mod motion_derivatives;
 mod motion_discretization;
 mod motion_filtering;
+mod nav;
