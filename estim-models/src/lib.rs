@@ -40,5 +40,5 @@ pub mod limits;
 pub mod lu;
 pub mod lv2;
 pub mod motion;
-pub mod sensors;
 pub mod nav;
+pub mod sensors;
