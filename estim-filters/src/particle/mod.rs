@@ -70,16 +70,19 @@
 mod auxiliary;
 #[cfg(feature = "serde")]
 mod checkpoint;
+mod ffbsi;
 mod noise;
 mod own_noise;
 mod resample;
 mod rng;
 mod step;
+mod transition;
 
 use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
 use estim_core::rand_distr::{Distribution, StandardNormal};
 use estim_core::{Alloc, Error, Gaussian, Parameter, Real, error::Result, psd_factor};
 
+pub use ffbsi::{Ffbsi, SmoothedPaths};
 pub use noise::{
     AdditiveGaussian, MeasurementLikelihood, NonGaussian, ParticleMeasurement, ParticleProcess,
     ProcessSampler,
@@ -87,6 +90,7 @@ pub use noise::{
 pub use own_noise::NonGaussianFilter;
 pub use resample::{ResampleWhen, Resampling, log_sum_exp, resample};
 pub use rng::{ParticleRng, RESAMPLE};
+pub use transition::{ParticleTransition, TransitionDensity, log_transition_density};
 
 use crate::traits::{Estimator, Rollback};
 use resample::effective_sample_size;
