@@ -127,6 +127,24 @@ where
     /// Errors (the record unchanged): Δt negative or not finite; a particle count or state
     /// dimension different from the earlier records'
     /// ([`Error::DimensionMismatch`] with [`Quantity::Weights`] or [`Quantity::Mean`]).
+    ///
+    /// ```
+    /// use estim_core::nalgebra::{Matrix1, Vector1};
+    /// use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+    /// use estim_filters::particle::{Ffbsi, ParticleFilter};
+    ///
+    /// let process = LinearProcess::without_input(Matrix1::new(0.9f64), Matrix1::new(0.5));
+    /// let sensor = LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(0.2) };
+    /// let mut apf = ParticleFilter::new(Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0))?, 300, 1)?;
+    /// let mut ffbsi = Ffbsi::new();
+    /// for z in [0.5, 0.9, 0.2] {
+    ///     ffbsi.record(&apf, (), 1.0)?; // then any step: here an auxiliary one
+    ///     apf.auxiliary_step(&process, &(), 1.0, &sensor, &Vector1::new(z))?;
+    /// }
+    /// let paths = ffbsi.smooth(&apf, &process, 100, 2)?;
+    /// assert_eq!((paths.len(), paths.paths()), (4, 100));
+    /// # Ok::<(), estim_core::Error>(())
+    /// ```
     pub fn record(&mut self, filter: &ParticleFilter<T, N>, input: U, dt: T) -> Result<()> {
         ensure_time_step(dt)?;
         if let Some(first) = self.records.first() {

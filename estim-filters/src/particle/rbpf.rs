@@ -30,6 +30,13 @@
 //! estimate of the bootstrap filter, with the same resampling schemes, trigger and random
 //! streams (seed, step, particle) as [`ParticleFilter`](super::ParticleFilter).
 //!
+//! **Scope.** Generic over the scalar and the sizes (runtime-size pieces are shape-checked;
+//! the tests run f64 at static sizes), with the step atomic on error (the new
+//! cloud is built aside and swapped in). Not yet: a cross-covariance Qln between wn and wl
+//! (decorrelate the model first, Schön et al. §III-B), the step traits, [`Rollback`](crate::Rollback)
+//! and checkpoints, and allocation-free steps (each step allocates the new cloud and clones the
+//! N filters).
+//!
 //! The moments: x̂n = Σ Wⁱ xnⁱ, Pn their weighted covariance; x̂l = Σ Wⁱ x̂lⁱ and
 //! Pl = Σ Wⁱ (Plⁱ + (x̂lⁱ − x̂l)(x̂lⁱ − x̂l)ᵀ) (the mixture's covariance).
 //!

@@ -192,6 +192,7 @@ fn ffbsi_converges_to_the_rts_smoother() {
             }
         }
     }
+    eprintln!("FFBSi RMS errors [config][mean, variance][k = 0, 4, 8]: {rms:?}");
     for moment in 0..2 {
         for (s, &k) in checked.iter().enumerate() {
             let ratio = rms[1][moment][s] / rms[0][moment][s];
