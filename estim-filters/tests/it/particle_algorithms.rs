@@ -7,7 +7,7 @@
 //! z- or t-test whose false-failure rate (for a fresh seed) is stated beside it.
 
 use estim_core::nalgebra::{
-    DMatrix, DVector, Matrix1, Matrix1x2, Matrix2, U0, U1, U2, Vector1, Vector2,
+    DMatrix, DVector, Dyn, Matrix1, Matrix1x2, Matrix2, U0, U1, U2, Vector1, Vector2,
 };
 use estim_core::rand::Rng;
 use estim_core::rand_distr::{Distribution, StandardNormal};
@@ -913,4 +913,122 @@ fn guided_step_bad_proposals_give_typed_errors() {
     // A well-formed (if poor) proposal steps.
     step(&mut pf, &Bad(0.1, 0.0)).unwrap();
     assert_ne!(pf, before);
+}
+
+/// The split constant-velocity model of `SplitCv` with runtime sizes (1 + 1).
+struct SplitCvDyn;
+
+impl ConditionallyLinearProcess<f64, Dyn, Dyn> for SplitCvDyn {
+    type Input = ();
+    fn conditional_transition(
+        &self,
+        xn: &DVector<f64>,
+        _: &(),
+        dt: f64,
+    ) -> ConditionalTransition<f64, Dyn, Dyn> {
+        ConditionalTransition {
+            nonlinear_mean: xn.clone(),
+            coupling: DMatrix::from_element(1, 1, dt),
+            nonlinear_noise: DMatrix::from_element(1, 1, 0.1),
+            linear_mean: DVector::zeros(1),
+            linear_transition: DMatrix::from_element(1, 1, 1.0),
+            linear_noise: DMatrix::from_element(1, 1, 0.05),
+        }
+    }
+}
+
+struct SplitPositionDyn;
+
+impl ConditionallyLinearMeasurement<f64, Dyn, Dyn, Dyn> for SplitPositionDyn {
+    fn conditional_measurement(&self, xn: &DVector<f64>) -> ConditionalMeasurement<f64, Dyn, Dyn> {
+        ConditionalMeasurement {
+            offset: xn.clone(),
+            observation: DMatrix::zeros(1, 1),
+            noise: DMatrix::from_element(1, 1, 0.5),
+        }
+    }
+}
+
+/// Runtime sizes follow the static ones: the FFBSi paths of a `Dyn` 2-state filter and the
+/// Rao-Blackwellised filter with `Dyn` parts equal the static runs to round-off (the same
+/// streams and the same operations; 10⁻¹² of the spread leaves room for a different order of
+/// the small matrix kernels, and a backward draw could flip only on a near-tie of cumulative
+/// weights, which these seeds do not hit). A runtime-size piece of the wrong shape is a typed
+/// error.
+#[test]
+fn runtime_sizes_follow_the_static_algorithms() {
+    let f = Matrix2::new(1.0, 1.0, 0.0, 1.0);
+    let q = Matrix2::new(0.1, 0.02, 0.02, 0.05);
+    let h = Matrix1x2::new(1.0, 0.0);
+    let process = LinearProcess::without_input(f, q);
+    let sensor = LinearMeasurement {
+        observation: h,
+        noise: Matrix1::new(0.5),
+    };
+    let dyn_process = LinearProcess::without_input(
+        DMatrix::from_column_slice(2, 2, f.as_slice()),
+        DMatrix::from_column_slice(2, 2, q.as_slice()),
+    );
+    let dyn_sensor = LinearMeasurement {
+        observation: DMatrix::from_column_slice(1, 2, h.as_slice()),
+        noise: DMatrix::from_element(1, 1, 0.5),
+    };
+    let prior = Gaussian::new(Vector2::new(0.0, 1.0), Matrix2::identity()).unwrap();
+    let zs = cv_readings(5, 8);
+    let mut fixed = ParticleFilter::new(prior.clone(), 200, 3).unwrap();
+    let mut dynamic: ParticleFilter<f64, Dyn> =
+        ParticleFilter::new(prior.clone().into_dyn(), 200, 3).unwrap();
+    let (mut fixed_record, mut dyn_record) = (Ffbsi::new(), Ffbsi::new());
+    for &z in &zs {
+        fixed_record
+            .predict(&mut fixed, &process, &(), 1.0)
+            .unwrap();
+        fixed.update(&sensor, &Vector1::new(z)).unwrap();
+        dyn_record
+            .predict(&mut dynamic, &dyn_process, &(), 1.0)
+            .unwrap();
+        dynamic
+            .update(&dyn_sensor, &DVector::from_element(1, z))
+            .unwrap();
+    }
+    let fixed_paths = fixed_record.smooth(&fixed, &process, 40, 9).unwrap();
+    let dyn_paths = dyn_record.smooth(&dynamic, &dyn_process, 40, 9).unwrap();
+    let spread = fixed.covariance()[(0, 0)].sqrt();
+    for k in 0..fixed_paths.len() {
+        for i in 0..2 {
+            let d = dyn_paths.mean(k)[i] - fixed_paths.mean(k)[i];
+            assert!(d.abs() <= 1e-12 * spread, "k = {k}, i = {i}: {d}");
+        }
+    }
+    // A Q of the wrong shape for the runtime-size state.
+    let wrong = LinearProcess::without_input(
+        DMatrix::from_column_slice(2, 2, f.as_slice()),
+        DMatrix::identity(3, 3),
+    );
+    assert!(matches!(
+        dyn_record.smooth(&dynamic, &wrong, 40, 9),
+        Err(Error::DimensionMismatch { .. })
+    ));
+
+    let xn = Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0)).unwrap();
+    let xl = Gaussian::new(Vector1::new(1.0), Matrix1::new(1.0)).unwrap();
+    let mut fixed = RaoBlackwellised::new(xn.clone(), xl.clone(), 100, 5).unwrap();
+    let mut dynamic: RaoBlackwellised<f64, Dyn, Dyn> =
+        RaoBlackwellised::new(xn.into_dyn(), xl.into_dyn(), 100, 5).unwrap();
+    for &z in &zs {
+        fixed.predict(&SplitCv, &(), 1.0).unwrap();
+        fixed.update(&SplitPosition, &Vector1::new(z)).unwrap();
+        dynamic.predict(&SplitCvDyn, &(), 1.0).unwrap();
+        dynamic
+            .update(&SplitPositionDyn, &DVector::from_element(1, z))
+            .unwrap();
+    }
+    let spread = fixed.linear_covariance()[(0, 0)].sqrt();
+    assert!((dynamic.linear_mean()[0] - fixed.linear_mean()[0]).abs() <= 1e-12 * spread);
+    assert!((dynamic.nonlinear_mean()[0] - fixed.nonlinear_mean()[0]).abs() <= 1e-12 * spread);
+    // A reading of the wrong length.
+    assert!(matches!(
+        dynamic.update(&SplitPositionDyn, &DVector::from_element(2, 0.0)),
+        Err(Error::DimensionMismatch { .. })
+    ));
 }
