@@ -1,57 +1,4 @@
-//! The forward-filtering backward-simulation particle smoother (FFBSi; Godsill, Doucet &
-//! West 2004).
-//!
-//! The forward pass is the user's own loop over a [`ParticleFilter`], with
-//! [`Ffbsi::predict`] in place of `predict` (or [`Ffbsi::record`] before any step, e.g. an
-//! [`auxiliary_step`](ParticleFilter::auxiliary_step)): each records the filtering cloud
-//! {xₖⁱ, Wₖⁱ} of p(xₖ | z₁..ₖ) and the input and Δt of the transition that follows. The
-//! backward pass ([`Ffbsi::smooth`]) draws M trajectories x₀..K⁽ʲ⁾ from the particle
-//! approximation of the joint smoothing distribution p(x₀..K | z₁..K):
-//!
-//! ```text
-//! last:      bₖ ~ Categorical(W_K)                                  (K = the last step)
-//! backward:  log w̃ⁱ = log Wₖⁱ + log p(x̃ₖ₊₁ | xₖⁱ, uₖ, Δtₖ),   bₖ ~ Categorical(w̃ / Σ w̃)
-//!            x̃ₖ = xₖ^bₖ                                             (k = K−1, …, 0)
-//! ```
-//!
-//! The backward weights need the transition log-density ([`ParticleTransition`]: Gaussian
-//! from the model's f and Q, or the model's own [`TransitionDensity`](super::TransitionDensity);
-//! a singular Q is [`Error::NotPositiveDefinite`], see [`log_transition_density`](super::log_transition_density)).
-//! The cost is O(M N) density evaluations per step; on the Gaussian path f(xₖⁱ) and the
-//! factor of Q are computed once per particle and step, so each of the M N evaluations is a
-//! subtraction and a triangular solve.
-//!
-//! Each trajectory j draws from the stream (seed, k, j) at step k ([`ParticleRng`]): the
-//! paths do not depend on the order they are computed in, and a seed gives the same bits.
-//! Unlike the filter's resampled genealogy, the backward draws re-select ancestors at every
-//! step, so the early marginals do not collapse onto a few particles (path degeneracy).
-//!
-//! ```
-//! use estim_core::nalgebra::{Matrix1, Vector1};
-//! use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
-//! use estim_filters::particle::{Ffbsi, ParticleFilter};
-//! use estim_filters::smoother::Rts;
-//! use estim_filters::{KalmanFilter, Update};
-//!
-//! let process = LinearProcess::without_input(Matrix1::new(0.9f64), Matrix1::new(0.5));
-//! let sensor = LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(1.0) };
-//! let prior = Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0))?;
-//! let mut pf = ParticleFilter::new(prior.clone(), 1000, 4)?;
-//! let mut kf = KalmanFilter::new(prior);
-//! let (mut ffbsi, mut rts) = (Ffbsi::new(), Rts::new());
-//! for z in [0.4, -0.3, 1.1, 0.8] {
-//!     ffbsi.predict(&mut pf, &process, &(), 1.0)?;
-//!     rts.predict(&mut kf, &process, &(), 1.0)?;
-//!     pf.update(&sensor, &Vector1::new(z))?;
-//!     kf.update(&sensor, &Vector1::new(z))?;
-//! }
-//! let paths = ffbsi.smooth(&pf, &process, 500, 9)?;
-//! let exact = rts.smooth(&kf)?;
-//! assert_eq!(paths.len(), 5);
-//! // Smoothed sd ≈ 0.7 at k = 0: 500 paths over 1000 particles give the mean to ≈ 0.04.
-//! assert!((paths.mean(0)[0] - exact[0].mean()[0]).abs() < 0.15);
-//! # Ok::<(), Box<dyn std::error::Error>>(())
-//! ```
+//! The FFBSi particle smoother (documented on [`Ffbsi`]).
 
 use estim_core::checks::ensure_finite;
 use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
@@ -76,8 +23,63 @@ where
     dt: T,
 }
 
+/// The forward-filtering backward-simulation particle smoother (FFBSi; Godsill, Doucet &
+/// West 2004).
+///
+/// The forward pass is the user's own loop over a [`ParticleFilter`], with
+/// [`Ffbsi::predict`] in place of `predict` (or [`Ffbsi::record`] before any step, e.g. an
+/// [`auxiliary_step`](ParticleFilter::auxiliary_step)): each records the filtering cloud
+/// {xₖⁱ, Wₖⁱ} of p(xₖ | z₁..ₖ) and the input and Δt of the transition that follows. The
+/// backward pass ([`Ffbsi::smooth`]) draws M trajectories x₀..K⁽ʲ⁾ from the particle
+/// approximation of the joint smoothing distribution p(x₀..K | z₁..K):
+///
+/// ```text
+/// last:      bₖ ~ Categorical(W_K)                                  (K = the last step)
+/// backward:  log w̃ⁱ = log Wₖⁱ + log p(x̃ₖ₊₁ | xₖⁱ, uₖ, Δtₖ),   bₖ ~ Categorical(w̃ / Σ w̃)
+///            x̃ₖ = xₖ^bₖ                                             (k = K−1, …, 0)
+/// ```
+///
+/// The backward weights need the transition log-density ([`ParticleTransition`]: Gaussian
+/// from the model's f and Q, or the model's own [`TransitionDensity`](super::TransitionDensity);
+/// a singular Q is [`Error::NotPositiveDefinite`], see [`log_transition_density`](super::log_transition_density)).
+/// The cost is O(M N) density evaluations per step; on the Gaussian path f(xₖⁱ) and the
+/// factor of Q are computed once per particle and step, so each of the M N evaluations is a
+/// subtraction and a triangular solve.
+///
+/// Each trajectory j draws from the stream (seed, k, j) at step k ([`ParticleRng`]): the
+/// paths do not depend on the order they are computed in, and a seed gives the same bits.
+/// Unlike the filter's resampled genealogy, the backward draws re-select ancestors at every
+/// step, so the early marginals do not collapse onto a few particles (path degeneracy).
+///
+/// ```
+/// use estim_core::nalgebra::{Matrix1, Vector1};
+/// use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+/// use estim_filters::particle::{Ffbsi, ParticleFilter};
+/// use estim_filters::smoother::Rts;
+/// use estim_filters::{KalmanFilter, Update};
+///
+/// let process = LinearProcess::without_input(Matrix1::new(0.9f64), Matrix1::new(0.5));
+/// let sensor = LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(1.0) };
+/// let prior = Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0))?;
+/// let mut pf = ParticleFilter::new(prior.clone(), 1000, 4)?;
+/// let mut kf = KalmanFilter::new(prior);
+/// let (mut ffbsi, mut rts) = (Ffbsi::new(), Rts::new());
+/// for z in [0.4, -0.3, 1.1, 0.8] {
+///     ffbsi.predict(&mut pf, &process, &(), 1.0)?;
+///     rts.predict(&mut kf, &process, &(), 1.0)?;
+///     pf.update(&sensor, &Vector1::new(z))?;
+///     kf.update(&sensor, &Vector1::new(z))?;
+/// }
+/// let paths = ffbsi.smooth(&pf, &process, 500, 9)?;
+/// let exact = rts.smooth(&kf)?;
+/// assert_eq!(paths.len(), 5);
+/// // Smoothed sd ≈ 0.7 at k = 0: 500 paths over 1000 particles give the mean to ≈ 0.04.
+/// assert!((paths.mean(0)[0] - exact[0].mean()[0]).abs() < 0.15);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+///
 /// A forward-filtering backward-simulation particle smoother over a forward pass recorded
-/// with [`predict`](Self::predict) or [`record`](Self::record) (module docs). `U` is the
+/// with [`predict`](Self::predict) or [`record`](Self::record) (above). `U` is the
 /// process input type. Memory: one n × N cloud and N log-weights per recorded step.
 #[derive(Clone, Debug)]
 pub struct Ffbsi<T: Real, N: Dim, U = ()>
@@ -215,7 +217,7 @@ where
     }
 
     /// M = `paths` trajectories x₀..K from the smoothing distribution by backward simulation
-    /// (module docs) through any [`ParticleTransition`], seeded by `seed`.
+    /// (see [`Ffbsi`]) through any [`ParticleTransition`], seeded by `seed`.
     ///
     /// Errors (nothing changes: the record is only read): `paths` = 0
     /// ([`Parameter::SampleCount`]); `last` of another particle count or dimension

@@ -1,29 +1,4 @@
-//! Guided proposals: a particle filter step that draws from a user's q(x⁺ | x, z) instead of
-//! the process model.
-//!
-//! With the reading z in hand, each particle moves by the proposal and is reweighted by what
-//! the proposal got wrong (Doucet, Godsill & Andrieu 2000; Chopin & Papaspiliopoulos 2020,
-//! §10.3.2):
-//!
-//! ```text
-//! resample:  if ESS < τN: aⱼ ~ W, log W̄ⱼ = −log N;  else aⱼ = j, log W̄ⱼ = log Wⱼ
-//! propose:   xⱼ⁺ ~ q(· | x_aⱼ, u, Δt, z)
-//! weight:    log wⱼ = log W̄ⱼ + log p(z | xⱼ⁺) + log p(xⱼ⁺ | x_aⱼ, u, Δt) − log q(xⱼ⁺ | x_aⱼ, u, Δt, z)
-//! normalise: Δℓ = log Σ wⱼ,  log Wⱼ ← log wⱼ − Δℓ      (exp Δℓ unbiased for p(z | z₁..ₖ₋₁))
-//! ```
-//!
-//! The bootstrap filter is the special case q = p (the transition terms cancel, leaving
-//! log p(z | x⁺)). The *locally optimal* proposal q = p(x⁺ | x, z) makes the incremental
-//! weight p(z | x) independent of the draw, which minimises the weights' variance given the
-//! ancestors; for a linear-Gaussian model it is N(m, Σ) with
-//! Σ = (Q⁻¹ + Hᵀ R⁻¹ H)⁻¹, m = Σ (Q⁻¹ F x + Hᵀ R⁻¹ z). A proposal that puts mass where the
-//! sensor is sharp helps most when the measurement is informative relative to the process
-//! noise (the bootstrap filter's weights then degenerate).
-//!
-//! p(x⁺ | x, u, Δt) is the [`ParticleTransition`] density (Gaussian from Q, which must then be
-//! positive definite, or the model's own [`TransitionDensity`](super::TransitionDensity)).
-//! The proposal draws from the stream (seed, step, j) of the particle it makes, as the
-//! bootstrap prediction does.
+//! Guided proposals (documented on [`Proposal`]).
 
 use estim_core::checks::{ensure_finite, ensure_shape};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OVector};
@@ -41,6 +16,33 @@ use super::transition::{GaussianKernel, ParticleTransition, checked_log_density}
 use crate::gaussian_filter::ensure_time_step;
 use crate::report::UpdateReport;
 
+/// Guided proposals: a particle filter step that draws from a user's q(x⁺ | x, z) instead of
+/// the process model.
+///
+/// With the reading z in hand, each particle moves by the proposal and is reweighted by what
+/// the proposal got wrong (Doucet, Godsill & Andrieu 2000; Chopin & Papaspiliopoulos 2020,
+/// §10.3.2):
+///
+/// ```text
+/// resample:  if ESS < τN: aⱼ ~ W, log W̄ⱼ = −log N;  else aⱼ = j, log W̄ⱼ = log Wⱼ
+/// propose:   xⱼ⁺ ~ q(· | x_aⱼ, u, Δt, z)
+/// weight:    log wⱼ = log W̄ⱼ + log p(z | xⱼ⁺) + log p(xⱼ⁺ | x_aⱼ, u, Δt) − log q(xⱼ⁺ | x_aⱼ, u, Δt, z)
+/// normalise: Δℓ = log Σ wⱼ,  log Wⱼ ← log wⱼ − Δℓ      (exp Δℓ unbiased for p(z | z₁..ₖ₋₁))
+/// ```
+///
+/// The bootstrap filter is the special case q = p (the transition terms cancel, leaving
+/// log p(z | x⁺)). The *locally optimal* proposal q = p(x⁺ | x, z) makes the incremental
+/// weight p(z | x) independent of the draw, which minimises the weights' variance given the
+/// ancestors; for a linear-Gaussian model it is N(m, Σ) with
+/// Σ = (Q⁻¹ + Hᵀ R⁻¹ H)⁻¹, m = Σ (Q⁻¹ F x + Hᵀ R⁻¹ z). A proposal that puts mass where the
+/// sensor is sharp helps most when the measurement is informative relative to the process
+/// noise (the bootstrap filter's weights then degenerate).
+///
+/// p(x⁺ | x, u, Δt) is the [`ParticleTransition`] density (Gaussian from Q, which must then be
+/// positive definite, or the model's own [`TransitionDensity`](super::TransitionDensity)).
+/// The proposal draws from the stream (seed, step, j) of the particle it makes, as the
+/// bootstrap prediction does.
+///
 /// A proposal q(x⁺ | x, u, Δt, z) for [`ParticleFilter::guided_step`]: draws a successor of
 /// `x` knowing the next reading `z`, and says how likely that draw was.
 ///
@@ -90,8 +92,8 @@ impl<T: Real, N: Dim> ParticleFilter<T, N>
 where
     DefaultAllocator: Alloc<N>,
 {
-    /// One predict-and-update step with the guided proposal `proposal` (module docs of
-    /// `guided`): particles move by q, weights are W̄ p(z | x⁺) p(x⁺ | x) / q(x⁺ | x, z).
+    /// One predict-and-update step with the guided proposal `proposal` (see
+    /// [`Proposal`]): particles move by q, weights are W̄ p(z | x⁺) p(x⁺ | x) / q(x⁺ | x, z).
     /// `process` gives the transition density (Gaussian from its f and Q, which must be
     /// positive definite), `sensor` the likelihood N(z ⊖ h(x); 0, R). The report
     /// holds the innovation moments of the proposed cloud weighted by W̄ p / q and the

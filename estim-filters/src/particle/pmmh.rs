@@ -1,28 +1,4 @@
-//! Particle marginal Metropolis-Hastings (PMMH; Andrieu, Doucet & Holenstein 2010): Bayesian
-//! parameter learning through a particle filter's likelihood estimate.
-//!
-//! For a model parameterised by θ ∈ ℝᵈ (the user's map θ ↦ model, inside a closure) with
-//! prior log-density log p(θ), a Gaussian random walk proposes θ' = θ + L ε (ε ~ N(0, I), L
-//! the user's d × d scale: L Lᵀ is the proposal covariance), and θ' is accepted with
-//! probability
-//!
-//! ```text
-//! α = min(1, exp(ℓ̂(θ') + log p(θ') − ℓ̂(θ) − log p(θ)))
-//! ```
-//!
-//! where ℓ̂(θ) is a particle filter's log-likelihood estimate ([`particle_log_likelihood`], or
-//! any estimate the closure computes). Because exp ℓ̂ is an *unbiased* estimate of
-//! p(z₁..T | θ) (the filter's likelihood is unbiased under adaptive resampling too), the
-//! chain's stationary law is the exact posterior p(θ | z₁..T), whatever the particle count:
-//! few particles only make the chain stickier. The current state's estimate ℓ̂(θ) is kept,
-//! never recomputed (recomputing it would break exactness).
-//!
-//! With a closure returning the exact log-likelihood (e.g. a Kalman filter's), the same
-//! function is a plain random-walk Metropolis sampler.
-//!
-//! Randomness: iteration i draws ε from the stream (seed, i, 0) and its acceptance uniform
-//! from (seed, i, 1) ([`ParticleRng`]), and passes the closure the seed (seed, i) hashed
-//! into one `u64` for the filter it runs; a seed gives the same chain bit for bit.
+//! Particle marginal Metropolis-Hastings (documented on [`pmmh`]).
 
 use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OVector};
 use estim_core::rand::RngCore;
@@ -64,7 +40,33 @@ impl PmmhChain {
     }
 }
 
-/// Runs `iterations` steps of PMMH (module docs) from `start` with random-walk scale `scale`
+/// Particle marginal Metropolis-Hastings (PMMH; Andrieu, Doucet & Holenstein 2010): Bayesian
+/// parameter learning through a particle filter's likelihood estimate.
+///
+/// For a model parameterised by θ ∈ ℝᵈ (the user's map θ ↦ model, inside a closure) with
+/// prior log-density log p(θ), a Gaussian random walk proposes θ' = θ + L ε (ε ~ N(0, I), L
+/// the user's d × d scale: L Lᵀ is the proposal covariance), and θ' is accepted with
+/// probability
+///
+/// ```text
+/// α = min(1, exp(ℓ̂(θ') + log p(θ') − ℓ̂(θ) − log p(θ)))
+/// ```
+///
+/// where ℓ̂(θ) is a particle filter's log-likelihood estimate ([`particle_log_likelihood`], or
+/// any estimate the closure computes). Because exp ℓ̂ is an *unbiased* estimate of
+/// p(z₁..T | θ) (the filter's likelihood is unbiased under adaptive resampling too), the
+/// chain's stationary law is the exact posterior p(θ | z₁..T), whatever the particle count:
+/// few particles only make the chain stickier. The current state's estimate ℓ̂(θ) is kept,
+/// never recomputed (recomputing it would break exactness).
+///
+/// With a closure returning the exact log-likelihood (e.g. a Kalman filter's), the same
+/// function is a plain random-walk Metropolis sampler.
+///
+/// Randomness: iteration i draws ε from the stream (seed, i, 0) and its acceptance uniform
+/// from (seed, i, 1) ([`ParticleRng`]), and passes the closure the seed (seed, i) hashed
+/// into one `u64` for the filter it runs; a seed gives the same chain bit for bit.
+///
+/// Runs `iterations` steps of PMMH (above) from `start` with random-walk scale `scale`
 /// (L, d × d; the proposal is θ + L ε), prior log-density `log_prior` (−∞ outside the
 /// support: such a proposal is rejected without running the filter) and log-likelihood
 /// estimate `log_likelihood(θ, seed)` (`Ok(−∞)` for a likelihood of zero; any error stops the

@@ -1,84 +1,4 @@
-//! The Rao-Blackwellised (marginalised) particle filter for conditionally linear-Gaussian
-//! models (Schön, Gustafsson & Nordlund 2005).
-//!
-//! The state splits into a nonlinear part xn and a part xl that is linear-Gaussian given
-//! the xn trajectory:
-//!
-//! ```text
-//! xn⁺ = fn(xn) + An(xn) xl + wn,   wn ~ N(0, Qn(xn))
-//! xl⁺ = fl(xn) + Al(xn) xl + wl,   wl ~ N(0, Ql(xn))      (wn, wl independent)
-//! z   = h(xn)  + C(xn) xl  + v,    v  ~ N(0, R(xn))
-//! ```
-//!
-//! Particles carry xn; each carries a Kalman filter ([`KalmanFilter`], the workspace's own
-//! affine update, not a second implementation) for p(xl | xn₀..ₖ, z₁..ₖ) = N(x̂lⁱ, Plⁱ).
-//! Given the particle's path, the only randomness left is Gaussian, so the filter computes
-//! exactly what a plain particle filter would estimate by sampling xl: the Monte Carlo error
-//! of the xl part disappears (the Rao-Blackwell theorem: conditional expectation never
-//! increases variance).
-//!
-//! ```text
-//! update:   log gⁱ = log N(z; h(xnⁱ) + C x̂lⁱ, C Plⁱ Cᵀ + R)   (the KF update of xlⁱ on z − h(xnⁱ))
-//!           Δℓ = log Σ Wⁱ gⁱ,  log Wⁱ ← log Wⁱ + log gⁱ − Δℓ
-//! predict:  if ESS < τN: resample (particles with their filters)
-//!           xnⁱ⁺ ~ N(fn + An x̂lⁱ, An Plⁱ Anᵀ + Qn)             (xl marginalised out)
-//!           KF update of xlⁱ on η = xnⁱ⁺ − fn = An xl + wn       (xn⁺ carries information on xl)
-//!           KF prediction xlⁱ⁺ = Al xlⁱ + fl + wl
-//! ```
-//!
-//! (Schön et al., Algorithm 1 and eq. 24–25 with Qln = 0.) Δℓ is the unbiased likelihood
-//! estimate of the bootstrap filter, with the same resampling schemes, trigger and random
-//! streams (seed, step, particle) as [`ParticleFilter`](super::ParticleFilter).
-//!
-//! **Scope.** Generic over the scalar and the sizes (runtime-size pieces are shape-checked;
-//! the tests run f64 at static sizes), with the step atomic on error (the new
-//! cloud is built aside and swapped in). Not yet: a cross-covariance Qln between wn and wl
-//! (decorrelate the model first, Schön et al. §III-B), the step traits, [`Rollback`](crate::Rollback)
-//! and checkpoints, and allocation-free steps (each step allocates the new cloud and clones the
-//! N filters).
-//!
-//! The moments: x̂n = Σ Wⁱ xnⁱ, Pn their weighted covariance; x̂l = Σ Wⁱ x̂lⁱ and
-//! Pl = Σ Wⁱ (Plⁱ + (x̂lⁱ − x̂l)(x̂lⁱ − x̂l)ᵀ) (the mixture's covariance).
-//!
-//! ```
-//! use estim_core::nalgebra::{Matrix1, Vector1, U1};
-//! use estim_core::Gaussian;
-//! use estim_filters::particle::{
-//!     ConditionalMeasurement, ConditionalTransition, ConditionallyLinearMeasurement,
-//!     ConditionallyLinearProcess, RaoBlackwellised,
-//! };
-//!
-//! /// Position xn, velocity xl: xn⁺ = xn + xl + wn, xl⁺ = xl + wl; z = xn + v.
-//! struct Cv;
-//! impl ConditionallyLinearProcess<f64, U1, U1> for Cv {
-//!     type Input = ();
-//!     fn conditional_transition(&self, xn: &Vector1<f64>, _: &(), dt: f64) -> ConditionalTransition<f64, U1, U1> {
-//!         ConditionalTransition {
-//!             nonlinear_mean: *xn,
-//!             coupling: Matrix1::new(dt),
-//!             nonlinear_noise: Matrix1::new(0.1),
-//!             linear_mean: Vector1::zeros(),
-//!             linear_transition: Matrix1::new(1.0),
-//!             linear_noise: Matrix1::new(0.01),
-//!         }
-//!     }
-//! }
-//! struct Position;
-//! impl ConditionallyLinearMeasurement<f64, U1, U1, U1> for Position {
-//!     fn conditional_measurement(&self, xn: &Vector1<f64>) -> ConditionalMeasurement<f64, U1, U1> {
-//!         ConditionalMeasurement { offset: *xn, observation: Matrix1::zeros(), noise: Matrix1::new(0.25) }
-//!     }
-//! }
-//! let position = Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0))?;
-//! let velocity = Gaussian::new(Vector1::new(0.0), Matrix1::new(4.0))?;
-//! let mut rbpf = RaoBlackwellised::new(position, velocity, 500, 1)?;
-//! for k in 1..=10 {
-//!     rbpf.predict(&Cv, &(), 1.0)?;
-//!     rbpf.update(&Position, &Vector1::new(2.0 * k as f64))?; // moving at 2 per step
-//! }
-//! assert!((rbpf.linear_mean()[0] - 2.0).abs() < 0.5);
-//! # Ok::<(), estim_core::Error>(())
-//! ```
+//! The Rao-Blackwellised particle filter (documented on [`RaoBlackwellised`]).
 
 use estim_core::checks::{ensure_finite, ensure_shape};
 use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
@@ -94,7 +14,7 @@ use super::{ResampleWhen, Resampling, check_trigger, fill_normals};
 use crate::gaussian_filter::{KalmanFilter, ensure_time_step};
 use crate::traits::{Estimator, Predict, Update};
 
-/// The conditionally linear transition at one nonlinear state xn (module docs): the
+/// The conditionally linear transition at one nonlinear state xn (see [`RaoBlackwellised`]): the
 /// nonlinear part's mean fn(xn), its coupling An(xn) to xl and its noise Qn(xn); the linear
 /// part's offset fl(xn), transition Al(xn) and noise Ql(xn).
 #[derive(Clone, Debug, PartialEq)]
@@ -117,7 +37,7 @@ where
 }
 
 /// A process xn⁺ = fn + An xl + wn, xl⁺ = fl + Al xl + wl whose pieces depend on xn only
-/// (module docs).
+/// (see [`RaoBlackwellised`]).
 pub trait ConditionallyLinearProcess<T: Real, Nn: Dim, Nl: Dim>
 where
     DefaultAllocator: Alloc<Nn, Nl>,
@@ -149,7 +69,7 @@ where
     pub noise: OMatrix<T, M, M>,
 }
 
-/// A sensor z = h(xn) + C(xn) xl + v (module docs).
+/// A sensor z = h(xn) + C(xn) xl + v (see [`RaoBlackwellised`]).
 pub trait ConditionallyLinearMeasurement<T: Real, Nn: Dim, Nl: Dim, M: Dim>
 where
     DefaultAllocator: Alloc<Nn, Nl> + Alloc<Nl, M>,
@@ -158,8 +78,90 @@ where
     fn conditional_measurement(&self, xn: &OVector<T, Nn>) -> ConditionalMeasurement<T, Nl, M>;
 }
 
+/// The Rao-Blackwellised (marginalised) particle filter for conditionally linear-Gaussian
+/// models (Schön, Gustafsson & Nordlund 2005).
+///
+/// The state splits into a nonlinear part xn and a part xl that is linear-Gaussian given
+/// the xn trajectory:
+///
+/// ```text
+/// xn⁺ = fn(xn) + An(xn) xl + wn,   wn ~ N(0, Qn(xn))
+/// xl⁺ = fl(xn) + Al(xn) xl + wl,   wl ~ N(0, Ql(xn))      (wn, wl independent)
+/// z   = h(xn)  + C(xn) xl  + v,    v  ~ N(0, R(xn))
+/// ```
+///
+/// Particles carry xn; each carries a Kalman filter ([`KalmanFilter`], the workspace's own
+/// affine update, not a second implementation) for p(xl | xn₀..ₖ, z₁..ₖ) = N(x̂lⁱ, Plⁱ).
+/// Given the particle's path, the only randomness left is Gaussian, so the filter computes
+/// exactly what a plain particle filter would estimate by sampling xl: the Monte Carlo error
+/// of the xl part disappears (the Rao-Blackwell theorem: conditional expectation never
+/// increases variance).
+///
+/// ```text
+/// update:   log gⁱ = log N(z; h(xnⁱ) + C x̂lⁱ, C Plⁱ Cᵀ + R)   (the KF update of xlⁱ on z − h(xnⁱ))
+///           Δℓ = log Σ Wⁱ gⁱ,  log Wⁱ ← log Wⁱ + log gⁱ − Δℓ
+/// predict:  if ESS < τN: resample (particles with their filters)
+///           xnⁱ⁺ ~ N(fn + An x̂lⁱ, An Plⁱ Anᵀ + Qn)             (xl marginalised out)
+///           KF update of xlⁱ on η = xnⁱ⁺ − fn = An xl + wn       (xn⁺ carries information on xl)
+///           KF prediction xlⁱ⁺ = Al xlⁱ + fl + wl
+/// ```
+///
+/// (Schön et al., Algorithm 1 and eq. 24–25 with Qln = 0.) Δℓ is the unbiased likelihood
+/// estimate of the bootstrap filter, with the same resampling schemes, trigger and random
+/// streams (seed, step, particle) as [`ParticleFilter`](super::ParticleFilter).
+///
+/// **Scope.** Generic over the scalar and the sizes (runtime-size pieces are shape-checked;
+/// the tests run f64 at static sizes), with the step atomic on error (the new
+/// cloud is built aside and swapped in). Not yet: a cross-covariance Qln between wn and wl
+/// (decorrelate the model first, Schön et al. §III-B), the step traits, [`Rollback`](crate::Rollback)
+/// and checkpoints, and allocation-free steps (each step allocates the new cloud and clones the
+/// N filters).
+///
+/// The moments: x̂n = Σ Wⁱ xnⁱ, Pn their weighted covariance; x̂l = Σ Wⁱ x̂lⁱ and
+/// Pl = Σ Wⁱ (Plⁱ + (x̂lⁱ − x̂l)(x̂lⁱ − x̂l)ᵀ) (the mixture's covariance).
+///
+/// ```
+/// use estim_core::nalgebra::{Matrix1, Vector1, U1};
+/// use estim_core::Gaussian;
+/// use estim_filters::particle::{
+///     ConditionalMeasurement, ConditionalTransition, ConditionallyLinearMeasurement,
+///     ConditionallyLinearProcess, RaoBlackwellised,
+/// };
+///
+/// /// Position xn, velocity xl: xn⁺ = xn + xl + wn, xl⁺ = xl + wl; z = xn + v.
+/// struct Cv;
+/// impl ConditionallyLinearProcess<f64, U1, U1> for Cv {
+///     type Input = ();
+///     fn conditional_transition(&self, xn: &Vector1<f64>, _: &(), dt: f64) -> ConditionalTransition<f64, U1, U1> {
+///         ConditionalTransition {
+///             nonlinear_mean: *xn,
+///             coupling: Matrix1::new(dt),
+///             nonlinear_noise: Matrix1::new(0.1),
+///             linear_mean: Vector1::zeros(),
+///             linear_transition: Matrix1::new(1.0),
+///             linear_noise: Matrix1::new(0.01),
+///         }
+///     }
+/// }
+/// struct Position;
+/// impl ConditionallyLinearMeasurement<f64, U1, U1, U1> for Position {
+///     fn conditional_measurement(&self, xn: &Vector1<f64>) -> ConditionalMeasurement<f64, U1, U1> {
+///         ConditionalMeasurement { offset: *xn, observation: Matrix1::zeros(), noise: Matrix1::new(0.25) }
+///     }
+/// }
+/// let position = Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0))?;
+/// let velocity = Gaussian::new(Vector1::new(0.0), Matrix1::new(4.0))?;
+/// let mut rbpf = RaoBlackwellised::new(position, velocity, 500, 1)?;
+/// for k in 1..=10 {
+///     rbpf.predict(&Cv, &(), 1.0)?;
+///     rbpf.update(&Position, &Vector1::new(2.0 * k as f64))?; // moving at 2 per step
+/// }
+/// assert!((rbpf.linear_mean()[0] - 2.0).abs() < 0.5);
+/// # Ok::<(), estim_core::Error>(())
+/// ```
+///
 /// A Rao-Blackwellised particle filter: particles for xn, a [`KalmanFilter`] per particle
-/// for xl (module docs).
+/// for xl (above).
 #[derive(Clone, Debug)]
 pub struct RaoBlackwellised<T: Real, Nn: Dim, Nl: Dim>
 where
@@ -324,7 +326,7 @@ where
         covariance
     }
 
-    /// The time update (module docs): resample if the trigger fires, draw each xnⁱ⁺ from its
+    /// The time update (see [`RaoBlackwellised`]): resample if the trigger fires, draw each xnⁱ⁺ from its
     /// xl-marginalised Gaussian, condition xlⁱ on it and predict xlⁱ.
     ///
     /// Errors (the filter unchanged): Δt negative or not finite; a transition piece of the
@@ -415,7 +417,7 @@ where
         Ok(())
     }
 
-    /// The measurement update (module docs): each particle's Kalman filter is updated on
+    /// The measurement update (see [`RaoBlackwellised`]): each particle's Kalman filter is updated on
     /// z − h(xnⁱ) with observation C(xnⁱ), and its weight multiplied by the update's
     /// likelihood N(z; h + C x̂lⁱ, C Plⁱ Cᵀ + R). Returns the step's log-likelihood
     /// estimate Δℓ.

@@ -1,33 +1,4 @@
-//! The transition log-density log p(x⁺ | x, u, Δt), which the backward pass of a particle
-//! smoother and a guided proposal's importance weight need.
-//!
-//! **Design.** A [`ProcessModel`] written for the Kalman filters gives f and Q; a particle
-//! filter draws x⁺ = f(x, u, Δt) + L ε with L Lᵀ = Q through a PSD factor, so a singular Q is
-//! fine for *sampling*. The density of that draw is
-//!
-//! ```text
-//! log p(x⁺ | x, u, Δt) = −½ rᵀ Q⁻¹ r − ½ log det(2π Q),   r = x⁺ − f(x, u, Δt)
-//!                      = −½ |L⁻¹ r|² − n/2 log 2π − Σₖ log Lₖₖ     (Q = L Lᵀ, Cholesky)
-//! ```
-//!
-//! - r is the plain difference x⁺ − f: it is the difference the filter's sampler added the
-//!   noise with, so the density is the one of the draws the forward pass made (a wrapped angle
-//!   would need a wrapped density, which the model then states itself, below).
-//! - A singular Q (a state that is a deterministic function of the previous one, e.g. the
-//!   position of a constant-velocity model with noise on the velocity only) has **no
-//!   density**: the transition law is concentrated on a subspace and every other particle's
-//!   backward weight is 0 whatever the numbers say. That is a typed error,
-//!   [`Error::NotPositiveDefinite`] with [`Quantity::ProcessNoise`] (at the stage of the
-//!   algorithm that asked), never NaN or a silently regularised Q. Such a model is smoothed by
-//!   making its noise non-degenerate, or by stating a density of its own.
-//! - A non-Gaussian process opts in with [`TransitionDensity`], beside
-//!   [`ProcessSampler`](super::ProcessSampler): used as [`NonGaussian(model)`](super::NonGaussian)
-//!   it supplies both the draws and their density, and the two must agree (the smoother's
-//!   correctness rests on it).
-//!
-//! The dispatch trait [`ParticleTransition`] is implemented by the same two wrappers as
-//! [`ParticleProcess`]: [`AdditiveGaussian`] (the Gaussian density above, with Q evaluated at
-//! the conditioning state x, so a state-dependent Q is exact) and [`NonGaussian`].
+//! The transition log-density (design documented on [`log_transition_density`]).
 
 use estim_core::checks::{ensure_finite, ensure_shape};
 use estim_core::nalgebra::{Cholesky, DefaultAllocator, Dim, OMatrix, OVector, U1};
@@ -225,9 +196,40 @@ pub(crate) fn checked_log_density<T: Real>(value: T, stage: Stage) -> Result<T> 
     }
 }
 
+/// The transition log-density log p(x⁺ | x, u, Δt), which the backward pass of a particle
+/// smoother and a guided proposal's importance weight need.
+///
+/// **Design.** A [`ProcessModel`] written for the Kalman filters gives f and Q; a particle
+/// filter draws x⁺ = f(x, u, Δt) + L ε with L Lᵀ = Q through a PSD factor, so a singular Q is
+/// fine for *sampling*. The density of that draw is
+///
+/// ```text
+/// log p(x⁺ | x, u, Δt) = −½ rᵀ Q⁻¹ r − ½ log det(2π Q),   r = x⁺ − f(x, u, Δt)
+///                      = −½ |L⁻¹ r|² − n/2 log 2π − Σₖ log Lₖₖ     (Q = L Lᵀ, Cholesky)
+/// ```
+///
+/// - r is the plain difference x⁺ − f: it is the difference the filter's sampler added the
+///   noise with, so the density is the one of the draws the forward pass made (a wrapped angle
+///   would need a wrapped density, which the model then states itself, below).
+/// - A singular Q (a state that is a deterministic function of the previous one, e.g. the
+///   position of a constant-velocity model with noise on the velocity only) has **no
+///   density**: the transition law is concentrated on a subspace and every other particle's
+///   backward weight is 0 whatever the numbers say. That is a typed error,
+///   [`Error::NotPositiveDefinite`] with [`Quantity::ProcessNoise`] (at the stage of the
+///   algorithm that asked), never NaN or a silently regularised Q. Such a model is smoothed by
+///   making its noise non-degenerate, or by stating a density of its own.
+/// - A non-Gaussian process opts in with [`TransitionDensity`], beside
+///   [`ProcessSampler`](super::ProcessSampler): used as [`NonGaussian(model)`](super::NonGaussian)
+///   it supplies both the draws and their density, and the two must agree (the smoother's
+///   correctness rests on it).
+///
+/// The dispatch trait [`ParticleTransition`] is implemented by the same two wrappers as
+/// [`ParticleProcess`]: [`AdditiveGaussian`] (the Gaussian density above, with Q evaluated at
+/// the conditioning state x, so a state-dependent Q is exact) and [`NonGaussian`].
+///
 /// log p(x⁺ | x, u, Δt) through any [`ParticleTransition`]: the model's own density, or the
-/// Gaussian N(f(x, u, Δt), Q(x, u, Δt)) evaluated by the Cholesky factor of Q (module docs of
-/// [`particle`](super)). One evaluation; the smoother and the proposals use a cached form.
+/// Gaussian N(f(x, u, Δt), Q(x, u, Δt)) evaluated by the Cholesky factor of Q
+/// (above). One evaluation; the smoother and the proposals use a cached form.
 ///
 /// Errors (at `stage`): a singular or indefinite Q ([`Error::NotPositiveDefinite`] with
 /// [`Quantity::ProcessNoise`]: that transition has no density); f(x) or Q of the wrong shape or
