@@ -12,7 +12,8 @@
 //! | [`Iekf`] | linearised, update iterated (Gauss–Newton) | [`ProcessJacobian`](estim_core::ProcessJacobian) | [`MeasurementJacobian`](estim_core::MeasurementJacobian) |
 //! | [`FadingMemoryRls`] | — (update only) | — | [`MeasurementJacobian`](estim_core::MeasurementJacobian) |
 //! | [`SrKalmanFilter`], [`SrEkf`], [`SrUkf`] | as KF, EKF, UKF, on the Cholesky factor ([`square_root`]) | as KF, EKF, UKF | as KF, EKF, UKF |
-//! | [`ParticleFilter`](particle::ParticleFilter) | sampled (bootstrap SIR, auxiliary) | [`ProcessModel`](estim_core::ProcessModel), or a [`ProcessSampler`](particle::ProcessSampler) | [`MeasurementModel`](estim_core::MeasurementModel), or a [`MeasurementLikelihood`](particle::MeasurementLikelihood) |
+//! | [`ParticleFilter`](particle::ParticleFilter) | sampled (bootstrap SIR, auxiliary, guided [`Proposal`](particle::Proposal)) | [`ProcessModel`](estim_core::ProcessModel), or a [`ProcessSampler`](particle::ProcessSampler) | [`MeasurementModel`](estim_core::MeasurementModel), or a [`MeasurementLikelihood`](particle::MeasurementLikelihood) |
+//! | [`RaoBlackwellised`](particle::RaoBlackwellised) | sampled xn, a [`KalmanFilter`] per particle for xl | [`ConditionallyLinearProcess`](particle::ConditionallyLinearProcess) | [`ConditionallyLinearMeasurement`](particle::ConditionallyLinearMeasurement) |
 //!
 //! The Kalman-family filters are one type, [`GaussianFilter`], parameterised by the
 //! [`MomentPropagator`](estim_core::MomentPropagator); they differ only in how the predicted

@@ -41,6 +41,13 @@
 //! its variance grows (seen in the tests at R = Q/5); the bootstrap filter is then the safer
 //! choice.
 //!
+//! Beyond the filter: a user's guided proposal q(x⁺ | x, z) ([`Proposal`],
+//! [`ParticleFilter::guided_step`]); the transition log-density those and the smoother need
+//! ([`log_transition_density`], with the opt-in [`TransitionDensity`]; a singular Q has none, a
+//! typed error); the FFBSi particle smoother ([`Ffbsi`]); the Rao-Blackwellised filter for
+//! conditionally linear-Gaussian models ([`RaoBlackwellised`]); Bayesian parameter learning by
+//! particle marginal Metropolis-Hastings ([`pmmh`] with [`particle_log_likelihood`]).
+//!
 //! **Randomness.** All draws come from counter-based streams named by (seed, step, particle)
 //! ([`ParticleRng`]): the random state is one step counter, part of every snapshot and
 //! checkpoint, and per-particle work does not depend on the visiting order.
@@ -70,23 +77,36 @@
 mod auxiliary;
 #[cfg(feature = "serde")]
 mod checkpoint;
+mod ffbsi;
+mod guided;
 mod noise;
 mod own_noise;
+mod pmmh;
+mod rbpf;
 mod resample;
 mod rng;
 mod step;
+mod transition;
 
 use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
 use estim_core::rand_distr::{Distribution, StandardNormal};
 use estim_core::{Alloc, Error, Gaussian, Parameter, Real, error::Result, psd_factor};
 
+pub use ffbsi::{Ffbsi, SmoothedPaths};
+pub use guided::Proposal;
 pub use noise::{
     AdditiveGaussian, MeasurementLikelihood, NonGaussian, ParticleMeasurement, ParticleProcess,
     ProcessSampler,
 };
 pub use own_noise::NonGaussianFilter;
+pub use pmmh::{MAX_PMMH_ITERATIONS, PmmhChain, particle_log_likelihood, pmmh};
+pub use rbpf::{
+    ConditionalMeasurement, ConditionalTransition, ConditionallyLinearMeasurement,
+    ConditionallyLinearProcess, RaoBlackwellised,
+};
 pub use resample::{ResampleWhen, Resampling, log_sum_exp, resample};
 pub use rng::{ParticleRng, RESAMPLE};
+pub use transition::{ParticleTransition, TransitionDensity, log_transition_density};
 
 use crate::traits::{Estimator, Rollback};
 use resample::effective_sample_size;

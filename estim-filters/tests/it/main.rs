@@ -44,6 +44,7 @@ mod noise_id_em;
 mod noise_id_likelihood;
 mod noise_policy;
 mod particle;
+mod particle_algorithms;
 mod rls;
 mod robust;
 mod second_order;

@@ -1,0 +1,504 @@
+//! The Rao-Blackwellised particle filter (documented on [`RaoBlackwellised`]).
+
+use estim_core::checks::{ensure_finite, ensure_shape};
+use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
+use estim_core::{
+    Alloc, Error, Gaussian, LinearMeasurement, LinearProcess, Parameter, Quantity, Real, Stage,
+    error::Result, psd_factor,
+};
+
+use super::resample::{effective_sample_size, resample_with, to_f64};
+use super::rng::{ParticleRng, RESAMPLE};
+use super::step::normaliser;
+use super::{ResampleWhen, Resampling, check_trigger, fill_normals};
+use crate::gaussian_filter::{KalmanFilter, ensure_time_step};
+use crate::traits::{Estimator, Predict, Update};
+
+/// The conditionally linear transition at one nonlinear state xn (see [`RaoBlackwellised`]): the
+/// nonlinear part's mean fn(xn), its coupling An(xn) to xl and its noise Qn(xn); the linear
+/// part's offset fl(xn), transition Al(xn) and noise Ql(xn).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConditionalTransition<T: Real, Nn: Dim, Nl: Dim>
+where
+    DefaultAllocator: Alloc<Nn, Nl>,
+{
+    /// fn(xn).
+    pub nonlinear_mean: OVector<T, Nn>,
+    /// An(xn) (nn × nl).
+    pub coupling: OMatrix<T, Nn, Nl>,
+    /// Qn(xn), positive semi-definite.
+    pub nonlinear_noise: OMatrix<T, Nn, Nn>,
+    /// fl(xn).
+    pub linear_mean: OVector<T, Nl>,
+    /// Al(xn).
+    pub linear_transition: OMatrix<T, Nl, Nl>,
+    /// Ql(xn), positive semi-definite.
+    pub linear_noise: OMatrix<T, Nl, Nl>,
+}
+
+/// A process xn⁺ = fn + An xl + wn, xl⁺ = fl + Al xl + wl whose pieces depend on xn only
+/// (see [`RaoBlackwellised`]).
+pub trait ConditionallyLinearProcess<T: Real, Nn: Dim, Nl: Dim>
+where
+    DefaultAllocator: Alloc<Nn, Nl>,
+{
+    /// The input u (`()` for none).
+    type Input;
+
+    /// The transition's pieces at `xn`, with input `u` over `dt`.
+    fn conditional_transition(
+        &self,
+        xn: &OVector<T, Nn>,
+        u: &Self::Input,
+        dt: T,
+    ) -> ConditionalTransition<T, Nn, Nl>;
+}
+
+/// The conditionally linear measurement at one nonlinear state xn: z = h(xn) + C(xn) xl + v,
+/// v ~ N(0, R(xn)).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConditionalMeasurement<T: Real, Nl: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<Nl, M>,
+{
+    /// h(xn).
+    pub offset: OVector<T, M>,
+    /// C(xn) (m × nl; zero when only xn is measured).
+    pub observation: OMatrix<T, M, Nl>,
+    /// R(xn), positive definite.
+    pub noise: OMatrix<T, M, M>,
+}
+
+/// A sensor z = h(xn) + C(xn) xl + v (see [`RaoBlackwellised`]).
+pub trait ConditionallyLinearMeasurement<T: Real, Nn: Dim, Nl: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<Nn, Nl> + Alloc<Nl, M>,
+{
+    /// The measurement's pieces at `xn`.
+    fn conditional_measurement(&self, xn: &OVector<T, Nn>) -> ConditionalMeasurement<T, Nl, M>;
+}
+
+/// The Rao-Blackwellised (marginalised) particle filter for conditionally linear-Gaussian
+/// models (Schön, Gustafsson & Nordlund 2005).
+///
+/// The state splits into a nonlinear part xn and a part xl that is linear-Gaussian given
+/// the xn trajectory:
+///
+/// ```text
+/// xn⁺ = fn(xn) + An(xn) xl + wn,   wn ~ N(0, Qn(xn))
+/// xl⁺ = fl(xn) + Al(xn) xl + wl,   wl ~ N(0, Ql(xn))      (wn, wl independent)
+/// z   = h(xn)  + C(xn) xl  + v,    v  ~ N(0, R(xn))
+/// ```
+///
+/// Particles carry xn; each carries a Kalman filter ([`KalmanFilter`], the workspace's own
+/// affine update, not a second implementation) for p(xl | xn₀..ₖ, z₁..ₖ) = N(x̂lⁱ, Plⁱ).
+/// Given the particle's path, the only randomness left is Gaussian, so the filter computes
+/// exactly what a plain particle filter would estimate by sampling xl: the Monte Carlo error
+/// of the xl part disappears (the Rao-Blackwell theorem: conditional expectation never
+/// increases variance).
+///
+/// ```text
+/// update:   log gⁱ = log N(z; h(xnⁱ) + C x̂lⁱ, C Plⁱ Cᵀ + R)   (the KF update of xlⁱ on z − h(xnⁱ))
+///           Δℓ = log Σ Wⁱ gⁱ,  log Wⁱ ← log Wⁱ + log gⁱ − Δℓ
+/// predict:  if ESS < τN: resample (particles with their filters)
+///           xnⁱ⁺ ~ N(fn + An x̂lⁱ, An Plⁱ Anᵀ + Qn)             (xl marginalised out)
+///           KF update of xlⁱ on η = xnⁱ⁺ − fn = An xl + wn       (xn⁺ carries information on xl)
+///           KF prediction xlⁱ⁺ = Al xlⁱ + fl + wl
+/// ```
+///
+/// (Schön et al., Algorithm 1 and eq. 24–25 with Qln = 0.) Δℓ is the unbiased likelihood
+/// estimate of the bootstrap filter, with the same resampling schemes, trigger and random
+/// streams (seed, step, particle) as [`ParticleFilter`](super::ParticleFilter).
+///
+/// **Scope.** Generic over the scalar and the sizes (runtime-size pieces are shape-checked;
+/// the tests run f64 at static sizes), with the step atomic on error (the new
+/// cloud is built aside and swapped in). Not yet: a cross-covariance Qln between wn and wl
+/// (decorrelate the model first, Schön et al. §III-B), the step traits, [`Rollback`](crate::Rollback)
+/// and checkpoints, and allocation-free steps (each step allocates the new cloud and clones the
+/// N filters).
+///
+/// The moments: x̂n = Σ Wⁱ xnⁱ, Pn their weighted covariance; x̂l = Σ Wⁱ x̂lⁱ and
+/// Pl = Σ Wⁱ (Plⁱ + (x̂lⁱ − x̂l)(x̂lⁱ − x̂l)ᵀ) (the mixture's covariance).
+///
+/// ```
+/// use estim_core::nalgebra::{Matrix1, Vector1, U1};
+/// use estim_core::Gaussian;
+/// use estim_filters::particle::{
+///     ConditionalMeasurement, ConditionalTransition, ConditionallyLinearMeasurement,
+///     ConditionallyLinearProcess, RaoBlackwellised,
+/// };
+///
+/// /// Position xn, velocity xl: xn⁺ = xn + xl + wn, xl⁺ = xl + wl; z = xn + v.
+/// struct Cv;
+/// impl ConditionallyLinearProcess<f64, U1, U1> for Cv {
+///     type Input = ();
+///     fn conditional_transition(&self, xn: &Vector1<f64>, _: &(), dt: f64) -> ConditionalTransition<f64, U1, U1> {
+///         ConditionalTransition {
+///             nonlinear_mean: *xn,
+///             coupling: Matrix1::new(dt),
+///             nonlinear_noise: Matrix1::new(0.1),
+///             linear_mean: Vector1::zeros(),
+///             linear_transition: Matrix1::new(1.0),
+///             linear_noise: Matrix1::new(0.01),
+///         }
+///     }
+/// }
+/// struct Position;
+/// impl ConditionallyLinearMeasurement<f64, U1, U1, U1> for Position {
+///     fn conditional_measurement(&self, xn: &Vector1<f64>) -> ConditionalMeasurement<f64, U1, U1> {
+///         ConditionalMeasurement { offset: *xn, observation: Matrix1::zeros(), noise: Matrix1::new(0.25) }
+///     }
+/// }
+/// let position = Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0))?;
+/// let velocity = Gaussian::new(Vector1::new(0.0), Matrix1::new(4.0))?;
+/// let mut rbpf = RaoBlackwellised::new(position, velocity, 500, 1)?;
+/// for k in 1..=10 {
+///     rbpf.predict(&Cv, &(), 1.0)?;
+///     rbpf.update(&Position, &Vector1::new(2.0 * k as f64))?; // moving at 2 per step
+/// }
+/// assert!((rbpf.linear_mean()[0] - 2.0).abs() < 0.5);
+/// # Ok::<(), estim_core::Error>(())
+/// ```
+///
+/// A Rao-Blackwellised particle filter: particles for xn, a [`KalmanFilter`] per particle
+/// for xl (above).
+#[derive(Clone, Debug)]
+pub struct RaoBlackwellised<T: Real, Nn: Dim, Nl: Dim>
+where
+    DefaultAllocator: Alloc<Nn, Nl>,
+{
+    seed: u64,
+    scheme: Resampling,
+    when: ResampleWhen,
+    nonlinear: OMatrix<T, Nn, Dyn>,
+    linear: Vec<KalmanFilter<T, Nl>>,
+    log_weights: Vec<T>,
+    step: u64,
+    log_likelihood: T,
+}
+
+impl<T: Real, Nn: Dim, Nl: Dim> RaoBlackwellised<T, Nn, Nl>
+where
+    DefaultAllocator: Alloc<Nn, Nl>,
+{
+    /// `count` particles xnⁱ drawn from `nonlinear` (streams (seed, 0, i), through a PSD
+    /// factor, so a singular prior works), each with a Kalman filter started at `linear`
+    /// (xn and xl independent a priori), equally weighted. Systematic resampling when the ESS
+    /// falls below N/2, as [`ParticleFilter`](super::ParticleFilter).
+    ///
+    /// Errors: `count` = 0 ([`Parameter::SampleCount`]); a nonlinear prior covariance that is
+    /// not positive semi-definite.
+    ///
+    /// ```
+    /// use estim_core::nalgebra::{Matrix1, Matrix2, Vector1, Vector2};
+    /// use estim_core::Gaussian;
+    /// use estim_filters::particle::RaoBlackwellised;
+    ///
+    /// let xn = Gaussian::new(Vector1::new(1.0f64), Matrix1::new(0.5))?;
+    /// let xl = Gaussian::new(Vector2::new(0.0, 2.0), Matrix2::identity())?;
+    /// let rbpf = RaoBlackwellised::new(xn.clone(), xl.clone(), 1000, 3)?;
+    /// // Every filter starts at the prior (the weights sum to 1 up to round-off).
+    /// assert!((rbpf.linear_mean() - Vector2::new(0.0, 2.0)).norm() < 1e-12);
+    /// assert!((rbpf.nonlinear_mean()[0] - 1.0).abs() < 0.1); // 4 standard errors √(0.5/1000)
+    /// assert!(RaoBlackwellised::new(xn, xl, 0, 3).is_err());
+    /// # Ok::<(), estim_core::Error>(())
+    /// ```
+    pub fn new(
+        nonlinear: Gaussian<T, Nn>,
+        linear: Gaussian<T, Nl>,
+        count: usize,
+        seed: u64,
+    ) -> Result<Self> {
+        if count == 0 {
+            return Err(Error::InvalidParameter {
+                parameter: Parameter::SampleCount,
+                value: 0.0,
+            });
+        }
+        let factor = psd_factor(nonlinear.covariance(), Stage::Construction)?;
+        let (n, _) = nonlinear.mean().shape_generic();
+        let mut particles = OMatrix::zeros_generic(n, Dyn(count));
+        let mut normals = OVector::zeros_generic(n, U1);
+        for i in 0..count {
+            fill_normals(&mut normals, &mut ParticleRng::stream(seed, 0, i as u64));
+            let mut column = particles.column_mut(i);
+            column.copy_from(nonlinear.mean());
+            column.gemv(T::one(), &factor, &normals, T::one());
+        }
+        let uniform = -estim_core::scalar::real::<T>(count as f64).ln();
+        Ok(Self {
+            seed,
+            scheme: Resampling::default(),
+            when: ResampleWhen::default(),
+            nonlinear: particles,
+            linear: vec![KalmanFilter::new(linear); count],
+            log_weights: vec![uniform; count],
+            step: 1,
+            log_likelihood: T::zero(),
+        })
+    }
+
+    /// The same filter resampling by `scheme`.
+    pub fn with_resampling(mut self, scheme: Resampling) -> Self {
+        self.scheme = scheme;
+        self
+    }
+
+    /// The same filter resampling when `when` fires. Errors: an
+    /// [`EssBelow`](ResampleWhen::EssBelow) fraction outside (0, 1] ([`Parameter::Tolerance`]).
+    pub fn with_trigger(mut self, when: ResampleWhen) -> Result<Self> {
+        check_trigger(when)?;
+        self.when = when;
+        Ok(self)
+    }
+
+    /// The number of particles N.
+    pub fn count(&self) -> usize {
+        self.log_weights.len()
+    }
+
+    /// The nonlinear particles xnⁱ, one per column.
+    pub fn nonlinear_particles(&self) -> &OMatrix<T, Nn, Dyn> {
+        &self.nonlinear
+    }
+
+    /// The per-particle Kalman filters of xl.
+    pub fn linear_filters(&self) -> &[KalmanFilter<T, Nl>] {
+        &self.linear
+    }
+
+    /// The normalised log-weights log Wⁱ.
+    pub fn log_weights(&self) -> &[T] {
+        &self.log_weights
+    }
+
+    /// The effective sample size 1 / Σ Wᵢ².
+    pub fn effective_sample_size(&self) -> T {
+        estim_core::scalar::real(effective_sample_size(&self.log_weights))
+    }
+
+    /// The running log-likelihood estimate Σ Δℓ (its exponential is unbiased for p(z₁..ₖ)).
+    pub fn log_likelihood(&self) -> T {
+        self.log_likelihood
+    }
+
+    /// x̂n = Σ Wⁱ xnⁱ.
+    pub fn nonlinear_mean(&self) -> OVector<T, Nn> {
+        let mut mean = OVector::zeros_generic(self.nonlinear.shape_generic().0, U1);
+        for (i, &lw) in self.log_weights.iter().enumerate() {
+            mean.axpy(lw.exp(), &self.nonlinear.column(i), T::one());
+        }
+        mean
+    }
+
+    /// Pn = Σ Wⁱ (xnⁱ − x̂n)(xnⁱ − x̂n)ᵀ.
+    pub fn nonlinear_covariance(&self) -> OMatrix<T, Nn, Nn> {
+        let mean = self.nonlinear_mean();
+        let (n, _) = mean.shape_generic();
+        let mut covariance = OMatrix::zeros_generic(n, n);
+        for (i, &lw) in self.log_weights.iter().enumerate() {
+            let d = self.nonlinear.column(i) - &mean;
+            covariance.ger(lw.exp(), &d, &d, T::one());
+        }
+        covariance
+    }
+
+    /// x̂l = Σ Wⁱ x̂lⁱ.
+    pub fn linear_mean(&self) -> OVector<T, Nl> {
+        let mut mean = OVector::zeros_generic(self.linear[0].state().shape_generic().0, U1);
+        for (kf, &lw) in self.linear.iter().zip(&self.log_weights) {
+            mean.axpy(lw.exp(), kf.state(), T::one());
+        }
+        mean
+    }
+
+    /// Pl = Σ Wⁱ (Plⁱ + (x̂lⁱ − x̂l)(x̂lⁱ − x̂l)ᵀ).
+    pub fn linear_covariance(&self) -> OMatrix<T, Nl, Nl> {
+        let mean = self.linear_mean();
+        let (n, _) = mean.shape_generic();
+        let mut covariance = OMatrix::zeros_generic(n, n);
+        for (kf, &lw) in self.linear.iter().zip(&self.log_weights) {
+            let w = lw.exp();
+            let d = kf.state() - &mean;
+            covariance.ger(w, &d, &d, T::one());
+            covariance.zip_apply(kf.covariance(), |acc, p| *acc += w * p);
+        }
+        covariance
+    }
+
+    /// The time update (see [`RaoBlackwellised`]): resample if the trigger fires, draw each xnⁱ⁺ from its
+    /// xl-marginalised Gaussian, condition xlⁱ on it and predict xlⁱ.
+    ///
+    /// Errors (the filter unchanged): Δt negative or not finite; a transition piece of the
+    /// wrong shape or not finite; An Pl Anᵀ + Qn not positive semi-definite; a Kalman step
+    /// that fails (Qn singular where xn⁺ is coupled to xl: no innovation covariance to
+    /// factor, or Ql not PSD).
+    pub fn predict<P>(&mut self, process: &P, input: &P::Input, dt: T) -> Result<()>
+    where
+        P: ConditionallyLinearProcess<T, Nn, Nl> + ?Sized,
+    {
+        ensure_time_step(dt)?;
+        let count = self.count();
+        let step = self.step;
+        let resample = self
+            .when
+            .fires(effective_sample_size(&self.log_weights), count);
+        let mut ancestors: Vec<usize> = (0..count).collect();
+        if resample {
+            let weights: Vec<f64> = self
+                .log_weights
+                .iter()
+                .map(|&lw| to_f64(lw).exp())
+                .collect();
+            let mut rng = ParticleRng::stream(self.seed, step, RESAMPLE);
+            resample_with(
+                self.scheme,
+                &weights,
+                &mut rng,
+                &mut ancestors,
+                &mut Vec::new(),
+            );
+        }
+        let (n, _) = self.nonlinear.shape_generic();
+        let stage = Stage::Prediction;
+        let mut next = OMatrix::zeros_generic(n, Dyn(count));
+        let mut filters = Vec::with_capacity(count);
+        let mut xn = OVector::zeros_generic(n, U1);
+        let mut normals = OVector::zeros_generic(n, U1);
+        for (j, &a) in ancestors.iter().enumerate() {
+            xn.copy_from(&self.nonlinear.column(a));
+            let mut kf = self.linear[a].clone();
+            let t = process.conditional_transition(&xn, input, dt);
+            check_transition(&t, n.value(), kf.state().nrows())?;
+            // xn⁺ ~ N(fn + An x̂l, An Pl Anᵀ + Qn).
+            let mut mean = t.coupling.clone() * kf.state();
+            mean += &t.nonlinear_mean;
+            let mut spread = &t.coupling * kf.covariance() * t.coupling.transpose();
+            spread += &t.nonlinear_noise;
+            let factor =
+                psd_factor(&spread, stage).map_err(|_| Error::NotPositiveSemiDefinite {
+                    stage,
+                    quantity: Quantity::ProcessNoise,
+                })?;
+            fill_normals(
+                &mut normals,
+                &mut ParticleRng::stream(self.seed, step, j as u64),
+            );
+            mean.gemv(T::one(), &factor, &normals, T::one());
+            // Condition xl on η = xn⁺ − fn = An xl + wn (nothing to learn if An = 0).
+            if t.coupling.iter().any(|&c| c != T::zero()) {
+                let eta = &mean - &t.nonlinear_mean;
+                let dynamics = LinearMeasurement::<T, Nl, Nn> {
+                    observation: t.coupling,
+                    noise: t.nonlinear_noise,
+                };
+                kf.update(&dynamics, &eta)?;
+            }
+            // xl⁺ = Al xl + fl + wl: a linear process with input fl through B = I.
+            let (l, _) = t.linear_mean.shape_generic();
+            let linear = LinearProcess::<T, Nl, Nl> {
+                transition: t.linear_transition,
+                input: OMatrix::<T, Nl, Nl>::identity_generic(l, l),
+                noise: t.linear_noise,
+            };
+            kf.predict(&linear, &t.linear_mean, dt)?;
+            next.set_column(j, &mean);
+            filters.push(kf);
+        }
+        ensure_finite(&next, stage, Quantity::FunctionValue)?;
+        // Committed.
+        self.nonlinear = next;
+        self.linear = filters;
+        if resample {
+            let uniform = -estim_core::scalar::real::<T>(count as f64).ln();
+            self.log_weights.fill(uniform);
+        }
+        self.step = step.wrapping_add(1);
+        Ok(())
+    }
+
+    /// The measurement update (see [`RaoBlackwellised`]): each particle's Kalman filter is updated on
+    /// z − h(xnⁱ) with observation C(xnⁱ), and its weight multiplied by the update's
+    /// likelihood N(z; h + C x̂lⁱ, C Plⁱ Cᵀ + R). Returns the step's log-likelihood
+    /// estimate Δℓ.
+    ///
+    /// Errors (the filter unchanged): z not finite; a measurement piece of the wrong shape or
+    /// not finite; R such that an innovation covariance is not positive definite; every
+    /// weight zero or NaN ([`Quantity::Weights`]).
+    pub fn update<M, H>(&mut self, sensor: &H, z: &OVector<T, M>) -> Result<T>
+    where
+        M: Dim,
+        H: ConditionallyLinearMeasurement<T, Nn, Nl, M> + ?Sized,
+        DefaultAllocator: Alloc<Nl, M> + Alloc<Nn, M>,
+    {
+        ensure_finite(z, Stage::Update, Quantity::Measurement)?;
+        let count = self.count();
+        let mut filters = Vec::with_capacity(count);
+        let mut log_w = Vec::with_capacity(count);
+        let mut xn = OVector::zeros_generic(self.nonlinear.shape_generic().0, U1);
+        for (i, &lw) in self.log_weights.iter().enumerate() {
+            xn.copy_from(&self.nonlinear.column(i));
+            let mut kf = self.linear[i].clone();
+            let piece = sensor.conditional_measurement(&xn);
+            check_measurement(&piece, z.nrows(), kf.state().nrows())?;
+            let shifted = z - &piece.offset;
+            let model = LinearMeasurement::<T, Nl, M> {
+                observation: piece.observation,
+                noise: piece.noise,
+            };
+            let report = kf.update(&model, &shifted)?;
+            log_w.push(lw + report.log_likelihood);
+            filters.push(kf);
+        }
+        let increment = normaliser(&log_w)?;
+        // Committed.
+        for (lw, new) in self.log_weights.iter_mut().zip(log_w) {
+            *lw = new - increment;
+        }
+        self.linear = filters;
+        self.log_likelihood += increment;
+        Ok(increment)
+    }
+}
+
+/// Shapes (runtime sizes) and finiteness of a transition's pieces.
+fn check_transition<T: Real, Nn: Dim, Nl: Dim>(
+    t: &ConditionalTransition<T, Nn, Nl>,
+    n: usize,
+    l: usize,
+) -> Result<()>
+where
+    DefaultAllocator: Alloc<Nn, Nl>,
+{
+    let stage = Stage::Prediction;
+    ensure_shape(&t.nonlinear_mean, n, 1, stage, Quantity::FunctionValue)?;
+    ensure_shape(&t.coupling, n, l, stage, Quantity::Jacobian)?;
+    ensure_shape(&t.nonlinear_noise, n, n, stage, Quantity::ProcessNoise)?;
+    ensure_shape(&t.linear_mean, l, 1, stage, Quantity::FunctionValue)?;
+    ensure_shape(&t.linear_transition, l, l, stage, Quantity::Jacobian)?;
+    ensure_shape(&t.linear_noise, l, l, stage, Quantity::ProcessNoise)?;
+    ensure_finite(&t.nonlinear_mean, stage, Quantity::FunctionValue)?;
+    ensure_finite(&t.coupling, stage, Quantity::Jacobian)?;
+    ensure_finite(&t.nonlinear_noise, stage, Quantity::ProcessNoise)?;
+    ensure_finite(&t.linear_mean, stage, Quantity::FunctionValue)?;
+    ensure_finite(&t.linear_transition, stage, Quantity::Jacobian)?;
+    ensure_finite(&t.linear_noise, stage, Quantity::ProcessNoise)
+}
+
+/// Shapes (runtime sizes) and finiteness of a measurement's pieces.
+fn check_measurement<T: Real, Nl: Dim, M: Dim>(
+    piece: &ConditionalMeasurement<T, Nl, M>,
+    m: usize,
+    l: usize,
+) -> Result<()>
+where
+    DefaultAllocator: Alloc<Nl, M>,
+{
+    let stage = Stage::Update;
+    ensure_shape(&piece.offset, m, 1, stage, Quantity::FunctionValue)?;
+    ensure_shape(&piece.observation, m, l, stage, Quantity::Jacobian)?;
+    ensure_shape(&piece.noise, m, m, stage, Quantity::MeasurementNoise)?;
+    ensure_finite(&piece.offset, stage, Quantity::FunctionValue)?;
+    ensure_finite(&piece.observation, stage, Quantity::Jacobian)?;
+    ensure_finite(&piece.noise, stage, Quantity::MeasurementNoise)
+}
