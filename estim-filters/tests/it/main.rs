@@ -32,6 +32,7 @@ mod fuzz;
 mod gating;
 mod iekf;
 mod imm;
+mod imm_smoother;
 mod multirate;
 mod nees;
 mod no_alloc;
