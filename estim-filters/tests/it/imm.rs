@@ -1274,6 +1274,21 @@ mod gpb2 {
         );
     }
 
+    #[test]
+    fn many_gpb2_predictions_without_an_update_keep_mu_normalised() {
+        // Row 0 sums to 1 + 1e-14, within the 64 m ulps (2.8e-14) `new` accepts: each
+        // prediction without renormalising would grow Σ μ by about μ₀ · 1e-14.
+        let pi = DMatrix::from_row_slice(2, 2, &[0.5, 0.5 + 1e-14, 0.3, 0.7]);
+        let modes = vec![KalmanFilter::new(prior()); 2];
+        let mut gpb2 = Gpb2::new(modes, pi, DVector::from_vec(vec![0.5, 0.5])).unwrap();
+        let models = vec![cv(0.01), cv(0.1)];
+        for _ in 0..20 {
+            gpb2.predict_modes(&models, &u0(), DT).unwrap();
+            // A few ulps of the division by the sum of four weights and of μ's two sums.
+            assert!((gpb2.probabilities().sum() - 1.0).abs() <= 4.0 * f64::EPSILON);
+        }
+    }
+
     /// The quiet and agile models as one `Predict` model for a `Vec` of modes.
     struct Bank(Vec<Process>);
 
