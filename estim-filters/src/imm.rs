@@ -85,6 +85,7 @@
 
 #[cfg(feature = "serde")]
 mod checkpoint;
+mod gaussian_sum;
 mod gpb2;
 mod mixture;
 pub mod modes;
@@ -93,6 +94,7 @@ pub mod smoother;
 use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 
+pub use gaussian_sum::GaussianSum;
 pub use gpb2::{Gpb2, Gpb2Snapshot};
 pub use modes::{ModeModels, Modes, PredictModes, UpdateModes};
 pub use smoother::{ImmSmoother, PredictCrossModes, Prediction, SmoothedModes};

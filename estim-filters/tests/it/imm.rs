@@ -180,7 +180,7 @@ fn a_mode_with_the_wrong_model_loses_its_probability() {
 /// c̄(s₁) Π πₛₖ₋₁ₛₖ Π N(zₖ; ẑₖ, Sₖ). Returns, after each step, the posterior mixture's mean
 /// and covariance and P(s_k = j | z₁…z_k).
 #[allow(clippy::type_complexity)]
-fn enumerate(
+pub(crate) fn enumerate(
     models: &[Process],
     sensor: &Sensor,
     pi: &DMatrix<f64>,

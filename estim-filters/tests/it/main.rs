@@ -30,6 +30,7 @@ mod fusion_sizes;
 mod fusion_support;
 mod fuzz;
 mod gating;
+mod gaussian_sum;
 mod iekf;
 mod imm;
 mod imm_smoother;
