@@ -85,15 +85,19 @@
 
 #[cfg(feature = "serde")]
 mod checkpoint;
+mod gaussian_sum;
 mod gpb2;
 mod mixture;
 pub mod modes;
+pub mod smoother;
 
 use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 
+pub use gaussian_sum::GaussianSum;
 pub use gpb2::{Gpb2, Gpb2Snapshot};
 pub use modes::{ModeModels, Modes, PredictModes, UpdateModes};
+pub use smoother::{ImmSmoother, PredictCrossModes, Prediction, SmoothedModes};
 
 use crate::report::UpdateReport;
 use crate::snapshot::copy_matrix;

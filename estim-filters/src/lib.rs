@@ -51,7 +51,8 @@
 //!
 //! [`imm`]: the interacting multiple model estimator over any of these filters as modes (a
 //! tuple of filters of their own types, or a `Vec`), with a Markov mode chain, mixing by moment
-//! matching, and mode probabilities updated in logs.
+//! matching, and mode probabilities updated in logs; [`imm::ImmSmoother`] smooths a recorded
+//! IMM run.
 //!
 //! ## Learning the noise
 //!

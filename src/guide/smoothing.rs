@@ -58,3 +58,40 @@
 //!
 //! On any error the sequence functions return a [`SmootherError`](crate::filters::SmootherError)
 //! naming the time of the failing step and leave the filter as it was.
+//!
+//! # Smoothing a multiple-model run
+//!
+//! An [`Imm`](crate::filters::imm::Imm) run is smoothed by
+//! [`ImmSmoother`](crate::filters::imm::ImmSmoother): call its `predict` in place of the
+//! IMM's, then `smooth` gives, at every time, the smoothed mixture (combined Gaussian, mode
+//! probabilities, each mode's Gaussian). It is Kim's Rauch–Tung–Striebel-form backward pass
+//! with each pair of modes weighted by the likelihood of the data after it (the module docs
+//! give the equations and why this algorithm): exact for one mode and for a static bank, and
+//! within 0.23 σ of the exact smoothed posterior on a short manoeuvre where Kim's plain pass
+//! is 1.1 σ off.
+//!
+//! ```
+//! use estim::prelude::*;
+//! use estim::filters::imm::{Imm, ImmSmoother};
+//! use estim::nalgebra::{DMatrix, DVector, Matrix1, Matrix1x2, Matrix2, Vector1, Vector2};
+//!
+//! let f = Matrix2::new(1.0, 1.0, 0.0, 1.0);
+//! let models = (
+//!     LinearProcess::without_input(f, Matrix2::identity() * 1e-4),
+//!     LinearProcess::without_input(f, Matrix2::identity() * 1e-1),
+//! );
+//! let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.25) };
+//! let prior = Gaussian::new(Vector2::zeros(), Matrix2::identity())?;
+//! let modes = (KalmanFilter::new(prior.clone()), Ukf::new(prior));
+//! let pi = DMatrix::from_row_slice(2, 2, &[0.95, 0.05, 0.10, 0.90]);
+//! let mut imm = Imm::new(modes, pi, DVector::from_vec(vec![0.5, 0.5]))?;
+//! let mut smoother = ImmSmoother::new();
+//! for z in [0.1, 0.9, 2.2, 2.8, 4.1, 6.3, 9.2] {
+//!     smoother.predict(&mut imm, &models, &(), 1.0)?;
+//!     imm.update_modes(&sensor, &Vector1::new(z))?;
+//! }
+//! let smoothed = smoother.smooth(&imm)?;
+//! assert_eq!(smoothed.len(), 8);
+//! assert!(f64::abs(smoothed[2].probabilities.sum() - 1.0) < 1e-12);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```

@@ -22,6 +22,9 @@ mod heading_wrap;
 #[allow(dead_code)] // its `main` and printing helpers
 #[path = "../../examples/large_state.rs"]
 mod large_state;
+#[allow(dead_code)] // its `main` and printing helpers
+#[path = "../../examples/manoeuvring_target.rs"]
+mod manoeuvring_target;
 use estim_reproductions::lee_huang;
 use estim_reproductions::lu_calibration;
 use estim_reproductions::lu_delays;
@@ -43,3 +46,4 @@ mod lu_calibration_example;
 mod lu_delays_example;
 mod lu_noise_id_example;
 mod lv2_fusion_example;
+mod manoeuvring_target_example;

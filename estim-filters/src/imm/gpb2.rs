@@ -154,7 +154,8 @@ where
     }
 
     /// One GPB2 prediction: merge per mode, then m² components (i, j), mode j's filter from
-    /// the merged gᵢ predicted with `models[j]`. On an error nothing changes.
+    /// the merged gᵢ predicted with `models[j]`, weight πᵢⱼ μᵢ (divided by their sum, which
+    /// rounding in Π may move off 1 by a few ulps). On an error nothing changes.
     ///
     /// Errors: fewer models than modes ([`Error::DimensionMismatch`], quantity
     /// [`ModeProbabilities`](Quantity::ModeProbabilities)); any component's prediction error.
@@ -213,6 +214,13 @@ where
                     weight,
                 });
             }
+        }
+        // Σ πᵢⱼ μᵢ / its sum: Π's rows sum to 1 only within the rounding `new` accepts, so
+        // without this Σ μ would drift from 1 over predictions without an update (as the
+        // IMM's). The sum is > 0: μ sums to 1 and Π is row-stochastic.
+        let total = next.iter().fold(T::zero(), |acc, c| acc + c.weight);
+        for c in &mut next {
+            c.weight /= total;
         }
         self.components = next;
         self.combine();

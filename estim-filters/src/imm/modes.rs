@@ -147,7 +147,7 @@ pub(crate) fn model_of<P>(models: &[P], i: usize, count: usize) -> Result<&P> {
 }
 
 #[track_caller]
-fn no_mode(i: usize, count: usize) -> ! {
+pub(crate) fn no_mode(i: usize, count: usize) -> ! {
     panic!("mode {i} of a set of {count} modes")
 }
 

@@ -15,13 +15,13 @@ use estim_filters::{
 
 use crate::common::{ReferenceKf, assert_bitwise_eq, normal, rng};
 
-type Process = LinearProcess<f64, U2, U1>;
-type Sensor = LinearMeasurement<f64, U2, U1>;
+pub(crate) type Process = LinearProcess<f64, U2, U1>;
+pub(crate) type Sensor = LinearMeasurement<f64, U2, U1>;
 
-const DT: f64 = 1.0;
+pub(crate) const DT: f64 = 1.0;
 
 /// Constant velocity with white-acceleration noise of intensity `q` (Bar-Shalom §6.3.2).
-fn cv(q: f64) -> Process {
+pub(crate) fn cv(q: f64) -> Process {
     LinearProcess {
         transition: Matrix2::new(1.0, DT, 0.0, 1.0),
         input: Matrix2x1::new(0.5 * DT * DT, DT),
@@ -39,18 +39,18 @@ fn stationary_model(q: f64) -> Process {
     }
 }
 
-fn position(r: f64) -> Sensor {
+pub(crate) fn position(r: f64) -> Sensor {
     LinearMeasurement {
         observation: Matrix1x2::new(1.0, 0.0),
         noise: Matrix1::new(r),
     }
 }
 
-fn prior() -> Gaussian<f64, U2> {
+pub(crate) fn prior() -> Gaussian<f64, U2> {
     Gaussian::new(Vector2::new(0.0, 1.0), Matrix2::new(2.0, 0.3, 0.3, 1.0)).unwrap()
 }
 
-fn u0() -> Vector1<f64> {
+pub(crate) fn u0() -> Vector1<f64> {
     Vector1::zeros()
 }
 
@@ -62,7 +62,7 @@ fn measurements(seed: u64, steps: usize, r: f64) -> Vec<f64> {
         .collect()
 }
 
-fn two_by_two(a: f64, b: f64) -> DMatrix<f64> {
+pub(crate) fn two_by_two(a: f64, b: f64) -> DMatrix<f64> {
     DMatrix::from_row_slice(2, 2, &[1.0 - a, a, b, 1.0 - b])
 }
 
@@ -180,7 +180,7 @@ fn a_mode_with_the_wrong_model_loses_its_probability() {
 /// c̄(s₁) Π πₛₖ₋₁ₛₖ Π N(zₖ; ẑₖ, Sₖ). Returns, after each step, the posterior mixture's mean
 /// and covariance and P(s_k = j | z₁…z_k).
 #[allow(clippy::type_complexity)]
-fn enumerate(
+pub(crate) fn enumerate(
     models: &[Process],
     sensor: &Sensor,
     pi: &DMatrix<f64>,
@@ -287,12 +287,12 @@ impl ReferenceImm {
     }
 }
 
-fn models() -> [Process; 2] {
+pub(crate) fn models() -> [Process; 2] {
     [cv(0.001), cv(1.0)]
 }
 
 /// A target coasting, then manoeuvring (the velocity jumps), measured (seeded).
-fn manoeuvre(seed: u64, steps: usize) -> Vec<f64> {
+pub(crate) fn manoeuvre(seed: u64, steps: usize) -> Vec<f64> {
     let mut g = rng(seed);
     let (mut x, mut v) = (0.0, 1.0);
     (0..steps)
@@ -1272,6 +1272,21 @@ mod gpb2 {
             )
             .is_err()
         );
+    }
+
+    #[test]
+    fn many_gpb2_predictions_without_an_update_keep_mu_normalised() {
+        // Row 0 sums to 1 + 1e-14, within the 64 m ulps (2.8e-14) `new` accepts: each
+        // prediction without renormalising would grow Σ μ by about μ₀ · 1e-14.
+        let pi = DMatrix::from_row_slice(2, 2, &[0.5, 0.5 + 1e-14, 0.3, 0.7]);
+        let modes = vec![KalmanFilter::new(prior()); 2];
+        let mut gpb2 = Gpb2::new(modes, pi, DVector::from_vec(vec![0.5, 0.5])).unwrap();
+        let models = vec![cv(0.01), cv(0.1)];
+        for _ in 0..20 {
+            gpb2.predict_modes(&models, &u0(), DT).unwrap();
+            // A few ulps of the division by the sum of four weights and of μ's two sums.
+            assert!((gpb2.probabilities().sum() - 1.0).abs() <= 4.0 * f64::EPSILON);
+        }
     }
 
     /// The quiet and agile models as one `Predict` model for a `Vec` of modes.
