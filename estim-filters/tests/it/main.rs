@@ -42,6 +42,7 @@ mod noise_id_em;
 mod noise_id_likelihood;
 mod noise_policy;
 mod particle;
+mod particle_parallel;
 mod rls;
 mod second_order;
 #[cfg(feature = "serde")]
