@@ -23,6 +23,9 @@ mod heading_wrap;
 #[path = "../../examples/large_state.rs"]
 mod large_state;
 use estim_reproductions::lee_huang;
+#[allow(dead_code)] // its `main` and printing helpers
+#[path = "../../examples/particle_growth.rs"]
+mod particle_growth;
 use estim_reproductions::lu_calibration;
 use estim_reproductions::lu_delays;
 use estim_reproductions::lu_noise_id;
@@ -43,3 +46,4 @@ mod lu_calibration_example;
 mod lu_delays_example;
 mod lu_noise_id_example;
 mod lv2_fusion_example;
+mod particle_growth_example;
