@@ -390,7 +390,52 @@ fn check_same_algorithm() {
     let _ = PARALLEL_MIN;
 }
 
+/// Counted mode for callgrind: `PARTICLE_BENCH_STEPS=<variant>=<steps>` with variant
+/// `library` or `hand` runs that many growth-model steps at N = 1000 in [`run_counted`] and
+/// exits, e.g. `PARTICLE_BENCH_STEPS=library=50 valgrind --tool=callgrind
+/// --toggle-collect='*run_counted*' <binary> --bench`.
+fn counted() -> bool {
+    let Ok(spec) = std::env::var("PARTICLE_BENCH_STEPS") else {
+        return false;
+    };
+    let (variant, steps) = spec.split_once('=').expect("<variant>=<steps>");
+    run_counted(variant, steps.parse().expect("a step count"));
+    true
+}
+
+#[inline(never)]
+fn run_counted(variant: &str, steps: usize) {
+    let zs = growth_readings();
+    let prior = Gaussian::new(Vector1::new(0.1), Matrix1::new(2.0)).unwrap();
+    let mut pf = ParticleFilter::new(prior, 1000, SEED)
+        .unwrap()
+        .with_trigger(ResampleWhen::Always)
+        .unwrap();
+    let mut hand = Hand::<1>::new(1000, [0.1], [[2f64.sqrt()]]);
+    let sq = 10f64.sqrt();
+    let half_log_2pi = 0.5 * std::f64::consts::TAU.ln();
+    for k in 1..=steps {
+        let (kf, z) = (k as f64, zs[k % STEPS]);
+        if variant == "library" {
+            pf.predict(&Growth, &kf, 1.0).unwrap();
+            pf.update(&Square, &Vector1::new(z)).unwrap();
+        } else {
+            hand.step(
+                |x, e, out| out[0] = growth(x[0], kf) + sq * e[0],
+                |x| {
+                    let r = z - x[0] * x[0] / 20.0;
+                    -0.5 * r * r - half_log_2pi
+                },
+            );
+        }
+    }
+    black_box((pf.state()[0], hand.mean[0]));
+}
+
 fn benches(c: &mut Criterion) {
+    if counted() {
+        return;
+    }
     check_same_algorithm();
     bench_growth(c);
     bench_tracker(c);

@@ -289,8 +289,41 @@ pub(crate) fn first_error<'a, T: Real + 'a>(
     first.map_or(Ok(()), Err)
 }
 
+/// One chunk's Σ Wᵢ dᵢ into `first` and Σ Wᵢ dᵢ dᵢᵀ into `second` (column-major), dᵢ = xᵢ − s,
+/// for particles of dimension D (`x` holds them one after another).
+#[inline(always)]
+fn chunk_moments<T: Real, const D: usize>(
+    x: &[T],
+    weights: &[f64],
+    shift: &[T],
+    first: &mut [T],
+    second: &mut [T],
+) {
+    let shift: [T; D] = core::array::from_fn(|r| shift[r]);
+    let mut m1 = [T::zero(); D];
+    let mut m2 = [[T::zero(); D]; D];
+    for (x, &wi) in x.chunks_exact(D).zip(weights) {
+        let wi = estim_core::scalar::real::<T>(wi);
+        let d: [T; D] = core::array::from_fn(|r| x[r] - shift[r]);
+        for c in 0..D {
+            let wd = wi * d[c];
+            m1[c] += wd;
+            for r in 0..D {
+                m2[c][r] += wd * d[r];
+            }
+        }
+    }
+    first.copy_from_slice(&m1);
+    for (column, m) in second.chunks_exact_mut(D).zip(&m2) {
+        column.copy_from_slice(m);
+    }
+}
+
 /// The weighted moments x̂ = Σ Wᵢ xᵢ and P = Σ Wᵢ (xᵢ − x̂)(xᵢ − x̂)ᵀ of `particles` with
-/// weights `weights` (Σ Wᵢ = 1), by chunks, the partial sums added in chunk order.
+/// weights `weights` (Σ Wᵢ = 1), in one pass by chunks, the partial sums added in chunk order.
+/// Each chunk sums dᵢ = xᵢ − s and Wᵢ dᵢ dᵢᵀ about a shift s, the particle of largest
+/// weight (inside the cloud's bulk, so the correction below loses no precision); then
+/// x̂ = s + Σ Wᵢ dᵢ and P = Σ Wᵢ dᵢ dᵢᵀ − (x̂ − s)(x̂ − s)ᵀ.
 pub(crate) fn moments<T: Real, N: Dim>(
     chunks: &mut [ChunkWork<T>],
     particles: &OMatrix<T, N, Dyn>,
@@ -302,46 +335,62 @@ pub(crate) fn moments<T: Real, N: Dim>(
 {
     let count = weights.len();
     let n = particles.nrows();
-    let par = parallel(count);
     let particles = particles.as_slice();
-    for_states(par, chunks, |c, w| {
-        if w.mean.nrows() != n {
+    let heaviest = weights
+        .iter()
+        .enumerate()
+        .fold(
+            (0, f64::NEG_INFINITY),
+            |(a, m), (i, &w)| if w > m { (i, w) } else { (a, m) },
+        )
+        .0;
+    let shift = &particles[heaviest * n..(heaviest + 1) * n];
+    for_states(parallel(count), chunks, |c, w| {
+        if w.mean.nrows() != n || w.covariance.nrows() != n {
             w.mean = dvector(n);
             w.covariance = dmatrix(n, n);
         }
-        w.mean.fill(T::zero());
-        for i in range(c, count) {
-            let wi = estim_core::scalar::real::<T>(weights[i]);
-            for (m, &x) in w.mean.iter_mut().zip(&particles[i * n..(i + 1) * n]) {
-                *m += wi * x;
-            }
-        }
-    });
-    mean.fill(T::zero());
-    for w in chunks.iter() {
-        for (m, &p) in mean.iter_mut().zip(w.mean.iter()) {
-            *m += p;
-        }
-    }
-    let mean = mean.as_slice();
-    for_states(par, chunks, |c, w| {
-        w.covariance.fill(T::zero());
-        for i in range(c, count) {
-            let wi = estim_core::scalar::real::<T>(weights[i]);
-            let x = &particles[i * n..(i + 1) * n];
-            for col in 0..n {
-                let dc = wi * (x[col] - mean[col]);
-                for row in 0..n {
-                    w.covariance[(row, col)] += dc * (x[row] - mean[row]);
+        let first = w.mean.as_mut_slice();
+        let second = w.covariance.as_mut_slice();
+        first.fill(T::zero());
+        second.fill(T::zero());
+        let (range, w) = (range(c, count), &weights[c * CHUNK..]);
+        let x = &particles[range.start * n..range.end * n];
+        // The loops unrolled for the common small dimensions.
+        match n {
+            1 => chunk_moments::<T, 1>(x, w, shift, first, second),
+            2 => chunk_moments::<T, 2>(x, w, shift, first, second),
+            3 => chunk_moments::<T, 3>(x, w, shift, first, second),
+            4 => chunk_moments::<T, 4>(x, w, shift, first, second),
+            6 => chunk_moments::<T, 6>(x, w, shift, first, second),
+            _ => {
+                for (x, &wi) in x.chunks_exact(n).zip(w) {
+                    let wi = estim_core::scalar::real::<T>(wi);
+                    for (col, column) in second.chunks_exact_mut(n).enumerate() {
+                        let wd = wi * (x[col] - shift[col]);
+                        first[col] += wd;
+                        for ((p, &xr), &sr) in column.iter_mut().zip(x).zip(shift) {
+                            *p += wd * (xr - sr);
+                        }
+                    }
                 }
             }
         }
     });
+    mean.fill(T::zero());
     covariance.fill(T::zero());
     for w in chunks.iter() {
+        for (m, &p) in mean.iter_mut().zip(w.mean.iter()) {
+            *m += p;
+        }
         for (p, &q) in covariance.iter_mut().zip(w.covariance.iter()) {
             *p += q;
         }
+    }
+    // P = Σ W d dᵀ − m₁ m₁ᵀ with m₁ = x̂ − s, then x̂ = s + m₁.
+    covariance.ger(-T::one(), mean, mean, T::one());
+    for (m, &s) in mean.iter_mut().zip(shift) {
+        *m += s;
     }
 }
 
