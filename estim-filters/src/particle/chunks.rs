@@ -25,8 +25,10 @@ use super::step::Factored;
 pub(crate) const CHUNK: usize = 512;
 
 /// The smallest particle count whose loops run on rayon's pool (feature `parallel`): below it
-/// the fork-join overhead outweighs the work on this machine class (measured with the
-/// `particle` bench, BENCHMARKS.md). Serial and parallel runs give the same bits.
+/// the fork-join overhead (a few µs per loop, five loops a step) outweighs the work (≈ 0.1 µs
+/// per particle-step, so 4096 particles are ≈ 0.4 ms a step). An estimate, not yet a
+/// measured crossover (BENCHMARKS.md, "Particle filter"). Serial and parallel runs give the
+/// same bits.
 pub const PARALLEL_MIN: usize = 4096;
 
 /// Whether the loops over `count` particles run on rayon's pool.
