@@ -26,6 +26,9 @@ mod large_state;
 #[path = "../../examples/manoeuvring_target.rs"]
 mod manoeuvring_target;
 use estim_reproductions::lee_huang;
+#[allow(dead_code)] // its `main` and printing helpers
+#[path = "../../examples/particle_growth.rs"]
+mod particle_growth;
 use estim_reproductions::lu_calibration;
 use estim_reproductions::lu_delays;
 use estim_reproductions::lu_noise_id;
@@ -47,3 +50,4 @@ mod lu_delays_example;
 mod lu_noise_id_example;
 mod lv2_fusion_example;
 mod manoeuvring_target_example;
+mod particle_growth_example;

@@ -16,14 +16,15 @@
 //! [`NonGaussian`](super::NonGaussian) model's likelihood). ηᵢ must be positive wherever the
 //! children of xᵢ can explain z (true for a Gaussian R); a particle with ηᵢ = 0 has no children.
 
-use estim_core::checks::ensure_finite;
-use estim_core::nalgebra::{DefaultAllocator, Dim, OVector};
+use estim_core::checks::{ensure_finite, ensure_shape};
+use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector};
 use estim_core::{Alloc, ProcessModel, Quantity, Real, Stage, error::Result};
 
 use super::ParticleFilter;
+use super::chunks::{CHUNK, first_error, for_chunks1, parallel, with_state};
 use super::noise::{AdditiveGaussian, ParticleMeasurement, ParticleProcess};
-use super::rng::ParticleRng;
-use super::step::{Weigher, normaliser};
+use super::resample::to_f64;
+use super::step::Work;
 use crate::gaussian_filter::ensure_time_step;
 use crate::report::UpdateReport;
 use estim_core::MeasurementModel;
@@ -67,9 +68,10 @@ where
         z: &OVector<T, M>,
     ) -> Result<UpdateReport<T, M>>
     where
-        P: ProcessModel<T, N> + ?Sized,
+        P: ProcessModel<T, N> + Sync + ?Sized,
+        P::Input: Sync,
         M: Dim,
-        H: MeasurementModel<T, N, M> + ?Sized,
+        H: MeasurementModel<T, N, M> + Sync + ?Sized,
         DefaultAllocator: Alloc<N, M>,
     {
         let mut report = UpdateReport::zeros(z.shape_generic().0);
@@ -98,78 +100,107 @@ where
         report: &mut UpdateReport<T, M>,
     ) -> Result<()>
     where
-        P: ParticleProcess<T, N> + ?Sized,
+        P: ParticleProcess<T, N> + Sync + ?Sized,
+        <P::Model as ProcessModel<T, N>>::Input: Sync,
         M: Dim,
-        H: ParticleMeasurement<T, N, M> + ?Sized,
+        H: ParticleMeasurement<T, N, M> + Sync + ?Sized,
         DefaultAllocator: Alloc<N, M>,
     {
         ensure_time_step(dt)?;
         ensure_finite(z, Stage::Update, Quantity::Measurement)?;
         let count = self.count();
         let (n, _) = self.cloud.mean.shape_generic();
-        let step = self.cloud.step;
-        let mut look_ahead = Weigher::new(n, z.shape_generic().0);
+        let (seed, step) = (self.seed, self.cloud.step);
+        let cloud = &self.cloud;
         let work = &mut self.work;
-        // First stage: μᵢ into `next`, log ηᵢ into `log_eta`, log λᵢ into `log_w`.
-        work.log_eta.clear();
-        work.log_w.clear();
-        for (i, &lw) in self.cloud.log_weights.iter().enumerate() {
-            work.x.copy_from(&self.cloud.particles.column(i));
-            process
-                .model()
-                .transition_into(&work.x, input, dt, &mut work.y);
-            ensure_finite(&work.y, Stage::Prediction, Quantity::FunctionValue)?;
-            work.next.set_column(i, &work.y);
-            let log_eta = look_ahead.log_density(sensor, z, &work.next, i, T::zero())?;
-            work.log_eta.push(log_eta);
-            work.log_w.push(lw + log_eta);
-        }
-        let first = normaliser(&work.log_w)?;
-        for lw in &mut work.log_w {
-            *lw -= first;
-        }
-        let first_stage = core::mem::take(&mut work.log_w);
-        work.ancestors_from(&first_stage, true, self.scheme, self.seed, step);
-        work.log_w = first_stage;
+        // First stage: μᵢ into `next`, log ηᵢ into `log_eta`.
+        let (nn, particles) = (n.value(), cloud.particles.as_slice());
+        for_chunks1(
+            parallel(count),
+            &mut work.chunks,
+            work.next.as_mut_slice(),
+            n.value() * CHUNK,
+            |c, w, out| {
+                w.error = with_state(&mut w.state, n, |s| {
+                    for (k, column) in out.chunks_exact_mut(n.value()).enumerate() {
+                        let i = c * CHUNK + k;
+                        s.x.copy_from_slice(&particles[i * nn..(i + 1) * nn]);
+                        process.model().transition_into(&s.x, input, dt, &mut s.y);
+                        let (stage, quantity) = (Stage::Prediction, Quantity::FunctionValue);
+                        let checked = ensure_shape(&s.y, s.x.nrows(), 1, stage, quantity)
+                            .and_then(|()| ensure_finite(&s.y, stage, quantity));
+                        if let Err(e) = checked {
+                            return Some(e);
+                        }
+                        for (o, &y) in column.iter_mut().zip(s.y.iter()) {
+                            *o = y;
+                        }
+                    }
+                    None
+                });
+            },
+        );
+        first_error(work.chunks.iter_mut())?;
+        let next = core::mem::replace(&mut work.next, OMatrix::zeros_generic(n, Dyn(0)));
+        let mut log_eta = core::mem::take(&mut work.log_eta);
+        log_eta.resize(count, T::zero());
+        let first_stage = work.weigh(sensor, z, &next, &mut log_eta, |_| (T::zero(), T::zero()));
+        work.next = next;
+        work.log_eta = log_eta;
+        first_stage?;
+        // log λᵢ = log Wᵢ + log ηᵢ; L₁ = log Σ λᵢ; resampling weights λᵢ / Σ λ.
+        let mut log_w = core::mem::take(&mut work.log_w);
+        log_w.clear();
+        log_w.extend(
+            cloud
+                .log_weights
+                .iter()
+                .zip(&work.log_eta)
+                .map(|(&lw, &eta)| lw + eta),
+        );
+        let first = work.normaliser(&log_w);
+        work.log_w = log_w;
+        let first = first?;
+        work.weights.clear();
+        work.weights
+            .extend(work.log_w.iter().map(|&l| to_f64(l - first).exp()));
+        Work::<T, N>::ancestors_from(
+            &mut work.ancestors,
+            &mut work.scratch,
+            &work.weights,
+            true,
+            self.scheme,
+            seed,
+            step,
+        );
         // Propagate the chosen particles.
-        for j in 0..count {
-            let a = work.ancestors[j];
-            work.x.copy_from(&self.cloud.particles.column(a));
-            let rng = ParticleRng::stream(self.seed, step, j as u64);
-            work.propagate(process, input, dt, rng, j)?;
-        }
+        work.propagate_all(&cloud.particles, process, input, dt, seed, step)?;
         // Second stage; predictive weights ∝ 1/η_aⱼ for the report's moments.
-        let max_inverse = work
-            .ancestors
+        let ancestors = core::mem::take(&mut work.ancestors);
+        let log_eta = core::mem::take(&mut work.log_eta);
+        let max_inverse = ancestors
             .iter()
-            .map(|&a| -work.log_eta[a])
+            .map(|&a| -log_eta[a])
             .fold(-T::one() / T::zero(), |m, v| if v > m { v } else { m });
-        let mut weigher = Weigher::new(n, z.shape_generic().0);
-        let mut predictive_total = T::zero();
-        work.log_w.clear();
-        for j in 0..count {
-            let log_eta = work.log_eta[work.ancestors[j]];
-            let v = (-log_eta - max_inverse).exp();
-            predictive_total += v;
-            let log_g = weigher.log_density(sensor, z, &work.next, j, v)?;
-            work.log_w.push(log_g - log_eta);
-        }
-        let second = normaliser(&work.log_w)?;
+        let next = core::mem::replace(&mut work.next, OMatrix::zeros_generic(n, Dyn(0)));
+        let mut log_w = core::mem::take(&mut work.log_w);
+        let second = work.weigh(sensor, z, &next, &mut log_w, |j| {
+            let log_eta = log_eta[ancestors[j]];
+            ((-log_eta - max_inverse).exp(), -log_eta)
+        });
+        work.next = next;
+        work.log_w = log_w;
+        work.ancestors = ancestors;
+        work.log_eta = log_eta;
+        let second = second?;
         let increment = first + second - estim_core::scalar::real::<T>(count as f64).ln();
         // Committed.
-        core::mem::swap(&mut self.cloud.particles, &mut self.work.next);
-        for (lw, &new) in self
-            .cloud
-            .log_weights
-            .iter_mut()
-            .zip(self.work.log_w.iter())
-        {
-            *lw = new - second;
-        }
+        work.report(z.shape_generic().0, increment, report);
+        core::mem::swap(&mut self.cloud.particles, &mut work.next);
+        work.normalise(second, &mut self.cloud.log_weights, &mut self.cloud.weights);
         self.cloud.step = step.wrapping_add(1);
         self.cloud.log_likelihood += increment;
         self.update_moments();
-        weigher.report(predictive_total, increment, report);
         Ok(())
     }
 }

@@ -110,18 +110,21 @@ where
         validate(&f).map_err(D::Error::custom)?;
         let (n, _) = f.state.shape_generic();
         let count = f.log_weights.len();
+        let mut cloud = ParticleSnapshot {
+            particles: f.particles,
+            log_weights: f.log_weights,
+            weights: Vec::with_capacity(count),
+            step: f.step,
+            mean: f.state,
+            covariance: f.covariance,
+            log_likelihood: f.log_likelihood,
+        };
+        cloud.refresh_weights();
         Ok(ParticleFilter {
             seed: f.seed,
             scheme: f.resampling,
             when: f.trigger,
-            cloud: ParticleSnapshot {
-                particles: f.particles,
-                log_weights: f.log_weights,
-                step: f.step,
-                mean: f.state,
-                covariance: f.covariance,
-                log_likelihood: f.log_likelihood,
-            },
+            cloud,
             work: Work::new(n, count),
         })
     }

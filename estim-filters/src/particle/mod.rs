@@ -52,6 +52,16 @@
 //! ([`ParticleRng`]): the random state is one step counter, part of every snapshot and
 //! checkpoint, and per-particle work does not depend on the visiting order.
 //!
+//! **Parallel and reproducible.** The per-particle loops run over fixed chunks of particles,
+//! each with its own scratch and partial sums (log-sum-exp, moments), combined in chunk
+//! order. With the `parallel` feature the chunks of a filter with at least [`PARALLEL_MIN`]
+//! particles run on rayon's current pool (install a pool to choose the threads); serial or on
+//! any number of threads, a seed gives the same bits. The models and inputs are therefore
+//! `Sync` (the bound holds with and without the feature, so code compiles either way). After
+//! the first step (which sizes the runtime-size buffers and factorises Q and R), steps with a
+//! fixed particle count allocate nothing, for static and runtime (`Dyn`) sizes alike, as
+//! long as the model's `_into` methods do not allocate.
+//!
 //! ```
 //! use estim_core::nalgebra::{Matrix1, Vector1};
 //! use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
@@ -77,6 +87,7 @@
 mod auxiliary;
 #[cfg(feature = "serde")]
 mod checkpoint;
+mod chunks;
 mod ffbsi;
 mod guided;
 mod noise;
@@ -92,6 +103,7 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
 use estim_core::rand_distr::{Distribution, StandardNormal};
 use estim_core::{Alloc, Error, Gaussian, Parameter, Real, error::Result, psd_factor};
 
+pub use chunks::PARALLEL_MIN;
 pub use ffbsi::{Ffbsi, SmoothedPaths};
 pub use guided::Proposal;
 pub use noise::{
@@ -109,9 +121,7 @@ pub use rng::{ParticleRng, RESAMPLE};
 pub use transition::{ParticleTransition, TransitionDensity, log_transition_density};
 
 use crate::traits::{Estimator, Rollback};
-use resample::effective_sample_size;
-#[cfg(test)]
-use resample::to_f64;
+use resample::{ess_of_weights, to_f64};
 use step::Work;
 
 /// A particle filter: bootstrap (SIR) steps through [`Predict`](crate::Predict) and
@@ -139,6 +149,9 @@ where
 {
     pub(crate) particles: OMatrix<T, N, Dyn>,
     pub(crate) log_weights: Vec<T>,
+    /// Wᵢ = exp(log Wᵢ) in f64 (a function of the log-weights, kept for the ESS, resampling
+    /// and the moments).
+    pub(crate) weights: Vec<f64>,
     pub(crate) step: u64,
     pub(crate) mean: OVector<T, N>,
     pub(crate) covariance: OMatrix<T, N, N>,
@@ -157,6 +170,7 @@ where
             self.particles = other.particles.clone();
         }
         self.log_weights.clone_from(&other.log_weights);
+        self.weights.clone_from(&other.weights);
         self.step = other.step;
         if self.mean.shape() == other.mean.shape() {
             self.mean.copy_from(&other.mean);
@@ -166,6 +180,21 @@ where
             self.covariance = other.covariance.clone();
         }
         self.log_likelihood = other.log_likelihood;
+    }
+
+    /// Wᵢ = exp(log Wᵢ) from the log-weights (for a checkpoint read back).
+    #[cfg(any(feature = "serde", test))]
+    pub(crate) fn refresh_weights(&mut self) {
+        self.weights.clear();
+        self.weights
+            .extend(self.log_weights.iter().map(|&lw| to_f64(lw).exp()));
+    }
+
+    /// Equal weights: log Wᵢ = −log N.
+    pub(crate) fn set_uniform(&mut self) {
+        let uniform = -estim_core::scalar::real::<T>(self.log_weights.len() as f64).ln();
+        self.log_weights.fill(uniform);
+        self.weights.fill(to_f64(uniform).exp());
     }
 }
 
@@ -225,6 +254,7 @@ where
             cloud: ParticleSnapshot {
                 particles: OMatrix::zeros_generic(n, Dyn(count)),
                 log_weights: vec![T::zero(); count],
+                weights: vec![0.0; count],
                 step: 0,
                 mean: prior.mean().clone(),
                 covariance: prior.covariance().clone(),
@@ -276,7 +306,7 @@ where
 
     /// The effective sample size 1 / Σ Wᵢ², in [1, N].
     pub fn effective_sample_size(&self) -> T {
-        estim_core::scalar::real(effective_sample_size(&self.cloud.log_weights))
+        estim_core::scalar::real(ess_of_weights(&self.cloud.weights))
     }
 
     /// The running log-likelihood estimate log p̂(z₁..ₖ) = Σ Δℓ since construction or the last
@@ -320,42 +350,36 @@ where
             cloud.particles = OMatrix::zeros_generic(n, Dyn(count));
         }
         self.work.fit(n, count);
-        let normals = &mut self.work.normals;
+        let mut normals = OVector::zeros_generic(n, U1);
         for i in 0..count {
             let mut rng = ParticleRng::stream(self.seed, 0, i as u64);
-            fill_normals(normals, &mut rng);
+            fill_normals(&mut normals, &mut rng);
             let mut column = cloud.particles.column_mut(i);
             column.copy_from(prior.mean());
-            column.gemv(T::one(), factor, normals, T::one());
+            column.gemv(T::one(), factor, &normals, T::one());
         }
-        let uniform = -estim_core::scalar::real::<T>(count as f64).ln();
-        cloud.log_weights.fill(uniform);
+        cloud.set_uniform();
         cloud.step = 1;
         cloud.log_likelihood = T::zero();
         self.update_moments();
     }
 
-    /// x̂ = Σ Wᵢ xᵢ and P = Σ Wᵢ (xᵢ − x̂)(xᵢ − x̂)ᵀ from the cloud.
+    /// x̂ = Σ Wᵢ xᵢ and P = Σ Wᵢ (xᵢ − x̂)(xᵢ − x̂)ᵀ from the cloud (by chunks, in a fixed
+    /// order).
     fn update_moments(&mut self) {
         let cloud = &mut self.cloud;
-        let d = &mut self.work.x;
         let (n, _) = cloud.particles.shape_generic();
         if cloud.mean.nrows() != n.value() {
             cloud.mean = OVector::zeros_generic(n, U1);
             cloud.covariance = OMatrix::zeros_generic(n, n);
         }
-        cloud.mean.fill(T::zero());
-        for (i, &lw) in cloud.log_weights.iter().enumerate() {
-            cloud
-                .mean
-                .axpy(lw.exp(), &cloud.particles.column(i), T::one());
-        }
-        cloud.covariance.fill(T::zero());
-        for (i, &lw) in cloud.log_weights.iter().enumerate() {
-            d.copy_from(&cloud.particles.column(i));
-            *d -= &cloud.mean;
-            cloud.covariance.ger(lw.exp(), d, d, T::one());
-        }
+        chunks::moments(
+            &mut self.work.chunks,
+            &cloud.particles,
+            &cloud.weights,
+            &mut cloud.mean,
+            &mut cloud.covariance,
+        );
     }
 }
 
@@ -468,6 +492,7 @@ mod tests {
         pf.cloud.particles[(0, 0)] = 1.0;
         pf.cloud.particles[(0, 1)] = 3.0;
         pf.cloud.log_weights = vec![0.25f64.ln(), 0.75f64.ln()];
+        pf.cloud.refresh_weights();
         pf.update_moments();
         // Mean 0.25 + 2.25 = 2.5; variance 0.25·2.25 + 0.75·0.25 = 0.75.
         assert!((pf.state()[0] - 2.5).abs() < 1e-15);

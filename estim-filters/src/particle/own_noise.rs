@@ -127,9 +127,10 @@ where
     }
 }
 
-impl<T: Real, N: Dim, P: ProcessSampler<T, N>> Predict<T, N, P> for NonGaussianFilter<T, N>
+impl<T: Real, N: Dim, P: ProcessSampler<T, N> + Sync> Predict<T, N, P> for NonGaussianFilter<T, N>
 where
     DefaultAllocator: Alloc<N>,
+    P::Input: Sync,
 {
     /// [`ParticleFilter::predict_with`] drawing from the model's sampler.
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
@@ -137,7 +138,7 @@ where
     }
 }
 
-impl<T: Real, N: Dim, M: Dim, H: MeasurementLikelihood<T, N, M>> Update<T, N, M, H>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementLikelihood<T, N, M> + Sync> Update<T, N, M, H>
     for NonGaussianFilter<T, N>
 where
     DefaultAllocator: Alloc<N, M>,

@@ -213,14 +213,7 @@ pub(crate) fn to_f64<T: estim_core::Real>(x: T) -> f64 {
     estim_core::nalgebra::try_convert::<T, f64>(x).unwrap_or(f64::NAN)
 }
 
-/// The effective sample size 1 / Σ Wᵢ² of normalised log-weights (log Σ Wᵢ = 0).
-pub(crate) fn effective_sample_size<T: estim_core::Real>(log_weights: &[T]) -> f64 {
-    let sum_sq: f64 = log_weights
-        .iter()
-        .map(|&lw| {
-            let w = to_f64(lw).exp();
-            w * w
-        })
-        .sum();
-    1.0 / sum_sq
+/// The effective sample size 1 / Σ Wᵢ² of normalised weights (Σ Wᵢ = 1).
+pub(crate) fn ess_of_weights(weights: &[f64]) -> f64 {
+    1.0 / weights.iter().map(|w| w * w).sum::<f64>()
 }

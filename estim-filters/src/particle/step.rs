@@ -1,14 +1,23 @@
 //! The bootstrap filter's prediction and update, and their step-trait impls.
 
+use core::marker::PhantomData;
+
+use estim_core::alloc::{DimAlloc, SizeFamily};
 use estim_core::checks::{ensure_finite, ensure_shape};
 use estim_core::linalg::inverse_quadratic_form;
-use estim_core::nalgebra::{Cholesky, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
+use estim_core::nalgebra::{
+    Cholesky, DMatrix, DVector, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1,
+};
 use estim_core::{
     Alloc, Error, MeasurementModel, ProcessModel, Quantity, Real, Stage, error::Result, psd_factor,
 };
 
+use super::chunks::{
+    CHUNK, ChunkWork, StateScratch, chunk_count, dmatrix, dvector, first_error, for_chunks,
+    for_chunks1, for_states, lse_combine, lse_partial, parallel, range, with_state,
+};
 use super::noise::{AdditiveGaussian, ParticleMeasurement, ParticleProcess};
-use super::resample::{effective_sample_size, resample_with, to_f64};
+use super::resample::{ess_of_weights, resample_with, to_f64};
 use super::rng::{ParticleRng, RESAMPLE};
 use super::{ParticleFilter, fill_normals};
 use crate::gaussian_filter::ensure_time_step;
@@ -16,9 +25,10 @@ use crate::report::{UpdateOutcome, UpdateReport};
 use crate::traits::{Predict, Update};
 
 /// A noise matrix remembered with its factor (and, for R, log det(2πR)/2).
-type Factored<T, D, Extra> = Option<(OMatrix<T, D, D>, OMatrix<T, D, D>, Extra)>;
+pub(crate) type Factored<T, D, Extra> = Option<(OMatrix<T, D, D>, OMatrix<T, D, D>, Extra)>;
 
-/// Buffers of the steps (no state: a step overwrites what it reads).
+/// Buffers of the steps (no state: a step overwrites what it reads). Everything kept per
+/// chunk is of runtime size (see [`ChunkWork`]), so the chunks can run on rayon's threads.
 #[derive(Clone, Debug)]
 pub(crate) struct Work<T: Real, N: Dim>
 where
@@ -28,18 +38,19 @@ where
     pub(crate) next: OMatrix<T, N, Dyn>,
     /// New log-weights (update) or first-stage log-weights (auxiliary).
     pub(crate) log_w: Vec<T>,
-    /// Normalised weights in f64, for resampling.
+    /// The auxiliary filter's first-stage weights in f64, for resampling.
     pub(crate) weights: Vec<f64>,
     pub(crate) ancestors: Vec<usize>,
     /// The auxiliary filter's first-stage log-densities log ηᵢ.
     pub(crate) log_eta: Vec<T>,
     pub(crate) scratch: Vec<f64>,
-    pub(crate) x: OVector<T, N>,
-    pub(crate) y: OVector<T, N>,
-    pub(crate) normals: OVector<T, N>,
-    pub(crate) q: OMatrix<T, N, N>,
-    /// The last Q seen and its PSD factor (Q is factorised again only when it changes).
-    pub(crate) q_cache: Factored<T, N, ()>,
+    /// One scratch and partial-sum set per chunk of particles.
+    pub(crate) chunks: Vec<ChunkWork<T>>,
+    /// One measurement scratch per chunk (used as such for runtime-size measurements).
+    pub(crate) sensors: Vec<SensorScratch<T, Dyn>>,
+    /// The report's S and ν, copied for the NIS solve.
+    nis_s: DMatrix<T>,
+    nis_nu: DVector<T>,
 }
 
 impl<T: Real, N: Dim> Work<T, N>
@@ -47,18 +58,20 @@ where
     DefaultAllocator: Alloc<N>,
 {
     pub(crate) fn new(n: N, count: usize) -> Self {
+        let chunks = chunk_count(count);
         Self {
             next: OMatrix::zeros_generic(n, Dyn(count)),
             log_w: vec![T::zero(); count],
             weights: vec![0.0; count],
             ancestors: (0..count).collect(),
-            log_eta: Vec::with_capacity(count),
+            log_eta: vec![T::zero(); count],
             scratch: Vec::with_capacity(2 * count),
-            x: OVector::zeros_generic(n, U1),
-            y: OVector::zeros_generic(n, U1),
-            normals: OVector::zeros_generic(n, U1),
-            q: OMatrix::zeros_generic(n, n),
-            q_cache: None,
+            chunks: (0..chunks).map(|_| ChunkWork::new(n.value())).collect(),
+            sensors: (0..chunks)
+                .map(|_| SensorScratch::<T, Dyn>::new(Dyn(0)))
+                .collect(),
+            nis_s: dmatrix(0, 0),
+            nis_nu: dvector(0),
         }
     }
 
@@ -69,235 +82,470 @@ where
         }
     }
 
-    /// Ancestors from the normalised log-weights `log_w` (resampled by `scheme` from the
-    /// stream (seed, step, RESAMPLE) if `resample`, else the identity).
+    /// Ancestors from the normalised weights `weights` (resampled by `scheme` from the stream
+    /// (seed, step, RESAMPLE) if `resample`, else the identity).
     pub(crate) fn ancestors_from(
-        &mut self,
-        log_w: &[T],
+        ancestors: &mut [usize],
+        scratch: &mut Vec<f64>,
+        weights: &[f64],
         resample: bool,
         scheme: super::Resampling,
         seed: u64,
         step: u64,
     ) {
         if resample {
-            self.weights.clear();
-            self.weights
-                .extend(log_w.iter().map(|&lw| to_f64(lw).exp()));
             let mut rng = ParticleRng::stream(seed, step, RESAMPLE);
-            resample_with(
-                scheme,
-                &self.weights,
-                &mut rng,
-                &mut self.ancestors,
-                &mut self.scratch,
-            );
+            resample_with(scheme, weights, &mut rng, ancestors, scratch);
         } else {
-            for (i, a) in self.ancestors.iter_mut().enumerate() {
+            for (i, a) in ancestors.iter_mut().enumerate() {
                 *a = i;
             }
         }
     }
 
-    /// Moves particle `x` (copied into `self.x`) with stream (seed, step, j) into column j
-    /// of `next`.
-    #[inline(always)]
-    pub(crate) fn propagate<P: ParticleProcess<T, N> + ?Sized>(
+    /// Propagates the particles `ancestors[j]` of `particles` into column j of `next`, with
+    /// the streams (seed, step, j), by chunks. Errors: the first failing particle's (in
+    /// particle order), `next` then partly written.
+    pub(crate) fn propagate_all<P: ParticleProcess<T, N> + Sync + ?Sized>(
         &mut self,
+        particles: &OMatrix<T, N, Dyn>,
         process: &P,
         input: &<P::Model as ProcessModel<T, N>>::Input,
         dt: T,
-        mut rng: ParticleRng,
-        j: usize,
-    ) -> Result<()> {
-        let Self {
-            next,
-            x,
-            y,
-            normals,
-            q,
-            q_cache,
-            ..
-        } = self;
-        if !process.sample_into(x, input, dt, &mut rng, y) {
-            let model = process.model();
-            model.transition_into(x, input, dt, y);
-            model.process_noise_into(x, input, dt, q);
-            let factor = match q_cache {
-                Some((cached, factor, ())) if cached == q => factor,
-                _ => {
-                    let n = x.nrows();
-                    ensure_shape(q, n, n, Stage::Prediction, Quantity::ProcessNoise)?;
-                    ensure_finite(q, Stage::Prediction, Quantity::ProcessNoise)?;
-                    let factor = psd_factor(q, Stage::Prediction).map_err(|_| {
-                        Error::NotPositiveSemiDefinite {
-                            stage: Stage::Prediction,
-                            quantity: Quantity::ProcessNoise,
+        seed: u64,
+        step: u64,
+    ) -> Result<()>
+    where
+        <P::Model as ProcessModel<T, N>>::Input: Sync,
+    {
+        let (n, _) = particles.shape_generic();
+        let count = particles.ncols();
+        let ancestors = &self.ancestors;
+        let nn = n.value();
+        let particles = particles.as_slice();
+        for_chunks1(
+            parallel(count),
+            &mut self.chunks,
+            self.next.as_mut_slice(),
+            n.value() * CHUNK,
+            |c, w, out| {
+                w.error = with_state(&mut w.state, n, |s| {
+                    for (k, column) in out.chunks_exact_mut(n.value()).enumerate() {
+                        let j = c * CHUNK + k;
+                        let a = ancestors[j];
+                        s.x.copy_from_slice(&particles[a * nn..(a + 1) * nn]);
+                        let rng = ParticleRng::stream(seed, step, j as u64);
+                        if let Err(e) = propagate(s, process, input, dt, rng) {
+                            return Some(e);
                         }
-                    })?;
-                    &mut q_cache.insert((q.clone(), factor, ())).1
-                }
-            };
-            fill_normals(normals, &mut rng);
-            y.gemv(T::one(), factor, normals, T::one());
-        }
-        if y.nrows() != x.nrows() {
-            return Err(Error::DimensionMismatch {
-                stage: Stage::Prediction,
-                quantity: Quantity::FunctionValue,
-                expected_rows: x.nrows(),
-                expected_cols: 1,
-                found_rows: y.nrows(),
-                found_cols: 1,
-            });
-        }
-        ensure_finite(y, Stage::Prediction, Quantity::FunctionValue)?;
-        next.set_column(j, y);
-        Ok(())
-    }
-}
-
-/// The per-particle measurement log-density and the update report's innovation moments
-/// (ν = Σ vᵢ (z ⊖ h(xᵢ)), S = Σ vᵢ (rᵢ − ν)(rᵢ − ν)ᵀ + Σ vᵢ R(xᵢ) for predictive weights vᵢ).
-pub(crate) struct Weigher<T: Real, N: Dim, M: Dim>
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    x: OVector<T, N>,
-    h: OVector<T, M>,
-    r: OVector<T, M>,
-    noise: OMatrix<T, M, M>,
-    /// The last R, its Cholesky factor L and log det(2πR)/2.
-    cache: Factored<T, M, T>,
-    solved: OVector<T, M>,
-    mean: OVector<T, M>,
-    second: OMatrix<T, M, M>,
-    noise_mean: OMatrix<T, M, M>,
-}
-
-impl<T: Real, N: Dim, M: Dim> Weigher<T, N, M>
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    pub(crate) fn new(n: N, m: M) -> Self {
-        Self {
-            x: OVector::zeros_generic(n, U1),
-            h: OVector::zeros_generic(m, U1),
-            r: OVector::zeros_generic(m, U1),
-            noise: OMatrix::zeros_generic(m, m),
-            cache: None,
-            solved: OVector::zeros_generic(m, U1),
-            mean: OVector::zeros_generic(m, U1),
-            second: OMatrix::zeros_generic(m, m),
-            noise_mean: OMatrix::zeros_generic(m, m),
-        }
+                        for (o, &y) in column.iter_mut().zip(s.y.iter()) {
+                            *o = y;
+                        }
+                    }
+                    None
+                });
+            },
+        );
+        first_error(self.chunks.iter_mut())
     }
 
-    /// log p(z | x) for column `i` of `cloud`, accumulating the innovation moments with
-    /// weight `v`. Errors: h(x) of the wrong length, a NaN or +∞ log-density, a non-finite
-    /// or (Gaussian path) not positive definite R.
-    #[inline(always)]
-    pub(crate) fn log_density<H: ParticleMeasurement<T, N, M> + ?Sized>(
+    /// The weighing pass over `cloud`, by chunks: `log_w[i] = baseᵢ + log p(z | xᵢ)` with
+    /// (vᵢ, baseᵢ) = `prior(i)`, vᵢ the predictive weight of the report's moments (added to
+    /// each chunk's partial sums). Returns the log-sum-exp of the new values. Errors: the
+    /// first failing particle's (in particle order), or the typed error of a degenerate weight
+    /// set (every new value −∞: no particle explains the measurement).
+    pub(crate) fn weigh<M, H, F>(
         &mut self,
         sensor: &H,
         z: &OVector<T, M>,
         cloud: &OMatrix<T, N, Dyn>,
-        i: usize,
-        v: T,
-    ) -> Result<T> {
-        let model = sensor.model();
-        self.x.copy_from(&cloud.column(i));
-        model.measure_into(&self.x, &mut self.h);
-        ensure_shape(
-            &self.h,
-            z.nrows(),
+        log_w: &mut [T],
+        prior: F,
+    ) -> Result<T>
+    where
+        M: Dim,
+        H: ParticleMeasurement<T, N, M> + Sync + ?Sized,
+        F: Fn(usize) -> (T, T) + Sync,
+        DefaultAllocator: Alloc<N, M>,
+    {
+        let (n, _) = cloud.shape_generic();
+        let m = z.shape_generic().0;
+        let count = log_w.len();
+        let (nn, cloud, z) = (n.value(), cloud.as_slice(), z.as_slice());
+        let mut sensors = core::mem::take(&mut self.sensors);
+        sensors.resize_with(self.chunks.len(), || SensorScratch::<T, Dyn>::new(Dyn(0)));
+        for_chunks(
+            parallel(count),
+            &mut self.chunks,
+            log_w,
+            CHUNK,
+            &mut sensors,
             1,
-            Stage::Update,
-            Quantity::FunctionValue,
-        )?;
-        model.residual_into(z, &self.h, &mut self.r);
-        model.measurement_noise_into(&self.x, &mut self.noise);
-        let custom = sensor.log_likelihood(z, &self.x);
-        let log_g = match custom {
-            Some(log_g) => log_g,
-            None => {
-                let (_, factor, half_log_det) = match &self.cache {
-                    Some((cached, ..)) if *cached == self.noise => self.cache.as_ref().unwrap(),
-                    _ => {
-                        let (m, stage) = (z.nrows(), Stage::Update);
-                        ensure_shape(&self.noise, m, m, stage, Quantity::MeasurementNoise)?;
-                        ensure_finite(&self.noise, stage, Quantity::MeasurementNoise)?;
-                        let not_pd = Error::NotPositiveDefinite {
-                            stage: Stage::Update,
-                            quantity: Quantity::MeasurementNoise,
-                        };
-                        let l = Cholesky::new(self.noise.clone()).ok_or(not_pd)?.unpack();
-                        let m = estim_core::scalar::real::<T>(z.nrows() as f64);
-                        let mut half_log_det = m * T::two_pi().ln() / estim_core::scalar::real(2.0);
-                        for k in 0..l.nrows() {
-                            half_log_det += l[(k, k)].ln();
-                        }
-                        if !half_log_det.is_finite() {
-                            return Err(not_pd);
-                        }
-                        self.cache.insert((self.noise.clone(), l, half_log_det))
-                    }
+            |c, w, out, kept| {
+                let mm = m.value();
+                w.sums.clear();
+                w.sums.resize(mm * (1 + 2 * mm), T::zero());
+                w.total_v = T::zero();
+                let ChunkWork {
+                    state,
+                    sums,
+                    total_v,
+                    ..
+                } = w;
+                let mut sums = Sums {
+                    m: mm,
+                    sums,
+                    total_v,
                 };
-                self.solved.copy_from(&self.r);
-                factor.solve_lower_triangular_mut(&mut self.solved);
-                -self.solved.norm_squared() / estim_core::scalar::real(2.0) - *half_log_det
-            }
-        };
-        #[allow(clippy::eq_op)] // NaN is the one value unequal to itself
-        let nan = log_g != log_g;
-        if nan || log_g == T::one() / T::zero() {
-            return Err(Error::NonFinite {
+                let error = with_state(state, n, |s| {
+                    with_sensor::<T, M, _>(&mut kept[0], m, |ms| {
+                        ms.z.copy_from_slice(z);
+                        for (k, o) in out.iter_mut().enumerate() {
+                            let i = c * CHUNK + k;
+                            let (v, base) = prior(i);
+                            s.x.copy_from_slice(&cloud[i * nn..(i + 1) * nn]);
+                            match log_density::<T, N, M, H>(ms, sensor, &s.x, v, &mut sums) {
+                                Ok(log_g) => *o = base + log_g,
+                                Err(e) => return Some(e),
+                            }
+                        }
+                        None
+                    })
+                });
+                w.error = error;
+                w.lse = lse_partial(out);
+            },
+        );
+        self.sensors = sensors;
+        first_error(self.chunks.iter_mut())?;
+        let total = lse_combine(self.chunks.iter().map(|w| w.lse));
+        if total.is_finite() {
+            Ok(total)
+        } else {
+            Err(Error::NonFinite {
                 stage: Stage::Update,
                 quantity: Quantity::Weights,
-            });
+            })
         }
-        if v > T::zero() {
-            self.mean.axpy(v, &self.r, T::one());
-            self.second.ger(v, &self.r, &self.r, T::one());
-            self.noise_mean
-                .zip_apply(&self.noise, |acc, r| *acc += v * r);
-        }
-        Ok(log_g)
     }
 
-    /// Writes the innovation moments accumulated with weights summing to `total` and the
-    /// step's log-likelihood `increment` into `report`.
-    pub(crate) fn report(&mut self, total: T, increment: T, report: &mut UpdateReport<T, M>) {
-        let m = self.mean.shape_generic().0;
+    /// Writes the innovation moments accumulated by the last [`weigh`](Self::weigh) (chunk
+    /// partials added in order, normalised by their total Σ vᵢ) and the step's log-likelihood
+    /// `increment` into `report`: ν = Σ vᵢ rᵢ / Σ vᵢ, S = (Σ vᵢ rᵢ rᵢᵀ + Σ vᵢ Rᵢ)/Σ vᵢ − ν νᵀ,
+    /// NIS = νᵀ S⁻¹ ν (+∞ if S is singular).
+    pub(crate) fn report<M: Dim>(&mut self, m: M, increment: T, report: &mut UpdateReport<T, M>)
+    where
+        DefaultAllocator: Alloc<N, M>,
+    {
         report.fit(m);
-        let inv = T::one() / total;
-        report.innovation.copy_from(&self.mean);
-        report.innovation *= inv;
+        let mm = m.value();
         let s = &mut report.innovation_covariance;
-        s.copy_from(&self.second);
-        s.zip_apply(&self.noise_mean, |acc, r| *acc = (*acc + r) * inv);
+        report.innovation.fill(T::zero());
+        s.fill(T::zero());
+        let mut total = T::zero();
+        for w in &self.chunks {
+            let (innovation, rest) = w.sums.split_at(mm);
+            let (second, noise) = rest.split_at(mm * mm);
+            for (a, &b) in report.innovation.iter_mut().zip(innovation) {
+                *a += b;
+            }
+            for ((a, &b), &r) in s.iter_mut().zip(second).zip(noise) {
+                *a += b + r;
+            }
+            total += w.total_v;
+        }
+        let inv = T::one() / total;
+        report.innovation *= inv;
+        *s *= inv;
         s.ger(-T::one(), &report.innovation, &report.innovation, T::one());
         estim_core::checks::symmetrize(s);
-        let mut work = s.clone();
-        let mut nu = report.innovation.clone();
-        report.nis = inverse_quadratic_form(&mut work, &mut nu).unwrap_or(T::one() / T::zero());
+        let nis = if M::try_to_usize().is_some() {
+            // Static: copies on the stack.
+            inverse_quadratic_form(&mut s.clone_owned(), &mut report.innovation.clone_owned())
+        } else {
+            if self.nis_nu.nrows() != mm {
+                self.nis_s = dmatrix(mm, mm);
+                self.nis_nu = dvector(mm);
+            }
+            for (a, &b) in self.nis_s.iter_mut().zip(s.iter()) {
+                *a = b;
+            }
+            for (a, &b) in self.nis_nu.iter_mut().zip(report.innovation.iter()) {
+                *a = b;
+            }
+            inverse_quadratic_form(&mut self.nis_s, &mut self.nis_nu)
+        };
+        report.nis = nis.unwrap_or(T::one() / T::zero());
         report.log_likelihood = increment;
         report.outcome = UpdateOutcome::Applied;
         report.iterations = None;
     }
+
+    /// The log-sum-exp of `values` by chunks (see [`lse_combine`]), or the typed error of a
+    /// degenerate weight set (every value −∞).
+    pub(crate) fn normaliser(&mut self, values: &[T]) -> Result<T> {
+        let count = values.len();
+        for_states(parallel(count), &mut self.chunks, |c, w| {
+            w.lse = lse_partial(&values[range(c, count)]);
+        });
+        let total = lse_combine(self.chunks.iter().map(|w| w.lse));
+        if total.is_finite() {
+            Ok(total)
+        } else {
+            Err(Error::NonFinite {
+                stage: Stage::Update,
+                quantity: Quantity::Weights,
+            })
+        }
+    }
+
+    /// log Wᵢ = `self.log_w[i]` − `total` into `log_weights` and Wᵢ = exp(log Wᵢ) (in f64)
+    /// into `weights`, by chunks.
+    pub(crate) fn normalise(&mut self, total: T, log_weights: &mut [T], weights: &mut [f64]) {
+        let log_w = &self.log_w;
+        let count = log_w.len();
+        for_chunks(
+            parallel(count),
+            &mut self.chunks,
+            log_weights,
+            CHUNK,
+            weights,
+            CHUNK,
+            |c, _, lw, w| {
+                let start = c * CHUNK;
+                for (k, (lw, w)) in lw.iter_mut().zip(w.iter_mut()).enumerate() {
+                    *lw = log_w[start + k] - total;
+                    *w = to_f64(*lw).exp();
+                }
+            },
+        );
+    }
 }
 
-/// log-sum-exp of `log_w`, or the typed error of a degenerate weight set (a NaN, or every
-/// weight zero: no particle explains the measurement).
-pub(crate) fn normaliser<T: Real>(log_w: &[T]) -> Result<T> {
-    let total = super::log_sum_exp(log_w);
-    if total.is_finite() {
-        Ok(total)
-    } else {
-        Err(Error::NonFinite {
+/// Moves particle `s.x` with stream `rng` into `s.y`.
+#[inline(always)]
+fn propagate<T: Real, N: Dim, P: ParticleProcess<T, N> + ?Sized>(
+    s: &mut StateScratch<T, N>,
+    process: &P,
+    input: &<P::Model as ProcessModel<T, N>>::Input,
+    dt: T,
+    mut rng: ParticleRng,
+) -> Result<()>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    let StateScratch {
+        x,
+        y,
+        normals,
+        q,
+        q_cache,
+    } = s;
+    if !process.sample_into(x, input, dt, &mut rng, y) {
+        let model = process.model();
+        model.transition_into(x, input, dt, y);
+        model.process_noise_into(x, input, dt, q);
+        let factor = match q_cache {
+            Some((cached, factor, ())) if cached == q => factor,
+            _ => {
+                let n = x.nrows();
+                ensure_shape(q, n, n, Stage::Prediction, Quantity::ProcessNoise)?;
+                ensure_finite(q, Stage::Prediction, Quantity::ProcessNoise)?;
+                let factor = psd_factor(q, Stage::Prediction).map_err(|_| {
+                    Error::NotPositiveSemiDefinite {
+                        stage: Stage::Prediction,
+                        quantity: Quantity::ProcessNoise,
+                    }
+                })?;
+                &mut q_cache.insert((q.clone(), factor, ())).1
+            }
+        };
+        if y.nrows() == x.nrows() {
+            fill_normals(normals, &mut rng);
+            y.gemv(T::one(), factor, normals, T::one());
+        }
+    }
+    if y.nrows() != x.nrows() {
+        return Err(Error::DimensionMismatch {
+            stage: Stage::Prediction,
+            quantity: Quantity::FunctionValue,
+            expected_rows: x.nrows(),
+            expected_cols: 1,
+            found_rows: y.nrows(),
+            found_cols: 1,
+        });
+    }
+    ensure_finite(y, Stage::Prediction, Quantity::FunctionValue)
+}
+
+/// The measurement scratch of a chunk: h(x), the residual, R, the last R with its Cholesky
+/// factor and log det(2πR)/2, and a solve buffer.
+#[derive(Clone, Debug)]
+pub(crate) struct SensorScratch<T: Real, M: Dim>
+where
+    DefaultAllocator: Alloc<M>,
+{
+    /// A copy of the reading z.
+    z: OVector<T, M>,
+    x_h: OVector<T, M>,
+    r: OVector<T, M>,
+    noise: OMatrix<T, M, M>,
+    cache: Factored<T, M, T>,
+    solved: OVector<T, M>,
+}
+
+impl<T: Real, M: Dim> SensorScratch<T, M>
+where
+    DefaultAllocator: Alloc<M>,
+{
+    fn new(m: M) -> Self {
+        Self {
+            z: OVector::zeros_generic(m, U1),
+            x_h: OVector::zeros_generic(m, U1),
+            r: OVector::zeros_generic(m, U1),
+            noise: OMatrix::zeros_generic(m, m),
+            cache: None,
+            solved: OVector::zeros_generic(m, U1),
+        }
+    }
+
+    /// Whether every buffer has dimension m (a model's default `_into` method may reshape a
+    /// runtime-size buffer on a failed update).
+    fn fits(&self, m: usize) -> bool {
+        self.z.nrows() == m
+            && self.x_h.nrows() == m
+            && self.r.nrows() == m
+            && self.solved.nrows() == m
+            && self.noise.shape() == (m, m)
+    }
+}
+
+/// [`SensorScratch`] as a function of the measurement dimension.
+struct SensorFamily<T>(PhantomData<T>);
+
+impl<T: Real> SizeFamily<Dyn> for SensorFamily<T> {
+    type Of<Z: Dim>
+        = SensorScratch<T, Z>
+    where
+        DefaultAllocator: Alloc<Z, Dyn>;
+}
+
+/// Runs `f` with measurement scratch of dimension m: `kept` when M is `Dyn`, a fresh one on
+/// the stack when M is static.
+#[inline(always)]
+fn with_sensor<T: Real, M: Dim, R>(
+    kept: &mut SensorScratch<T, Dyn>,
+    m: M,
+    f: impl FnOnce(&mut SensorScratch<T, M>) -> R,
+) -> R
+where
+    DefaultAllocator: Alloc<M>,
+{
+    if M::try_to_usize().is_some() {
+        return f(&mut SensorScratch::new(m));
+    }
+    if !kept.fits(m.value()) {
+        *kept = SensorScratch::<T, Dyn>::new(Dyn(m.value()));
+    }
+    match <DefaultAllocator as DimAlloc<M>>::runtime_sized::<Dyn, SensorFamily<T>>(kept) {
+        Some(kept) => f(kept),
+        None => f(&mut SensorScratch::new(m)),
+    }
+}
+
+/// A chunk's innovation-moment sums: Σ vᵢ rᵢ, Σ vᵢ rᵢ rᵢᵀ and Σ vᵢ Rᵢ flat (see
+/// [`ChunkWork::sums`]), and Σ vᵢ.
+struct Sums<'a, T: Real> {
+    m: usize,
+    sums: &'a mut [T],
+    total_v: &'a mut T,
+}
+
+/// log p(z | x) for the particle `x`, adding its residual and R with weight `v` (if positive)
+/// to `sums`. Errors: h(x) of the wrong length, a NaN or +∞ log-density, a non-finite or
+/// (Gaussian path) not positive definite R.
+#[inline(always)]
+fn log_density<T, N, M, H>(
+    ms: &mut SensorScratch<T, M>,
+    sensor: &H,
+    x: &OVector<T, N>,
+    v: T,
+    sums: &mut Sums<'_, T>,
+) -> Result<T>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: ParticleMeasurement<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    let model = sensor.model();
+    let z = &ms.z;
+    model.measure_into(x, &mut ms.x_h);
+    ensure_shape(
+        &ms.x_h,
+        z.nrows(),
+        1,
+        Stage::Update,
+        Quantity::FunctionValue,
+    )?;
+    model.residual_into(z, &ms.x_h, &mut ms.r);
+    model.measurement_noise_into(x, &mut ms.noise);
+    let log_g = match sensor.log_likelihood(z, x) {
+        Some(log_g) => log_g,
+        None => {
+            let (_, factor, half_log_det) = match &ms.cache {
+                Some((cached, ..)) if *cached == ms.noise => ms.cache.as_ref().unwrap(),
+                _ => {
+                    let (m, stage) = (z.nrows(), Stage::Update);
+                    ensure_shape(&ms.noise, m, m, stage, Quantity::MeasurementNoise)?;
+                    ensure_finite(&ms.noise, stage, Quantity::MeasurementNoise)?;
+                    let not_pd = Error::NotPositiveDefinite {
+                        stage: Stage::Update,
+                        quantity: Quantity::MeasurementNoise,
+                    };
+                    let l = Cholesky::new(ms.noise.clone()).ok_or(not_pd)?.unpack();
+                    let m = estim_core::scalar::real::<T>(z.nrows() as f64);
+                    let mut half_log_det = m * T::two_pi().ln() / estim_core::scalar::real(2.0);
+                    for k in 0..l.nrows() {
+                        half_log_det += l[(k, k)].ln();
+                    }
+                    if !half_log_det.is_finite() {
+                        return Err(not_pd);
+                    }
+                    ms.cache.insert((ms.noise.clone(), l, half_log_det))
+                }
+            };
+            ms.solved.copy_from(&ms.r);
+            factor.solve_lower_triangular_mut(&mut ms.solved);
+            -ms.solved.norm_squared() / estim_core::scalar::real(2.0) - *half_log_det
+        }
+    };
+    #[allow(clippy::eq_op)] // NaN is the one value unequal to itself
+    let nan = log_g != log_g;
+    if nan || log_g == T::one() / T::zero() {
+        return Err(Error::NonFinite {
             stage: Stage::Update,
             quantity: Quantity::Weights,
-        })
+        });
     }
+    if v > T::zero() {
+        let m = sums.m;
+        let (innovation, rest) = sums.sums.split_at_mut(m);
+        let (second, noise) = rest.split_at_mut(m * m);
+        for (a, &r) in innovation.iter_mut().zip(ms.r.iter()) {
+            *a += v * r;
+        }
+        for col in 0..m {
+            let vr = v * ms.r[col];
+            for row in 0..m {
+                second[col * m + row] += vr * ms.r[row];
+                noise[col * m + row] += v * ms.noise[(row, col)];
+            }
+        }
+        *sums.total_v += v;
+    }
+    Ok(log_g)
 }
 
 impl<T: Real, N: Dim> ParticleFilter<T, N>
@@ -337,35 +585,35 @@ where
     /// assert!((pf.state()[0] - 1.0).abs() < 0.15);      // E = 1, standard error 1/√1000
     /// # Ok::<(), estim_core::Error>(())
     /// ```
-    pub fn predict_with<P: ParticleProcess<T, N> + ?Sized>(
+    pub fn predict_with<P: ParticleProcess<T, N> + Sync + ?Sized>(
         &mut self,
         process: &P,
         input: &<P::Model as ProcessModel<T, N>>::Input,
         dt: T,
-    ) -> Result<()> {
+    ) -> Result<()>
+    where
+        <P::Model as ProcessModel<T, N>>::Input: Sync,
+    {
         ensure_time_step(dt)?;
         let count = self.count();
-        let ess = effective_sample_size(&self.cloud.log_weights);
+        let ess = ess_of_weights(&self.cloud.weights);
         let resample = self.when.fires(ess, count);
         let step = self.cloud.step;
-        self.work.ancestors_from(
-            &self.cloud.log_weights,
+        let work = &mut self.work;
+        Work::<T, N>::ancestors_from(
+            &mut work.ancestors,
+            &mut work.scratch,
+            &self.cloud.weights,
             resample,
             self.scheme,
             self.seed,
             step,
         );
-        for j in 0..count {
-            let a = self.work.ancestors[j];
-            self.work.x.copy_from(&self.cloud.particles.column(a));
-            let rng = ParticleRng::stream(self.seed, step, j as u64);
-            self.work.propagate(process, input, dt, rng, j)?;
-        }
+        work.propagate_all(&self.cloud.particles, process, input, dt, self.seed, step)?;
         // Committed: nothing below fails.
         core::mem::swap(&mut self.cloud.particles, &mut self.work.next);
         if resample {
-            let uniform = -estim_core::scalar::real::<T>(count as f64).ln();
-            self.cloud.log_weights.fill(uniform);
+            self.cloud.set_uniform();
         }
         self.cloud.step = step.wrapping_add(1);
         self.update_moments();
@@ -379,7 +627,8 @@ where
     /// is singular, possible only with a [`NonGaussian`](super::NonGaussian) model whose R is
     /// singular), and the step's log-likelihood estimate Δℓ = log Σ Wᵢ p(z | xᵢ); the outcome
     /// is always [`Applied`](crate::UpdateOutcome::Applied) (no gate). Runtime-size
-    /// measurements allocate their per-update buffers. On error (non-finite z, h(x) of the
+    /// measurements size their per-chunk buffers at the first update with that length (and
+    /// when R changes), then allocate nothing. On error (non-finite z, h(x) of the
     /// wrong length, R not finite or, on the Gaussian path, not positive definite, a NaN or
     /// +∞ log-density, every weight zero) the filter is unchanged.
     ///
@@ -403,7 +652,7 @@ where
     /// assert_eq!(pf, before);
     /// # Ok::<(), estim_core::Error>(())
     /// ```
-    pub fn update_with<M: Dim, H: ParticleMeasurement<T, N, M> + ?Sized>(
+    pub fn update_with<M: Dim, H: ParticleMeasurement<T, N, M> + Sync + ?Sized>(
         &mut self,
         sensor: &H,
         z: &OVector<T, M>,
@@ -417,7 +666,7 @@ where
     }
 
     /// [`update_with`](Self::update_with) into `report`.
-    pub fn update_into_with<M: Dim, H: ParticleMeasurement<T, N, M> + ?Sized>(
+    pub fn update_into_with<M: Dim, H: ParticleMeasurement<T, N, M> + Sync + ?Sized>(
         &mut self,
         sensor: &H,
         z: &OVector<T, M>,
@@ -427,30 +676,30 @@ where
         DefaultAllocator: Alloc<N, M>,
     {
         ensure_finite(z, Stage::Update, Quantity::Measurement)?;
-        let (n, _) = self.cloud.mean.shape_generic();
-        let mut weigher = Weigher::new(n, z.shape_generic().0);
-        let cloud = &self.cloud;
-        let log_w = &mut self.work.log_w;
-        log_w.clear();
-        for (i, &lw) in cloud.log_weights.iter().enumerate() {
-            let log_g = weigher.log_density(sensor, z, &cloud.particles, i, lw.exp())?;
-            log_w.push(lw + log_g);
-        }
-        let increment = normaliser(log_w)?;
+        let count = self.count();
+        let cloud = &mut self.cloud;
+        let work = &mut self.work;
+        let (log_weights, weights) = (&cloud.log_weights, &cloud.weights);
+        let mut log_w = core::mem::take(&mut work.log_w);
+        log_w.resize(count, T::zero());
+        let weighed = work.weigh(sensor, z, &cloud.particles, &mut log_w, |i| {
+            (estim_core::scalar::real(weights[i]), log_weights[i])
+        });
+        work.log_w = log_w;
+        let increment = weighed?;
         // Committed.
-        for (lw, &new) in self.cloud.log_weights.iter_mut().zip(log_w.iter()) {
-            *lw = new - increment;
-        }
-        self.cloud.log_likelihood += increment;
+        work.report(z.shape_generic().0, increment, report);
+        work.normalise(increment, &mut cloud.log_weights, &mut cloud.weights);
+        cloud.log_likelihood += increment;
         self.update_moments();
-        weigher.report(T::one(), increment, report);
         Ok(())
     }
 }
 
-impl<T: Real, N: Dim, P: ProcessModel<T, N>> Predict<T, N, P> for ParticleFilter<T, N>
+impl<T: Real, N: Dim, P: ProcessModel<T, N> + Sync> Predict<T, N, P> for ParticleFilter<T, N>
 where
     DefaultAllocator: Alloc<N>,
+    P::Input: Sync,
 {
     /// [`ParticleFilter::predict_with`] with Gaussian process noise N(0, Q).
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
@@ -458,7 +707,7 @@ where
     }
 }
 
-impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>> Update<T, N, M, H>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M> + Sync> Update<T, N, M, H>
     for ParticleFilter<T, N>
 where
     DefaultAllocator: Alloc<N, M>,
