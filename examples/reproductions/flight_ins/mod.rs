@@ -484,12 +484,16 @@ fn prior(rec: &Recording) -> Result<Gaussian<f64, Const<15>>, estim_core::Error>
     Gaussian::new(x, p)
 }
 
+/// A filter's track, its time per IMU sample [µs] and its gate rejections (positions,
+/// velocities).
+type Driven = (Vec<Point>, f64, (usize, usize));
+
 fn drive<F>(
     rec: &Recording,
     latency: f64,
     end: f64,
     filter: F,
-) -> Result<(Vec<Point>, f64, (usize, usize)), Box<dyn std::error::Error>>
+) -> Result<Driven, Box<dyn std::error::Error>>
 where
     F: Predict<f64, Const<15>, Strapdown>
         + Rollback
@@ -758,13 +762,13 @@ pub fn run_config(config: &Config) -> Result<FlightResult, Box<dyn std::error::E
         .iter()
         .filter(|r| t(r) >= whole.0 && t(r) <= whole.1)
         .step_by(5)
-        .filter_map(|r| {
+        .map(|r| {
             let i = ekf
                 .track
                 .partition_point(|e| e.t < t(r))
                 .min(ekf.track.len() - 1);
             let e = &ekf.track[i];
-            Some((t(r), e.q.angle_to(&quaternion(r)).to_degrees()))
+            (t(r), e.q.angle_to(&quaternion(r)).to_degrees())
         })
         .collect();
     Ok(FlightResult {
