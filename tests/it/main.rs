@@ -16,6 +16,7 @@ use estim_reproductions::boje_moments;
 use estim_reproductions::boje_rate;
 use estim_reproductions::common;
 use estim_reproductions::consistency;
+use estim_reproductions::flight_ins;
 #[allow(dead_code)] // its `main` and printing helpers
 #[path = "../../examples/heading_wrap.rs"]
 mod heading_wrap;
@@ -42,6 +43,7 @@ mod boje_examples;
 mod consistency_example;
 mod figure_dir;
 mod firmware;
+mod flight_ins_example;
 mod heading_wrap_example;
 mod large_state_example;
 mod lee_huang_example;
