@@ -143,7 +143,7 @@ use estim_core::checks::{
 };
 use estim_core::kernel::{self, Accum};
 use estim_core::linalg::{mirror_lower_checked, psd_factor};
-use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::{Affine, Linearized, Unscented};
 use estim_core::{
     Alloc, Error, Euclidean, Gaussian, MeasurementModel, ProcessModel, Quantity, Real, Stage,
@@ -474,7 +474,13 @@ where
     match psd_factor(c, Stage::Construction) {
         Ok(mut s) => {
             let n = s.nrows();
-            lower_triangularize(n, 0, &mut [Block::new(s.as_mut_slice(), &mut [], n)]);
+            let mut work = OVector::<T, N>::zeros_generic(s.shape_generic().0, U1);
+            lower_triangularize(
+                n,
+                0,
+                &mut [Block::new(s.as_mut_slice(), &mut [], n)],
+                (work.as_mut_slice(), &mut []),
+            );
             (s, true)
         }
         Err(_) => (c.clone(), false),

@@ -47,6 +47,7 @@ where
         cross.copy_from(&(factor * fs.transpose()));
         finite(cross, stage, Quantity::CrossCovariance)?;
     }
+    let mut work: OVector<T, N> = OVector::zeros_generic(n_dim, U1);
     lower_triangularize(
         n,
         0,
@@ -54,6 +55,7 @@ where
             Block::new(fs.as_mut_slice(), &mut [], n),
             Block::new(sq.as_mut_slice(), &mut [], n),
         ],
+        (work.as_mut_slice(), &mut []),
     );
     finite(&fs, stage, Quantity::Covariance)?;
     Ok((mean, fs))
@@ -96,6 +98,8 @@ where
     kernel::mul(&mut hs, Accum::Replace, T::one(), &jacobian, factor);
     let mut kbar: OMatrix<T, N, M> = OMatrix::zeros_generic(n_dim, m_dim);
     let mut posterior = factor.clone();
+    let mut work_m: OVector<T, M> = OVector::zeros_generic(m_dim, U1);
+    let mut work_n: OVector<T, N> = OVector::zeros_generic(n_dim, U1);
     lower_triangularize(
         m,
         n,
@@ -103,6 +107,7 @@ where
             Block::new(l.as_mut_slice(), kbar.as_mut_slice(), m),
             Block::new(hs.as_mut_slice(), posterior.as_mut_slice(), n),
         ],
+        (work_m.as_mut_slice(), work_n.as_mut_slice()),
     );
     finish_update(state, &l, &kbar, posterior, threshold, report)
 }

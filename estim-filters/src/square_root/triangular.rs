@@ -1,5 +1,5 @@
 //! The two factor kernels of the square-root filters: lower-triangularising a pre-array by
-//! orthogonal rotations, and a rank-one Cholesky downdate that reports failure.
+//! Householder reflections, and a rank-one Cholesky downdate that reports failure.
 //!
 //! Both work on column-major slices, so one code path serves static and runtime sizes and
 //! a pre-array can be assembled from blocks of different static shapes (an (m + n)-row
@@ -8,6 +8,7 @@
 //! its Householder coefficients and its R at runtime sizes).
 
 use estim_core::Real;
+use estim_core::scalar::real;
 
 /// One column block of a pre-array: `cols` columns, each made of `p` rows in `top` followed
 /// by `r` rows in `bottom` (both column-major, `top.len() = p · cols`,
@@ -26,27 +27,219 @@ impl<'a, T> Block<'a, T> {
     }
 }
 
-/// Column `j` of `block` from global row `row` on: its top part (rows row..p) and bottom part.
+/// Calls `f(top, bottom)` with the whole of every column of the pre-array from (global)
+/// column `from` on, left to right.
 #[inline(always)]
-fn column_from<'b, T>(
-    block: &'b mut Block<'_, T>,
-    j: usize,
-    row: usize,
+fn for_columns<T>(
+    blocks: &mut [Block<'_, T>],
+    from: usize,
     (p, r): (usize, usize),
-) -> Column<'b, T> {
-    let top = &mut block.top[j * p..(j + 1) * p];
-    let bottom = &mut block.bottom[j * r..(j + 1) * r];
-    let (top_from, bottom_from) = if row < p { (row, 0) } else { (p, row - p) };
-    (&mut top[top_from..], &mut bottom[bottom_from..])
+    mut f: impl FnMut(&mut [T], &mut [T]),
+) {
+    let mut base = 0;
+    for block in blocks.iter_mut() {
+        for c in from.saturating_sub(base)..block.cols {
+            f(
+                &mut block.top[c * p..(c + 1) * p],
+                &mut block.bottom[c * r..(c + 1) * r],
+            );
+        }
+        base += block.cols;
+    }
 }
 
-/// (x, y) ← (c x + s y, −s x + c y), elementwise.
+/// Row `i` of a column given as (top, bottom).
 #[inline(always)]
-fn rotate<T: Real>(x: &mut [T], y: &mut [T], c: T, s: T) {
-    for (xi, yi) in x.iter_mut().zip(y.iter_mut()) {
-        let (a, b) = (*xi, *yi);
-        *xi = c * a + s * b;
-        *yi = c * b - s * a;
+fn at<'b, T>(top: &'b mut [T], bottom: &'b mut [T], i: usize, p: usize) -> &'b mut T {
+    if i < p {
+        &mut top[i]
+    } else {
+        &mut bottom[i - p]
+    }
+}
+
+/// The rows below `i` of a column given as (top, bottom).
+#[inline(always)]
+fn below<'b, T>(top: &'b mut [T], bottom: &'b mut [T], i: usize, p: usize) -> Column<'b, T> {
+    if i < p {
+        (&mut top[i + 1..], bottom)
+    } else {
+        (&mut top[p..], &mut bottom[i - p + 1..])
+    }
+}
+
+/// y ← y + a x.
+#[inline(always)]
+fn axpy<T: Real>(y: &mut [T], a: T, x: &[T]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi += a * *xi;
+    }
+}
+
+/// One column of a pre-array from some row on: its top and bottom parts.
+type Column<'b, T> = (&'b mut [T], &'b mut [T]);
+
+/// The squared norm below which (or at ∞) a row's norm is recomputed with scaling: the
+/// smallest normal number over ε, so that no square that matters has underflowed.
+#[inline(always)]
+fn scaling_threshold<T: Real>() -> T {
+    if T::default_epsilon() < real(1e-10) {
+        real(f64::MIN_POSITIVE / f64::EPSILON)
+    } else {
+        real(f64::from(f32::MIN_POSITIVE) / f64::from(f32::EPSILON))
+    }
+}
+
+/// Lower-triangularises the pre-array A (p + r rows, the blocks' columns side by side) in
+/// place by Householder reflections from the right: A Θ = [L 0] with Θ orthogonal, so
+/// L Lᵀ = A Aᵀ, L lower triangular (trapezoidal if A has fewer columns than rows) with a
+/// non-negative diagonal. This is the R factor of the QR factorisation of Aᵀ, transposed.
+/// `work` is (p, r) entries of scratch.
+///
+/// Row i is finished by one reflection of the columns i.. : with v = A[i, i..],
+/// σ = ‖v‖, u = v + sign(v₀) σ e₀ and H = I − 2 u uᵀ/(uᵀu), v H = −sign(v₀) σ e₀ᵀ. Stored as
+/// ũ = u/u₀ (|ũⱼ| ≤ 1) and τ = 1 + |v₀|/σ, H = I − τ ũ ũᵀ, so the rows below i take
+/// w = A[k, i..] ũ and A[k, i..] ← A[k, i..] − τ w ũᵀ: two passes of column `axpy`s over
+/// contiguous columns. Column i is negated when −sign(v₀) σ < 0, for a non-negative
+/// diagonal. Columns with ũⱼ = 0 cost nothing, so the zero blocks and triangular factors
+/// of the filters' pre-arrays (and the triangular fill-in of [F S | S_Q]) are skipped.
+/// Backward stable (Golub & Van Loan §5.2): the computed L is the exact factor of
+/// A Aᵀ + E with ‖E‖ = O(ε‖A‖²), never of an indefinite matrix. σ is computed as √(Σ vⱼ²)
+/// unless that sum under- or overflows, then as m √(Σ (vⱼ/m)²) with m = maxⱼ |vⱼ|.
+/// Non-finite entries propagate (the caller checks the result).
+///
+/// # Panics
+///
+/// If a block's slices are shorter than its `cols` columns of p (r) rows, or `work` is
+/// shorter than (p, r).
+#[track_caller]
+pub(crate) fn lower_triangularize<T: Real>(
+    p: usize,
+    r: usize,
+    blocks: &mut [Block<'_, T>],
+    work: (&mut [T], &mut [T]),
+) {
+    let (work_top, work_bottom) = (&mut work.0[..p], &mut work.1[..r]);
+    let rows = p + r;
+    let cols: usize = blocks.iter().map(|b| b.cols).sum();
+    let pr = (p, r);
+    let threshold = scaling_threshold::<T>();
+    for i in 0..rows.min(cols) {
+        let (bi, ci) = locate(blocks, i);
+        let diagonal = {
+            let block = &mut blocks[bi];
+            *at(
+                &mut block.top[ci * p..(ci + 1) * p],
+                &mut block.bottom[ci * r..(ci + 1) * r],
+                i,
+                p,
+            )
+        };
+        let mut rest = T::zero();
+        for_columns(blocks, i + 1, pr, |top, bottom| {
+            let v = *at(top, bottom, i, p);
+            rest += v * v;
+        });
+        if rest == T::zero() {
+            if diagonal < T::zero() {
+                let block = &mut blocks[bi];
+                let top = &mut block.top[ci * p..(ci + 1) * p];
+                let bottom = &mut block.bottom[ci * r..(ci + 1) * r];
+                let (t, b) = if i < p {
+                    (&mut top[i..], bottom)
+                } else {
+                    (&mut top[p..], &mut bottom[i - p..])
+                };
+                t.iter_mut().chain(b.iter_mut()).for_each(|v| *v = -*v);
+            }
+            continue;
+        }
+        let total = diagonal * diagonal + rest;
+        let sigma = if total >= threshold && total.is_finite() {
+            total.sqrt()
+        } else {
+            let mut largest = diagonal.abs();
+            for_columns(blocks, i + 1, pr, |top, bottom| {
+                largest = largest.max(at(top, bottom, i, p).abs());
+            });
+            let inverse = T::one() / largest;
+            let d = diagonal * inverse;
+            let mut sum = d * d;
+            for_columns(blocks, i + 1, pr, |top, bottom| {
+                let v = *at(top, bottom, i, p) * inverse;
+                sum += v * v;
+            });
+            largest * sum.sqrt()
+        };
+        // u₀ = v₀ + sign(v₀) σ (no cancellation), the reflection maps v to −sign(v₀) σ e₀.
+        let positive = diagonal >= T::zero();
+        let u0 = if positive {
+            diagonal + sigma
+        } else {
+            diagonal - sigma
+        };
+        let tau = T::one() + diagonal.abs() / sigma;
+        let inverse = T::one() / u0;
+        // w = A[k, i..] ũ for the rows k below i, into `work` (column i first: ũ₀ = 1).
+        {
+            let block = &mut blocks[bi];
+            let (t, b) = below(
+                &mut block.top[ci * p..(ci + 1) * p],
+                &mut block.bottom[ci * r..(ci + 1) * r],
+                i,
+                p,
+            );
+            let (wt, wb) = below(work_top, work_bottom, i, p);
+            wt.copy_from_slice(t);
+            wb.copy_from_slice(b);
+        }
+        for_columns(blocks, i + 1, pr, |top, bottom| {
+            let entry = at(top, bottom, i, p);
+            let u = *entry * inverse;
+            *entry = u;
+            if u != T::zero() {
+                let (t, b) = below(top, bottom, i, p);
+                let (wt, wb) = below(work_top, work_bottom, i, p);
+                axpy(wt, u, t);
+                axpy(wb, u, b);
+            }
+        });
+        // A[k, j] −= τ wₖ ũⱼ; row i becomes (±σ, 0, …, 0).
+        for_columns(blocks, i + 1, pr, |top, bottom| {
+            let entry = at(top, bottom, i, p);
+            let u = *entry;
+            *entry = T::zero();
+            if u != T::zero() {
+                let (t, b) = below(top, bottom, i, p);
+                let (wt, wb) = below(work_top, work_bottom, i, p);
+                axpy(t, -(tau * u), wt);
+                axpy(b, -(tau * u), wb);
+            }
+        });
+        let block = &mut blocks[bi];
+        let top = &mut block.top[ci * p..(ci + 1) * p];
+        let bottom = &mut block.bottom[ci * r..(ci + 1) * r];
+        *at(top, bottom, i, p) = sigma;
+        let (t, b) = below(top, bottom, i, p);
+        let (wt, wb) = below(work_top, work_bottom, i, p);
+        // Column i: a − τ w, negated when v₀ ≥ 0 (the reflection gave −σ there).
+        if positive {
+            for (a, w) in t
+                .iter_mut()
+                .zip(wt.iter())
+                .chain(b.iter_mut().zip(wb.iter()))
+            {
+                *a = tau * *w - *a;
+            }
+        } else {
+            for (a, w) in t
+                .iter_mut()
+                .zip(wt.iter())
+                .chain(b.iter_mut().zip(wb.iter()))
+            {
+                *a -= tau * *w;
+            }
+        }
     }
 }
 
@@ -60,96 +253,6 @@ fn locate<T>(blocks: &[Block<'_, T>], mut k: usize) -> (usize, usize) {
         k -= block.cols;
     }
     unreachable!("column beyond the pre-array")
-}
-
-/// One column of a pre-array from some row on: its top and bottom parts.
-type Column<'b, T> = (&'b mut [T], &'b mut [T]);
-
-/// Columns `a` < `b` of the pre-array, from row `row` on, as two disjoint mutable pairs.
-#[inline(always)]
-fn column_pair<'b, T>(
-    blocks: &'b mut [Block<'_, T>],
-    a: usize,
-    b: usize,
-    row: usize,
-    pr: (usize, usize),
-) -> (Column<'b, T>, Column<'b, T>) {
-    let ((ba, ja), (bb, jb)) = (locate(blocks, a), locate(blocks, b));
-    let (p, r) = pr;
-    if ba == bb {
-        let block = &mut blocks[ba];
-        // ja < jb: split each part between the two columns.
-        let (top_a, top_b) = block.top.split_at_mut(jb * p);
-        let (bottom_a, bottom_b) = block.bottom.split_at_mut(jb * r);
-        let (top_from, bottom_from) = if row < p { (row, 0) } else { (p, row - p) };
-        let col_a = (
-            &mut top_a[ja * p + top_from..(ja + 1) * p],
-            &mut bottom_a[ja * r + bottom_from..(ja + 1) * r],
-        );
-        let col_b = (&mut top_b[top_from..p], &mut bottom_b[bottom_from..r]);
-        (col_a, col_b)
-    } else {
-        let (first, second) = blocks.split_at_mut(bb);
-        (
-            column_from(&mut first[ba], ja, row, pr),
-            column_from(&mut second[0], jb, row, pr),
-        )
-    }
-}
-
-/// Lower-triangularises the pre-array A (p + r rows, the blocks' columns side by side) in
-/// place by Givens rotations from the right: A Θ = [L 0] with Θ orthogonal, so
-/// L Lᵀ = A Aᵀ, L lower triangular (trapezoidal if A has fewer columns than rows) with a
-/// non-negative diagonal. This is the R factor of the QR factorisation of Aᵀ, transposed.
-///
-/// Row i is finished by rotating column i against each later column j with aᵢⱼ ≠ 0:
-/// with h = hypot(aᵢᵢ, aᵢⱼ), c = aᵢᵢ/h, s = aᵢⱼ/h, (colᵢ, colⱼ) ← (c colᵢ + s colⱼ,
-/// c colⱼ − s colᵢ), which makes aᵢⱼ = 0 and aᵢᵢ = h ≥ 0. Rows above i are already zero in
-/// both columns, so only rows ≥ i are touched, and zero entries cost nothing (the zero block
-/// and triangular factors of the filters' pre-arrays). Backward stable: the computed L is the
-/// exact factor of A Aᵀ + E with ‖E‖ = O(ε‖A‖²), never of an indefinite matrix; the
-/// hypotenuse avoids overflow and underflow in the squares. Non-finite entries propagate
-/// (the caller checks the result).
-pub(crate) fn lower_triangularize<T: Real>(p: usize, r: usize, blocks: &mut [Block<'_, T>]) {
-    let rows = p + r;
-    let cols: usize = blocks.iter().map(|b| b.cols).sum();
-    let pr = (p, r);
-    let entry = |blocks: &[Block<'_, T>], i: usize, k: usize| -> T {
-        let (b, j) = locate(blocks, k);
-        if i < p {
-            blocks[b].top[j * p + i]
-        } else {
-            blocks[b].bottom[j * r + i - p]
-        }
-    };
-    for i in 0..rows.min(cols) {
-        for j in i + 1..cols {
-            let b = entry(blocks, i, j);
-            if b == T::zero() {
-                continue;
-            }
-            let a = entry(blocks, i, i);
-            let h = a.hypot(b);
-            let (c, s) = (a / h, b / h);
-            let ((xt, xb), (yt, yb)) = column_pair(blocks, i, j, i, pr);
-            rotate(xt, yt, c, s);
-            rotate(xb, yb, c, s);
-            // Exactly zero, not the rounding residue of c b − s a.
-            let (bj, jj) = locate(blocks, j);
-            if i < p {
-                blocks[bj].top[jj * p + i] = T::zero();
-            } else {
-                blocks[bj].bottom[jj * r + i - p] = T::zero();
-            }
-        }
-        if entry(blocks, i, i) < T::zero() {
-            let (b, j) = locate(blocks, i);
-            let (top, bottom) = column_from(&mut blocks[b], j, i, pr);
-            top.iter_mut()
-                .chain(bottom.iter_mut())
-                .for_each(|v| *v = -*v);
-        }
-    }
 }
 
 /// A rank-one downdate that says when it fails: L ← L′ with L′ L′ᵀ = L Lᵀ − v vᵀ, for L
@@ -219,7 +322,7 @@ mod tests {
             Block::new(l.as_mut_slice(), &mut empty, 3),
             Block::new(z.as_mut_slice(), &mut empty2, 2),
         ];
-        lower_triangularize(3, 0, &mut blocks);
+        lower_triangularize(3, 0, &mut blocks, (&mut [0.0; 3], &mut []));
         assert!((l * l.transpose() - expected).abs().max() < 1e-13);
         assert_eq!(z, Matrix3x2::zeros());
         assert!(

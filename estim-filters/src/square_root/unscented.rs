@@ -111,6 +111,7 @@ where
     let mut column = dev.mean.clone();
     column *= centre.abs().sqrt();
     let extra = usize::from(centre > T::zero());
+    let mut work = OVector::<T, M>::zeros_generic(dev.mean.shape_generic().0, U1);
     lower_triangularize(
         m,
         0,
@@ -120,6 +121,7 @@ where
             Block::new(dev.minus.as_mut_slice(), &mut [], n),
             Block::new(&mut column.as_mut_slice()[..m * extra], &mut [], extra),
         ],
+        (work.as_mut_slice(), &mut []),
     );
     if centre < T::zero() {
         rank_one_downdate(noise.as_mut_slice(), column.as_mut_slice(), m)?;
@@ -221,6 +223,8 @@ where
     let centre = ut.beta() - ut.alpha() * ut.alpha();
     let mut column = dev.mean;
     column *= centre.abs().sqrt();
+    let mut work_m: OVector<T, M> = OVector::zeros_generic(m_dim, U1);
+    let mut work_n: OVector<T, N> = OVector::zeros_generic(n_dim, U1);
     if centre < T::zero() {
         lower_triangularize(
             m,
@@ -229,6 +233,7 @@ where
                 Block::new(l.as_mut_slice(), &mut [], m),
                 Block::new(even.as_mut_slice(), &mut [], n),
             ],
+            (work_m.as_mut_slice(), &mut []),
         );
         rank_one_downdate(l.as_mut_slice(), column.as_mut_slice(), m).map_err(|()| {
             Error::NotPositiveDefinite {
@@ -255,6 +260,7 @@ where
             ),
             Block::new(odd.as_mut_slice(), prior.as_mut_slice(), n),
         ],
+        (work_m.as_mut_slice(), work_n.as_mut_slice()),
     );
     finish_update(state, &l, &kbar, posterior, threshold, report)
 }
