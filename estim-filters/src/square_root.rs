@@ -19,7 +19,7 @@
 //!                    x̂⁺ = x̂⁻ + K̄ (L⁻¹ ν),   NIS = |L⁻¹ ν|²,   ln det S_zz = 2 Σ ln Lᵢᵢ
 //! ```
 //!
-//! Θ is orthogonal, built from Givens rotations that lower-triangularise the array (the
+//! Θ is orthogonal, built from Householder reflections that lower-triangularise the array (the
 //! transposed R factor of a QR factorisation of its transpose; multiplying the identities out,
 //! the (2, 2) block gives S⁺S⁺ᵀ = P⁻ − K̄K̄ᵀ = P⁻ − K S_zz Kᵀ, the Kalman posterior: Kaminski,
 //! Bryson & Schmidt 1971; Grewal & Andrews, *Kalman Filtering*, §6.5; the "array algorithms" of
@@ -56,7 +56,7 @@
 //! [0     0         0              S     ]     [K̄  S⁺ 0  0]
 //! ```
 //!
-//! gives L, K̄ = P_xz L⁻ᵀ and S⁺ = (P⁻ − K S_zz Kᵀ)^{1/2} by rotations alone, as robust as the
+//! gives L, K̄ = P_xz L⁻ᵀ and S⁺ = (P⁻ − K S_zz Kᵀ)^{1/2} by reflections alone, as robust as the
 //! KF's (the paper's downdates and this are the same posterior in exact arithmetic). When
 //! β < α² (the cubature rule, α = 1, β = 0: [`Unscented::cubature`]; Julier's set) the centre
 //! column cannot be in the array: R̃'s factor is then the triangular factor of
@@ -143,7 +143,7 @@ use estim_core::checks::{
 };
 use estim_core::kernel::{self, Accum};
 use estim_core::linalg::{mirror_lower_checked, psd_factor};
-use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
+use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{Affine, Linearized, Unscented};
 use estim_core::{
     Alloc, Error, Euclidean, Gaussian, MeasurementModel, ProcessModel, Quantity, Real, Stage,
@@ -466,7 +466,7 @@ where
 
 /// A lower-triangular factor of the covariance `c` and whether it exists: [`psd_factor`]
 /// (which may return a pivoted, non-triangular root for a singular C) made triangular by
-/// rotations.
+/// reflections.
 fn lower_factor<T: Real, N: Dim>(c: &OMatrix<T, N, N>) -> (OMatrix<T, N, N>, bool)
 where
     DefaultAllocator: Alloc<N>,
@@ -474,13 +474,7 @@ where
     match psd_factor(c, Stage::Construction) {
         Ok(mut s) => {
             let n = s.nrows();
-            let mut work = OVector::<T, N>::zeros_generic(s.shape_generic().0, U1);
-            lower_triangularize(
-                n,
-                0,
-                &mut [Block::new(s.as_mut_slice(), &mut [], n)],
-                (work.as_mut_slice(), &mut []),
-            );
+            lower_triangularize(n, 0, &mut [Block::new(s.as_mut_slice(), &mut [], n)]);
             (s, true)
         }
         Err(_) => (c.clone(), false),

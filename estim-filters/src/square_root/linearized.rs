@@ -47,7 +47,6 @@ where
         cross.copy_from(&(factor * fs.transpose()));
         finite(cross, stage, Quantity::CrossCovariance)?;
     }
-    let mut work: OVector<T, N> = OVector::zeros_generic(n_dim, U1);
     lower_triangularize(
         n,
         0,
@@ -55,7 +54,6 @@ where
             Block::new(fs.as_mut_slice(), &mut [], n),
             Block::new(sq.as_mut_slice(), &mut [], n),
         ],
-        (work.as_mut_slice(), &mut []),
     );
     finite(&fs, stage, Quantity::Covariance)?;
     Ok((mean, fs))
@@ -98,8 +96,6 @@ where
     kernel::mul(&mut hs, Accum::Replace, T::one(), &jacobian, factor);
     let mut kbar: OMatrix<T, N, M> = OMatrix::zeros_generic(n_dim, m_dim);
     let mut posterior = factor.clone();
-    let mut work_m: OVector<T, M> = OVector::zeros_generic(m_dim, U1);
-    let mut work_n: OVector<T, N> = OVector::zeros_generic(n_dim, U1);
     lower_triangularize(
         m,
         n,
@@ -107,7 +103,6 @@ where
             Block::new(l.as_mut_slice(), kbar.as_mut_slice(), m),
             Block::new(hs.as_mut_slice(), posterior.as_mut_slice(), n),
         ],
-        (work_m.as_mut_slice(), work_n.as_mut_slice()),
     );
     finish_update(state, &l, &kbar, posterior, threshold, report)
 }

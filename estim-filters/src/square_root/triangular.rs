@@ -27,57 +27,28 @@ impl<'a, T> Block<'a, T> {
     }
 }
 
-/// Calls `f(top, bottom)` with the whole of every column of the pre-array from (global)
-/// column `from` on, left to right.
+/// Where row i of the pre-array lives in every block: (in `top`, offset, stride): entry
+/// (i, c) of a block is `top[c · p + i]` or `bottom[c · r + i − p]`.
 #[inline(always)]
-fn for_columns<T>(
-    blocks: &mut [Block<'_, T>],
-    from: usize,
-    (p, r): (usize, usize),
-    mut f: impl FnMut(&mut [T], &mut [T]),
-) {
-    let mut base = 0;
-    for block in blocks.iter_mut() {
-        for c in from.saturating_sub(base)..block.cols {
-            f(
-                &mut block.top[c * p..(c + 1) * p],
-                &mut block.bottom[c * r..(c + 1) * r],
-            );
-        }
-        base += block.cols;
-    }
-}
-
-/// Row `i` of a column given as (top, bottom).
-#[inline(always)]
-fn at<'b, T>(top: &'b mut [T], bottom: &'b mut [T], i: usize, p: usize) -> &'b mut T {
+fn slot(i: usize, p: usize, r: usize) -> (bool, usize, usize) {
     if i < p {
-        &mut top[i]
+        (true, i, p)
     } else {
-        &mut bottom[i - p]
+        (false, i - p, r)
     }
 }
 
-/// The rows below `i` of a column given as (top, bottom).
+/// The part (`top` or `bottom`) of `block` that holds a row.
 #[inline(always)]
-fn below<'b, T>(top: &'b mut [T], bottom: &'b mut [T], i: usize, p: usize) -> Column<'b, T> {
-    if i < p {
-        (&mut top[i + 1..], bottom)
-    } else {
-        (&mut top[p..], &mut bottom[i - p + 1..])
-    }
+fn part<'b, T>(block: &'b Block<'_, T>, top: bool) -> &'b [T] {
+    if top { block.top } else { block.bottom }
 }
 
-/// y ← y + a x.
+/// [`part`], mutably.
 #[inline(always)]
-fn axpy<T: Real>(y: &mut [T], a: T, x: &[T]) {
-    for (yi, xi) in y.iter_mut().zip(x) {
-        *yi += a * *xi;
-    }
+fn part_mut<'b, T>(block: &'b mut Block<'_, T>, top: bool) -> &'b mut [T] {
+    if top { block.top } else { block.bottom }
 }
-
-/// One column of a pre-array from some row on: its top and bottom parts.
-type Column<'b, T> = (&'b mut [T], &'b mut [T]);
 
 /// The squared norm below which (or at ∞) a row's norm is recomputed with scaling: the
 /// smallest normal number over ε, so that no square that matters has underflowed.
@@ -90,19 +61,21 @@ fn scaling_threshold<T: Real>() -> T {
     }
 }
 
+/// The most blocks a pre-array has (the SR-UKF update's).
+const MAX_BLOCKS: usize = 4;
+
 /// Lower-triangularises the pre-array A (p + r rows, the blocks' columns side by side) in
 /// place by Householder reflections from the right: A Θ = [L 0] with Θ orthogonal, so
 /// L Lᵀ = A Aᵀ, L lower triangular (trapezoidal if A has fewer columns than rows) with a
 /// non-negative diagonal. This is the R factor of the QR factorisation of Aᵀ, transposed.
-/// `work` is (p, r) entries of scratch.
 ///
 /// Row i is finished by one reflection of the columns i.. : with v = A[i, i..],
 /// σ = ‖v‖, u = v + sign(v₀) σ e₀ and H = I − 2 u uᵀ/(uᵀu), v H = −sign(v₀) σ e₀ᵀ. Stored as
-/// ũ = u/u₀ (|ũⱼ| ≤ 1) and τ = 1 + |v₀|/σ, H = I − τ ũ ũᵀ, so the rows below i take
-/// w = A[k, i..] ũ and A[k, i..] ← A[k, i..] − τ w ũᵀ: two passes of column `axpy`s over
-/// contiguous columns. Column i is negated when −sign(v₀) σ < 0, for a non-negative
-/// diagonal. Columns with ũⱼ = 0 cost nothing, so the zero blocks and triangular factors
-/// of the filters' pre-arrays (and the triangular fill-in of [F S | S_Q]) are skipped.
+/// ũ = u/u₀ (|ũⱼ| ≤ 1, kept in row i while the reflection is applied) and τ = 1 + |v₀|/σ,
+/// H = I − τ ũ ũᵀ, so each row k below i takes wₖ = τ A[k, i..] ũ and A[k, i..] −= wₖ ũᵀ.
+/// Column i is negated when −sign(v₀) σ < 0, for a non-negative diagonal. Only the columns
+/// from i to the last nonzero ũⱼ of each block are visited, so the zero blocks and triangular
+/// factors of the filters' pre-arrays (and the triangular fill-in of [F S | S_Q]) cost nothing.
 /// Backward stable (Golub & Van Loan §5.2): the computed L is the exact factor of
 /// A Aᵀ + E with ‖E‖ = O(ε‖A‖²), never of an indefinite matrix. σ is computed as √(Σ vⱼ²)
 /// unless that sum under- or overflows, then as m √(Σ (vⱼ/m)²) with m = maxⱼ |vⱼ|.
@@ -110,47 +83,46 @@ fn scaling_threshold<T: Real>() -> T {
 ///
 /// # Panics
 ///
-/// If a block's slices are shorter than its `cols` columns of p (r) rows, or `work` is
-/// shorter than (p, r).
+/// With more than four blocks, or a block whose slices are shorter than its `cols` columns of
+/// p (r) rows.
 #[track_caller]
-pub(crate) fn lower_triangularize<T: Real>(
-    p: usize,
-    r: usize,
-    blocks: &mut [Block<'_, T>],
-    work: (&mut [T], &mut [T]),
-) {
-    let (work_top, work_bottom) = (&mut work.0[..p], &mut work.1[..r]);
+pub(crate) fn lower_triangularize<T: Real>(p: usize, r: usize, blocks: &mut [Block<'_, T>]) {
+    assert!(blocks.len() <= MAX_BLOCKS, "at most {MAX_BLOCKS} blocks");
     let rows = p + r;
     let cols: usize = blocks.iter().map(|b| b.cols).sum();
-    let pr = (p, r);
     let threshold = scaling_threshold::<T>();
     for i in 0..rows.min(cols) {
+        let (ti, oi, si) = slot(i, p, r);
+        // Per block, the columns [lo, hi) from i to the last nonzero entry of row i.
+        let mut range = [(0usize, 0usize); MAX_BLOCKS];
+        let (mut diagonal, mut rest) = (T::zero(), T::zero());
+        let mut base = 0;
+        for (b, block) in blocks.iter().enumerate() {
+            let lo = i.saturating_sub(base).min(block.cols);
+            let row = part(block, ti);
+            let mut hi = lo;
+            for c in lo..block.cols {
+                let v = row[c * si + oi];
+                if base + c == i {
+                    diagonal = v;
+                    hi = c + 1;
+                } else if v != T::zero() {
+                    rest += v * v;
+                    hi = c + 1;
+                }
+            }
+            range[b] = (lo, hi);
+            base += block.cols;
+        }
         let (bi, ci) = locate(blocks, i);
-        let diagonal = {
-            let block = &mut blocks[bi];
-            *at(
-                &mut block.top[ci * p..(ci + 1) * p],
-                &mut block.bottom[ci * r..(ci + 1) * r],
-                i,
-                p,
-            )
-        };
-        let mut rest = T::zero();
-        for_columns(blocks, i + 1, pr, |top, bottom| {
-            let v = *at(top, bottom, i, p);
-            rest += v * v;
-        });
         if rest == T::zero() {
             if diagonal < T::zero() {
                 let block = &mut blocks[bi];
-                let top = &mut block.top[ci * p..(ci + 1) * p];
-                let bottom = &mut block.bottom[ci * r..(ci + 1) * r];
-                let (t, b) = if i < p {
-                    (&mut top[i..], bottom)
-                } else {
-                    (&mut top[p..], &mut bottom[i - p..])
-                };
-                t.iter_mut().chain(b.iter_mut()).for_each(|v| *v = -*v);
+                for k in i..rows {
+                    let (tk, ok, sk) = slot(k, p, r);
+                    let e = &mut part_mut(block, tk)[ci * sk + ok];
+                    *e = -*e;
+                }
             }
             continue;
         }
@@ -158,20 +130,25 @@ pub(crate) fn lower_triangularize<T: Real>(
         let sigma = if total >= threshold && total.is_finite() {
             total.sqrt()
         } else {
-            let mut largest = diagonal.abs();
-            for_columns(blocks, i + 1, pr, |top, bottom| {
-                largest = largest.max(at(top, bottom, i, p).abs());
-            });
+            let mut largest = T::zero();
+            for (b, block) in blocks.iter().enumerate() {
+                let row = part(block, ti);
+                for c in range[b].0..range[b].1 {
+                    largest = largest.max(row[c * si + oi].abs());
+                }
+            }
             let inverse = T::one() / largest;
-            let d = diagonal * inverse;
-            let mut sum = d * d;
-            for_columns(blocks, i + 1, pr, |top, bottom| {
-                let v = *at(top, bottom, i, p) * inverse;
-                sum += v * v;
-            });
+            let mut sum = T::zero();
+            for (b, block) in blocks.iter().enumerate() {
+                let row = part(block, ti);
+                for c in range[b].0..range[b].1 {
+                    let v = row[c * si + oi] * inverse;
+                    sum += v * v;
+                }
+            }
             largest * sum.sqrt()
         };
-        // u₀ = v₀ + sign(v₀) σ (no cancellation), the reflection maps v to −sign(v₀) σ e₀.
+        // u₀ = v₀ + sign(v₀) σ (no cancellation): the reflection maps v to −sign(v₀) σ e₀.
         let positive = diagonal >= T::zero();
         let u0 = if positive {
             diagonal + sigma
@@ -180,66 +157,54 @@ pub(crate) fn lower_triangularize<T: Real>(
         };
         let tau = T::one() + diagonal.abs() / sigma;
         let inverse = T::one() / u0;
-        // w = A[k, i..] ũ for the rows k below i, into `work` (column i first: ũ₀ = 1).
-        {
-            let block = &mut blocks[bi];
-            let (t, b) = below(
-                &mut block.top[ci * p..(ci + 1) * p],
-                &mut block.bottom[ci * r..(ci + 1) * r],
-                i,
-                p,
-            );
-            let (wt, wb) = below(work_top, work_bottom, i, p);
-            wt.copy_from_slice(t);
-            wb.copy_from_slice(b);
-        }
-        for_columns(blocks, i + 1, pr, |top, bottom| {
-            let entry = at(top, bottom, i, p);
-            let u = *entry * inverse;
-            *entry = u;
-            if u != T::zero() {
-                let (t, b) = below(top, bottom, i, p);
-                let (wt, wb) = below(work_top, work_bottom, i, p);
-                axpy(wt, u, t);
-                axpy(wb, u, b);
-            }
-        });
-        // A[k, j] −= τ wₖ ũⱼ; row i becomes (±σ, 0, …, 0).
-        for_columns(blocks, i + 1, pr, |top, bottom| {
-            let entry = at(top, bottom, i, p);
-            let u = *entry;
-            *entry = T::zero();
-            if u != T::zero() {
-                let (t, b) = below(top, bottom, i, p);
-                let (wt, wb) = below(work_top, work_bottom, i, p);
-                axpy(t, -(tau * u), wt);
-                axpy(b, -(tau * u), wb);
-            }
-        });
-        let block = &mut blocks[bi];
-        let top = &mut block.top[ci * p..(ci + 1) * p];
-        let bottom = &mut block.bottom[ci * r..(ci + 1) * r];
-        *at(top, bottom, i, p) = sigma;
-        let (t, b) = below(top, bottom, i, p);
-        let (wt, wb) = below(work_top, work_bottom, i, p);
-        // Column i: a − τ w, negated when v₀ ≥ 0 (the reflection gave −σ there).
-        if positive {
-            for (a, w) in t
-                .iter_mut()
-                .zip(wt.iter())
-                .chain(b.iter_mut().zip(wb.iter()))
-            {
-                *a = tau * *w - *a;
-            }
-        } else {
-            for (a, w) in t
-                .iter_mut()
-                .zip(wt.iter())
-                .chain(b.iter_mut().zip(wb.iter()))
-            {
-                *a -= tau * *w;
+        // Row i becomes ũ (ũ₀ = 1).
+        for (b, block) in blocks.iter_mut().enumerate() {
+            let row = part_mut(block, ti);
+            for c in range[b].0..range[b].1 {
+                row[c * si + oi] *= inverse;
             }
         }
+        let diagonal_entry = ci * si + oi;
+        part_mut(&mut blocks[bi], ti)[diagonal_entry] = T::one();
+        for k in i + 1..rows {
+            let (tk, ok, sk) = slot(k, p, r);
+            let mut w = T::zero();
+            for (b, block) in blocks.iter().enumerate() {
+                let (u, a) = (part(block, ti), part(block, tk));
+                for c in range[b].0..range[b].1 {
+                    w += a[c * sk + ok] * u[c * si + oi];
+                }
+            }
+            let w = tau * w;
+            for (b, block) in blocks.iter_mut().enumerate() {
+                let (lo, hi) = range[b];
+                if ti == tk {
+                    let row = part_mut(block, tk);
+                    for c in lo..hi {
+                        let u = row[c * si + oi];
+                        row[c * sk + ok] -= w * u;
+                    }
+                } else {
+                    // Row i in the top, row k in the bottom.
+                    let (u, a) = (&*block.top, &mut *block.bottom);
+                    for c in lo..hi {
+                        a[c * sk + ok] -= w * u[c * si + oi];
+                    }
+                }
+            }
+            if positive {
+                let e = &mut part_mut(&mut blocks[bi], tk)[ci * sk + ok];
+                *e = -*e;
+            }
+        }
+        // Row i becomes (σ, 0, …, 0).
+        for (b, block) in blocks.iter_mut().enumerate() {
+            let row = part_mut(block, ti);
+            for c in range[b].0..range[b].1 {
+                row[c * si + oi] = T::zero();
+            }
+        }
+        part_mut(&mut blocks[bi], ti)[diagonal_entry] = sigma;
     }
 }
 
@@ -305,7 +270,7 @@ pub(crate) fn rank_one_downdate<T: Real>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use estim_core::nalgebra::{Matrix3, Matrix3x2, Vector3};
+    use estim_core::nalgebra::{DMatrix, Matrix2, Matrix2x3, Matrix3, Matrix3x2, Vector3};
 
     /// L Lᵀ = A Aᵀ for a 3 × 5 pre-array in two blocks (3 + 2 columns), L lower triangular
     /// with a non-negative diagonal. Tolerance: backward error O(ε ‖A‖²) with ‖A‖² ≈ 30;
@@ -322,13 +287,41 @@ mod tests {
             Block::new(l.as_mut_slice(), &mut empty, 3),
             Block::new(z.as_mut_slice(), &mut empty2, 2),
         ];
-        lower_triangularize(3, 0, &mut blocks, (&mut [0.0; 3], &mut []));
+        lower_triangularize(3, 0, &mut blocks);
         assert!((l * l.transpose() - expected).abs().max() < 1e-13);
         assert_eq!(z, Matrix3x2::zeros());
         assert!(
             (0..3).all(|i| l[(i, i)] >= 0.0)
                 && l.upper_triangle() == Matrix3::from_diagonal(&l.diagonal())
         );
+    }
+
+    /// The update's shape, rows in a top (p = 2) and a bottom (r = 3) part:
+    /// [[S_R, H S], [0, S]] Θ = [[L, 0], [K̄, S⁺]] with the same A Aᵀ, L and S⁺ lower
+    /// triangular with non-negative diagonals, the (1, 2) block zero. Tolerance: backward
+    /// error O(ε ‖A‖²) with ‖A‖² ≈ 15; 1e-13 leaves a factor ≈ 30 of room.
+    #[test]
+    fn triangularises_a_two_part_array() {
+        let sr = Matrix2::new(0.7, 0.0, -0.2, 0.4);
+        let hs = Matrix2x3::new(1.0, -0.5, 2.0, 0.3, 1.2, -0.7);
+        let s = Matrix3::new(1.5, 0.0, 0.0, 0.4, 0.9, 0.0, -0.3, 0.2, 1.1);
+        let mut a = DMatrix::<f64>::zeros(5, 5);
+        a.view_mut((0, 0), (2, 2)).copy_from(&sr);
+        a.view_mut((0, 2), (2, 3)).copy_from(&hs);
+        a.view_mut((2, 2), (3, 3)).copy_from(&s);
+        let (mut l, mut kbar, mut top, mut posterior) = (sr, Matrix3x2::zeros(), hs, s);
+        let mut blocks = [
+            Block::new(l.as_mut_slice(), kbar.as_mut_slice(), 2),
+            Block::new(top.as_mut_slice(), posterior.as_mut_slice(), 3),
+        ];
+        lower_triangularize(2, 3, &mut blocks);
+        let mut full = DMatrix::<f64>::zeros(5, 5);
+        full.view_mut((0, 0), (2, 2)).copy_from(&l);
+        full.view_mut((2, 0), (3, 2)).copy_from(&kbar);
+        full.view_mut((2, 2), (3, 3)).copy_from(&posterior);
+        assert_eq!(top, Matrix2x3::zeros());
+        assert!((&full * full.transpose() - &a * a.transpose()).abs().max() < 1e-13);
+        assert!((0..5).all(|i| full[(i, i)] >= 0.0 && (i + 1..5).all(|j| full[(i, j)] == 0.0)));
     }
 
     /// The downdate inverts an update: L₀ Lᵀ₀ − v vᵀ with L₀ the factor of A + v vᵀ gives

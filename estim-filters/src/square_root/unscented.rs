@@ -6,7 +6,7 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::Unscented;
 use estim_core::scalar::real;
 use estim_core::{
-    Alloc, Error, MeasurementModel, Observation, Parameter, Quantity, Real, SigmaScratch, Stage,
+    Alloc, Error, MeasurementModel, Observation, Quantity, Real, SigmaScratch, Stage,
     VectorFunction, error::Result,
 };
 
@@ -47,13 +47,10 @@ where
 {
     let n_dim = x.shape_generic().0;
     let (n, m) = (n_dim.value(), m_dim.value());
+    // The accepted region for this n, as the full-covariance UKF checks it (c > 0 and
+    // α²κ + nβ ≥ 0): outside it no factor of cov(y) exists for some functions.
+    ut.check_dimension(n)?;
     let c = ut.alpha() * ut.alpha() * (real::<T>(n as f64) + ut.kappa());
-    if !(c > T::zero()) {
-        return Err(Error::InvalidParameter {
-            parameter: Parameter::UnscentedKappa,
-            value: estim_core::nalgebra::try_convert::<T, f64>(ut.kappa()).unwrap_or(f64::NAN),
-        });
-    }
     let gamma = c.sqrt();
     let offsets = s * gamma;
     let mut value = OVector::zeros_generic(m_dim, U1);
@@ -111,7 +108,6 @@ where
     let mut column = dev.mean.clone();
     column *= centre.abs().sqrt();
     let extra = usize::from(centre > T::zero());
-    let mut work = OVector::<T, M>::zeros_generic(dev.mean.shape_generic().0, U1);
     lower_triangularize(
         m,
         0,
@@ -121,7 +117,6 @@ where
             Block::new(dev.minus.as_mut_slice(), &mut [], n),
             Block::new(&mut column.as_mut_slice()[..m * extra], &mut [], extra),
         ],
-        (work.as_mut_slice(), &mut []),
     );
     if centre < T::zero() {
         rank_one_downdate(noise.as_mut_slice(), column.as_mut_slice(), m)?;
@@ -223,8 +218,6 @@ where
     let centre = ut.beta() - ut.alpha() * ut.alpha();
     let mut column = dev.mean;
     column *= centre.abs().sqrt();
-    let mut work_m: OVector<T, M> = OVector::zeros_generic(m_dim, U1);
-    let mut work_n: OVector<T, N> = OVector::zeros_generic(n_dim, U1);
     if centre < T::zero() {
         lower_triangularize(
             m,
@@ -233,7 +226,6 @@ where
                 Block::new(l.as_mut_slice(), &mut [], m),
                 Block::new(even.as_mut_slice(), &mut [], n),
             ],
-            (work_m.as_mut_slice(), &mut []),
         );
         rank_one_downdate(l.as_mut_slice(), column.as_mut_slice(), m).map_err(|()| {
             Error::NotPositiveDefinite {
@@ -260,7 +252,6 @@ where
             ),
             Block::new(odd.as_mut_slice(), prior.as_mut_slice(), n),
         ],
-        (work_m.as_mut_slice(), work_n.as_mut_slice()),
     );
     finish_update(state, &l, &kbar, posterior, threshold, report)
 }
