@@ -420,10 +420,10 @@ fn sr_ukf_checks_the_unscented_parameters_for_the_dimension() {
         noise: Matrix2::identity(),
     };
     let mut sr = SrUkf::with_propagator(prior.clone(), rule);
-    assert_refused(&mut sr, expected.clone(), |f| {
+    assert_refused(&mut sr, expected, |f| {
         f.predict(&process, &Vector3::zeros(), 0.1)
     });
-    assert_refused(&mut sr, expected.clone(), |f| {
+    assert_refused(&mut sr, expected, |f| {
         f.update(&sensor, &Vector2::new(1.0, 0.0)).map(|_| ())
     });
     let mut full = estim_filters::GaussianFilter::with_propagator(prior, rule);
