@@ -19,7 +19,8 @@
 //!                    x̂⁺ = x̂⁻ + K̄ (L⁻¹ ν),   NIS = |L⁻¹ ν|²,   ln det S_zz = 2 Σ ln Lᵢᵢ
 //! ```
 //!
-//! Θ is orthogonal, built from Householder reflections that lower-triangularise the array (the
+//! Θ is orthogonal, built from Householder reflections (Givens rotations for arrays of more
+//! than 16 rows, where they measured faster) that lower-triangularise the array (the
 //! transposed R factor of a QR factorisation of its transpose; multiplying the identities out,
 //! the (2, 2) block gives S⁺S⁺ᵀ = P⁻ − K̄K̄ᵀ = P⁻ − K S_zz Kᵀ, the Kalman posterior: Kaminski,
 //! Bryson & Schmidt 1971; Grewal & Andrews, *Kalman Filtering*, §6.5; the "array algorithms" of
