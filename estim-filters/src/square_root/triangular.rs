@@ -124,6 +124,8 @@ fn householder<T: Real>(p: usize, r: usize, blocks: &mut [Block<'_, T>]) {
         // Per block, the columns [lo, hi) from i to the last nonzero entry of row i.
         let mut range = [(0usize, 0usize); MAX_BLOCKS];
         let (mut diagonal, mut rest) = (T::zero(), T::zero());
+        // Whether row i has a nonzero right of the diagonal (its squares may underflow to 0).
+        let mut off_diagonal = false;
         let mut base = 0;
         for (b, block) in blocks.iter().enumerate() {
             let lo = i.saturating_sub(base).min(block.cols);
@@ -137,13 +139,14 @@ fn householder<T: Real>(p: usize, r: usize, blocks: &mut [Block<'_, T>]) {
                 } else if v != T::zero() {
                     rest += v * v;
                     hi = c + 1;
+                    off_diagonal = true;
                 }
             }
             range[b] = (lo, hi);
             base += block.cols;
         }
         let (bi, ci) = locate(blocks, i);
-        if rest == T::zero() {
+        if !off_diagonal {
             if diagonal < T::zero() {
                 let block = &mut blocks[bi];
                 for k in i..rows {
@@ -322,6 +325,38 @@ mod tests {
             (0..3).all(|i| l[(i, i)] >= 0.0)
                 && l.upper_triangle() == Matrix3::from_diagonal(&l.diagonal())
         );
+    }
+
+    /// Entries whose squares under- or overflow (×10∓²⁰⁰ in f64, ×10∓²⁵ in f32) take the scaled
+    /// norm and give the factor of the unscaled array, scaled: L(s A) = s L(A). Tolerance:
+    /// both factors carry a backward error O(ε ‖A‖²) with ‖A‖² ≈ 30, plus ε from forming s A;
+    /// 1e-13 (f64) and 1e-4 (f32, ε ≈ 1.2e-7) leave a factor ≈ 30 of room.
+    #[test]
+    fn extreme_scales_neither_underflow_nor_overflow() {
+        fn factor<T: Real>(a: &Matrix3<T>, b: &Matrix3x2<T>) -> Matrix3<T> {
+            let (mut l, mut z) = (*a, *b);
+            let mut blocks = [
+                Block::new(l.as_mut_slice(), &mut [], 3),
+                Block::new(z.as_mut_slice(), &mut [], 2),
+            ];
+            householder(3, 0, &mut blocks);
+            l
+        }
+        fn check<T: Real>(scales: [f64; 2], tol: f64) {
+            let a = Matrix3::new(1.0, 2.0, 0.5, -1.0, 0.3, 2.0, 0.0, 1.0, -3.0).map(real::<T>);
+            let b = Matrix3x2::new(0.2, -1.0, 1.5, 0.0, 0.7, 0.1).map(real::<T>);
+            let unscaled = factor(&a, &b);
+            for scale in scales.map(real::<T>) {
+                let scaled = factor(&(a * scale), &(b * scale)) / scale;
+                assert!(scaled.iter().all(|v| v.is_finite()));
+                assert!(
+                    (scaled - unscaled).abs().max() < real(tol),
+                    "scale {scale:?}"
+                );
+            }
+        }
+        check::<f64>([1e-200, 1e200], 1e-13);
+        check::<f32>([1e-25, 1e25], 1e-4);
     }
 
     /// The update's shape, rows in a top (p = 2) and a bottom (r = 3) part:
