@@ -1,15 +1,18 @@
 //! One predict + update step of the square-root filters against the Joseph-form filters of
 //! the same name, on a linear stable system (so KF, EKF and UKF run the same model): 6 states /
-//! 4 measurements with static sizes, and 20 / 10 with runtime sizes.
+//! 4 measurements with static sizes, and 20 / 10 and 50 / 20 with runtime sizes.
 //!
 //! Each filter keeps its state across iterations and takes the input and measurement of step
-//! i of a recorded 64-step trajectory; after step 64 it is reset to the prior. The estimate
-//! passes through `black_box` after every step.
+//! i of a recorded 64-step trajectory; after step 64 it is reset to the prior (the harness of
+//! [`common`]). For profilers and instruction counts, set
+//! `SQUARE_ROOT_BENCH_STEPS=<group>/<name>=<count>` to run one variant for `count` steps
+//! outside criterion (`square_root_counted.sh` drives it under callgrind).
 //!
 //! Run with `cargo bench -p estim-filters-benches --bench square_root`.
 
-use std::hint::black_box;
+mod common;
 
+use common::Steps;
 use criterion::{Criterion, criterion_group, criterion_main};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1, U4, U6};
 use estim_core::{Alloc, Gaussian, LinearMeasurement, LinearProcess};
@@ -82,48 +85,41 @@ where
 }
 
 fn bench_filter<N: Dim, M: Dim, F>(
-    c: &mut Criterion,
-    group: &str,
+    group: &mut Steps<'_, STEPS>,
     name: &str,
     p: &Problem<N, M>,
     make: impl Fn(Gaussian<f64, N>) -> F,
 ) where
     DefaultAllocator: Alloc<N, M> + Alloc<N, U1>,
-    F: Predict<f64, N, LinearProcess<f64, N, U1>> + Update<f64, N, M, LinearMeasurement<f64, N, M>>,
+    F: Clone
+        + Predict<f64, N, LinearProcess<f64, N, U1>>
+        + Update<f64, N, M, LinearMeasurement<f64, N, M>>,
 {
-    let mut filter = make(p.prior.clone());
-    let mut i = 0;
-    c.benchmark_group(group).bench_function(name, |b| {
-        b.iter(|| {
-            if i == STEPS {
-                filter.reset(p.prior.clone());
-                i = 0;
-            }
-            filter.predict(&p.process, &p.inputs[i], 1.0).unwrap();
-            let report = filter.update(&p.sensor, &p.measurements[i]).unwrap();
-            i += 1;
-            black_box(filter.state());
-            report.nis
-        })
+    group.bench(name, &make(p.prior.clone()), |filter, i| {
+        filter.predict(&p.process, &p.inputs[i], 1.0).unwrap();
+        filter.update(&p.sensor, &p.measurements[i]).unwrap().nis
     });
 }
 
-fn all<N: Dim, M: Dim>(c: &mut Criterion, group: &str, p: &Problem<N, M>)
+fn all<N: Dim, M: Dim>(c: &mut Criterion, name: &'static str, p: &Problem<N, M>)
 where
     DefaultAllocator: Alloc<N, M> + Alloc<N, U1>,
 {
-    bench_filter(c, group, "kf_joseph", p, KalmanFilter::new);
-    bench_filter(c, group, "kf_sqrt", p, SrKalmanFilter::new);
-    bench_filter(c, group, "ekf_joseph", p, Ekf::new);
-    bench_filter(c, group, "ekf_sqrt", p, SrEkf::new);
-    bench_filter(c, group, "ukf_joseph", p, Ukf::new);
-    bench_filter(c, group, "ukf_sqrt", p, SrUkf::new);
+    let mut group = Steps::new(c.benchmark_group(name), name, "SQUARE_ROOT_BENCH_STEPS");
+    bench_filter(&mut group, "kf_joseph", p, KalmanFilter::new);
+    bench_filter(&mut group, "kf_sqrt", p, SrKalmanFilter::new);
+    bench_filter(&mut group, "ekf_joseph", p, Ekf::new);
+    bench_filter(&mut group, "ekf_sqrt", p, SrEkf::new);
+    bench_filter(&mut group, "ukf_joseph", p, Ukf::new);
+    bench_filter(&mut group, "ukf_sqrt", p, SrUkf::new);
+    group.finish();
 }
 
 fn benches(c: &mut Criterion) {
+    use estim_core::nalgebra::Dyn;
     all(c, "static_6x4", &problem(U6, U4));
-    let p = problem(estim_core::nalgebra::Dyn(20), estim_core::nalgebra::Dyn(10));
-    all(c, "dyn_20x10", &p);
+    all(c, "dyn_20x10", &problem(Dyn(20), Dyn(10)));
+    all(c, "dyn_50x20", &problem(Dyn(50), Dyn(20)));
 }
 
 criterion_group! {

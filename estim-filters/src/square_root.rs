@@ -19,7 +19,8 @@
 //!                    x̂⁺ = x̂⁻ + K̄ (L⁻¹ ν),   NIS = |L⁻¹ ν|²,   ln det S_zz = 2 Σ ln Lᵢᵢ
 //! ```
 //!
-//! Θ is orthogonal, built from Givens rotations that lower-triangularise the array (the
+//! Θ is orthogonal, built from Householder reflections (Givens rotations for arrays of more
+//! than 16 rows, where they measured faster) that lower-triangularise the array (the
 //! transposed R factor of a QR factorisation of its transpose; multiplying the identities out,
 //! the (2, 2) block gives S⁺S⁺ᵀ = P⁻ − K̄K̄ᵀ = P⁻ − K S_zz Kᵀ, the Kalman posterior: Kaminski,
 //! Bryson & Schmidt 1971; Grewal & Andrews, *Kalman Filtering*, §6.5; the "array algorithms" of
@@ -56,7 +57,7 @@
 //! [0     0         0              S     ]     [K̄  S⁺ 0  0]
 //! ```
 //!
-//! gives L, K̄ = P_xz L⁻ᵀ and S⁺ = (P⁻ − K S_zz Kᵀ)^{1/2} by rotations alone, as robust as the
+//! gives L, K̄ = P_xz L⁻ᵀ and S⁺ = (P⁻ − K S_zz Kᵀ)^{1/2} by reflections alone, as robust as the
 //! KF's (the paper's downdates and this are the same posterior in exact arithmetic). When
 //! β < α² (the cubature rule, α = 1, β = 0: [`Unscented::cubature`]; Julier's set) the centre
 //! column cannot be in the array: R̃'s factor is then the triangular factor of
@@ -466,7 +467,7 @@ where
 
 /// A lower-triangular factor of the covariance `c` and whether it exists: [`psd_factor`]
 /// (which may return a pivoted, non-triangular root for a singular C) made triangular by
-/// rotations.
+/// reflections.
 fn lower_factor<T: Real, N: Dim>(c: &OMatrix<T, N, N>) -> (OMatrix<T, N, N>, bool)
 where
     DefaultAllocator: Alloc<N>,

@@ -6,7 +6,7 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::Unscented;
 use estim_core::scalar::real;
 use estim_core::{
-    Alloc, Error, MeasurementModel, Observation, Parameter, Quantity, Real, SigmaScratch, Stage,
+    Alloc, Error, MeasurementModel, Observation, Quantity, Real, SigmaScratch, Stage,
     VectorFunction, error::Result,
 };
 
@@ -47,13 +47,10 @@ where
 {
     let n_dim = x.shape_generic().0;
     let (n, m) = (n_dim.value(), m_dim.value());
+    // The accepted region for this n, as the full-covariance UKF checks it (c > 0 and
+    // α²κ + nβ ≥ 0): outside it no factor of cov(y) exists for some functions.
+    ut.check_dimension(n)?;
     let c = ut.alpha() * ut.alpha() * (real::<T>(n as f64) + ut.kappa());
-    if !(c > T::zero()) {
-        return Err(Error::InvalidParameter {
-            parameter: Parameter::UnscentedKappa,
-            value: estim_core::nalgebra::try_convert::<T, f64>(ut.kappa()).unwrap_or(f64::NAN),
-        });
-    }
     let gamma = c.sqrt();
     let offsets = s * gamma;
     let mut value = OVector::zeros_generic(m_dim, U1);

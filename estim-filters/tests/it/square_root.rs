@@ -393,6 +393,46 @@ fn a_failed_downdate_is_a_typed_error() {
     check::<f32>();
 }
 
+/// The SR-UKF checks the unscented parameters against the state dimension as the UKF does
+/// (`Unscented::check_dimension`): α = 1, β = −1, κ = 2 is accepted by `Unscented::new`
+/// (α²κ + β ≥ 0 at n = 1) but not at n = 3 (α²κ + 3β = −1 < 0), though c = α²(n + κ) = 5 > 0,
+/// the only condition the SR-UKF checked before. Both steps refuse it with the UKF's error and
+/// leave the filter unchanged.
+#[test]
+fn sr_ukf_checks_the_unscented_parameters_for_the_dimension() {
+    let rule = Unscented::new(1.0, -1.0, 2.0).unwrap();
+    let expected = rule.check_dimension(3).unwrap_err();
+    assert!(matches!(
+        expected,
+        Error::InvalidParameter {
+            parameter: estim_core::Parameter::UnscentedBeta,
+            ..
+        }
+    ));
+    let prior = Gaussian::new(Vector3::new(1.0, 0.0, -1.0), Matrix3::identity()).unwrap();
+    let process = LinearProcess {
+        transition: Matrix3::identity(),
+        input: Matrix3::zeros(),
+        noise: Matrix3::identity() * 0.1,
+    };
+    let sensor = LinearMeasurement {
+        observation: Matrix2x3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0),
+        noise: Matrix2::identity(),
+    };
+    let mut sr = SrUkf::with_propagator(prior.clone(), rule);
+    assert_refused(&mut sr, expected, |f| {
+        f.predict(&process, &Vector3::zeros(), 0.1)
+    });
+    assert_refused(&mut sr, expected, |f| {
+        f.update(&sensor, &Vector2::new(1.0, 0.0)).map(|_| ())
+    });
+    let mut full = estim_filters::GaussianFilter::with_propagator(prior, rule);
+    assert_eq!(
+        full.predict(&process, &Vector3::zeros(), 0.1),
+        Err(expected)
+    );
+}
+
 /// Gating: the same NIS, log-likelihood and outcome as the Joseph-form filter, and a gated
 /// update changes nothing.
 #[test]
