@@ -6,23 +6,23 @@
 //! [`Dense`] is implemented once for `f32` and once for `f64` here: faer's generic code is
 //! compiled in this crate only, not again in every crate that calls a kernel. faer runs
 //! single-threaded (`Par::Seq`) unless the `parallel` feature is on *and* the operation is at
-//! least [`PARALLEL_THRESHOLD`] on its smallest side. Without `std` there is no faer and
-//! [`Dense`] is only the seal.
+//! least [`PARALLEL_THRESHOLD`] on its smallest side. Without the `dense` feature there is no
+//! faer and [`Dense`] is only the seal.
 //!
 //! This module uses nothing of the scalar or kernel modules: `Real` builds on it, and the
 //! kernels on `Real`.
 
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 use faer::dyn_stack::{MemStack, StackReq};
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 use faer::linalg::cholesky::llt::factor::{LltRegularization, cholesky_in_place_scratch};
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 use faer::linalg::matmul::triangular::{self, BlockStructure};
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 use faer::linalg::triangular_solve::{
     solve_lower_triangular_in_place, solve_upper_triangular_in_place,
 };
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 use faer::{MatMut, MatRef, Par};
 
 /// Whether a product overwrites its destination or adds to it.
@@ -42,7 +42,7 @@ pub const PARALLEL_THRESHOLD: usize = 256;
 /// Below this order a lower-triangle product ([`mul_lower`](crate::kernel::mul_lower)) is faer's full product, faster
 /// there than its triangular-destination kernel (`a294f26`: KF step at n = 12 14 % faster, EKF
 /// 10 %, UKF 6 %).
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 pub(crate) const LOWER_TRIANGLE_MIN: usize = 32;
 
 /// How an operand enters a product or a triangular solve: as it is, or transposed.
@@ -65,7 +65,7 @@ pub enum Part {
 }
 
 /// faer's parallelism for an operation whose smallest dimension is `size`.
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 #[inline(always)]
 fn par(size: usize) -> Par {
     #[cfg(feature = "parallel")]
@@ -79,22 +79,22 @@ fn par(size: usize) -> Par {
 pub(crate) use sealed::Dense;
 
 mod sealed {
-    #[cfg(feature = "std")]
+    #[cfg(feature = "dense")]
     use super::*;
 
-    /// Without std (no faer): only the seal of [`Real`](crate::Real) to `f32` and `f64`.
-    #[cfg(not(feature = "std"))]
+    /// Without the `dense` feature (no faer): only the seal of [`Real`](crate::Real) to `f32` and `f64`.
+    #[cfg(not(feature = "dense"))]
     pub trait Dense: Sized {}
-    #[cfg(not(feature = "std"))]
+    #[cfg(not(feature = "dense"))]
     impl Dense for f32 {}
-    #[cfg(not(feature = "std"))]
+    #[cfg(not(feature = "dense"))]
     impl Dense for f64 {}
 
     /// faer's runtime-size operations for one scalar type: the supertrait that seals
     /// [`Real`](crate::Real) to `f32` and `f64`. Non-generic methods, so faer's generic code is compiled
     /// once, here (each integration test used to carry its own copy; `d3eba7e` halved the
     /// build of the two largest test binaries).
-    #[cfg(feature = "std")]
+    #[cfg(feature = "dense")]
     pub trait Dense: Sized {
         /// dst (+)= α A B, only the lower triangle of the (square) dst for [`Part::Lower`].
         fn matmul(
@@ -119,7 +119,7 @@ mod sealed {
         fn solve_lower(l: MatRef<'_, Self>, rhs: MatMut<'_, Self>, l_as: Operand);
     }
 
-    #[cfg(feature = "std")]
+    #[cfg(feature = "dense")]
     macro_rules! dense {
         ($($t:ty),*) => {$(
             impl Dense for $t {
@@ -180,7 +180,7 @@ mod sealed {
         )*};
     }
 
-    #[cfg(feature = "std")]
+    #[cfg(feature = "dense")]
     dense!(f32, f64);
 }
 
@@ -192,7 +192,7 @@ mod sealed {
 /// pulp's `x86-v4` is off), so the last bits depend on the instruction set. Our own kernel
 /// because faer's product costs 2–3× for one column: the UKF step at n = 50 is 24 % faster
 /// with it (BENCHMARKS.md, "Runtime-size kernels of our own").
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 pub(crate) struct Matvec<'a, T> {
     pub(crate) y: &'a mut [T],
     pub(crate) accum: Accum,
@@ -201,7 +201,7 @@ pub(crate) struct Matvec<'a, T> {
     pub(crate) x: &'a [T],
 }
 
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 macro_rules! matvec {
     ($t:ty, $ts:ident, $splat:ident, $fma:ident, $add:ident, $as_simd:ident, $as_mut:ident) => {
         impl Matvec<'_, $t> {
@@ -295,7 +295,7 @@ macro_rules! matvec {
     };
 }
 
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 matvec!(
     f64,
     f64s,
@@ -305,7 +305,7 @@ matvec!(
     as_simd_f64s,
     as_mut_simd_f64s
 );
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 matvec!(
     f32,
     f32s,

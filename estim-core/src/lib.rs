@@ -77,8 +77,9 @@
 //!
 //! **Without std** (default feature `std` off) the crate is `#![no_std]` and allocates nothing:
 //! static sizes, `f32` and `f64`, every propagator but [`Sampled`], the angle and manifold
-//! helpers, and [`Error`] with its `Display`. Runtime sizes (faer), sampling (rand) and the
-//! derivative checks need `std`.
+//! helpers, and [`Error`] with its `Display`. Runtime sizes, sampling (rand) and the
+//! derivative checks need `std`; faer's kernels for runtime sizes need `dense` (on by default;
+//! without it runtime sizes run plain loops, and faer is not compiled).
 #![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]

@@ -1,13 +1,14 @@
-//! The Cholesky factor in place and the triangular solves with it: faer's on runtime sizes,
-//! our loops on static ones.
+//! The Cholesky factor in place and the triangular solves with it: faer's on larger runtime
+//! sizes (`dense` feature), our loops (and nalgebra's triangular solve) on static and small
+//! runtime ones.
 
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 use faer::dyn_stack::{MemBuffer, MemStack};
 use nalgebra::{DefaultAllocator, Dim, OMatrix, allocator::Allocator};
 
-#[cfg(feature = "std")]
-use super::{fixed_route, is_static, view, view_mut};
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
+use super::{SMALL_RUNTIME_CHOLESKY, dense_route, fixed_route, is_static, view, view_mut};
+#[cfg(feature = "dense")]
 use crate::dense::Operand;
 use crate::scalar::Real;
 
@@ -15,7 +16,7 @@ use crate::scalar::Real;
 /// for a dimension and reused after (static sizes never touch it).
 #[derive(Default)]
 pub struct CholeskyScratch {
-    #[cfg(feature = "std")]
+    #[cfg(feature = "dense")]
     buffer: Option<MemBuffer>,
     capacity: usize,
 }
@@ -28,7 +29,7 @@ impl core::fmt::Debug for CholeskyScratch {
     }
 }
 
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 impl CholeskyScratch {
     /// Room for factorising `dim × dim` matrices of `T`.
     fn stack<T: Real>(&mut self, dim: usize) -> &mut MemStack {
@@ -43,13 +44,13 @@ impl CholeskyScratch {
 }
 
 /// Replaces the lower triangle of the symmetric positive definite `a` by its Cholesky factor L
-/// (a = L Lᵀ): faer's for runtime sizes (scratch from `scratch`) and for static sizes above 16
-/// with `std` (scratch on the stack: a static-size step's buffers are locals, and allocating
-/// there at every call is what static sizes promise not to do); our inlined left-looking loop
-/// for static sizes up to 16 (`left_looking_cholesky`, the same factor to round-off). The
-/// strict upper
-/// triangle is left unspecified. `false` if `a` is not (numerically) positive definite or not
-/// finite, and then `a` is unspecified. (A covariance that may be only semi-definite goes to
+/// (a = L Lᵀ): faer's for runtime sizes above [`SMALL_RUNTIME_CHOLESKY`](super::SMALL_RUNTIME_CHOLESKY)
+/// (scratch from `scratch`) and for static sizes above 16 (scratch on the stack: a static-size
+/// step's buffers are locals, and allocating there at every call is what static sizes promise
+/// not to do), both with the `dense` feature; our inlined left-looking loop otherwise
+/// (`left_looking_cholesky`, the same factor to round-off). The strict upper triangle is left
+/// unspecified. `false` if `a` is not (numerically) positive definite or not finite, and then
+/// `a` is unspecified. (A covariance that may be only semi-definite goes to
 /// [`crate::linalg::psd_factor`] instead.)
 #[inline(always)]
 pub fn cholesky_in_place<T: Real, D: Dim>(
@@ -60,15 +61,16 @@ where
     DefaultAllocator: Allocator<D, D>,
 {
     let _ = &scratch;
-    #[cfg(feature = "std")]
-    if !is_static::<D>() {
+    #[cfg(feature = "dense")]
+    if !is_static::<D>() && a.nrows() > SMALL_RUNTIME_CHOLESKY {
         let n = a.nrows();
         let ok = T::cholesky(view_mut(a), scratch.stack::<T>(n));
         // faer leaves NaN pivots unreported on some paths; a factor must be finite.
         return ok && (0..n).all(|i| a[(i, i)].is_finite());
     }
-    #[cfg(feature = "std")]
-    if a.nrows() > FAER_STATIC_CHOLESKY_MIN
+    #[cfg(feature = "dense")]
+    if is_static::<D>()
+        && a.nrows() > FAER_STATIC_CHOLESKY_MIN
         && let Some(ok) = static_faer_cholesky(a)
     {
         return ok;
@@ -76,19 +78,19 @@ where
     left_looking_cholesky(a)
 }
 
-/// Static sizes above this factorise by faer's blocked Cholesky (with the `std` feature),
+/// Static sizes above this factorise by faer's blocked Cholesky (with the `dense` feature),
 /// up to it by the register-resident [`left_looking_cholesky`].
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 pub(super) const FAER_STATIC_CHOLESKY_MIN: usize = 16;
 
 /// Bytes of stack a static-size factorisation lends faer's Cholesky (which needs n floats):
 /// enough up to n ≈ 500 in f64.
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 const STATIC_CHOLESKY_STACK: usize = 4096;
 
 /// faer's blocked Cholesky for a static size, its scratch on the stack (so nothing is
 /// allocated); `None` if the scratch would not fit in [`STATIC_CHOLESKY_STACK`].
-#[cfg(feature = "std")]
+#[cfg(feature = "dense")]
 #[inline(never)]
 fn static_faer_cholesky<T: Real, D: Dim>(a: &mut OMatrix<T, D, D>) -> Option<bool>
 where
@@ -104,7 +106,7 @@ where
     Some(ok && (0..n).all(|i| a[(i, i)].is_finite()))
 }
 
-/// [`cholesky_in_place`] for static sizes: column j of L from the finished columns, lᵢⱼ = (aᵢⱼ − Σₖ₍ⱼ lᵢₖ lⱼₖ) /
+/// [`cholesky_in_place`] for static and small runtime sizes: column j of L from the finished columns, lᵢⱼ = (aᵢⱼ − Σₖ₍ⱼ lᵢₖ lⱼₖ) /
 /// lⱼⱼ, each sum in a register, in place (column j reads only the original column j and the
 /// finished columns before it). The operations and order of [`crate::linalg::psd_factor`]'s
 /// loop, so a positive definite matrix gets the same bits from both, without its tolerance,
@@ -140,10 +142,10 @@ pub fn solve_lower_in_place<T: Real, D: Dim, C: Dim>(l: &OMatrix<T, D, D>, b: &m
 where
     DefaultAllocator: Allocator<D, D> + Allocator<D, C>,
 {
-    #[cfg(feature = "std")]
+    #[cfg(feature = "dense")]
     {
-        let size = b.nrows().max(b.ncols());
-        if !fixed_route(is_static::<D>() && is_static::<C>(), size) {
+        let (size, work) = (b.nrows().max(b.ncols()), b.nrows() * b.len() / 2);
+        if !fixed_route(is_static::<D>() && is_static::<C>(), size) && dense_route(work) {
             return T::solve_lower(view(l), view_mut(b), Operand::AsIs);
         }
     }
@@ -152,7 +154,7 @@ where
 
 /// Solves X Lᵀ = B in place (`b` ← B L⁻ᵀ) with L the lower triangle of `l`: the first half of
 /// a gain K = Pₓᵤ S⁻¹ = Pₓᵤ L⁻ᵀ L⁻¹, solved in K's own n × m storage (no transposed copy).
-/// Runtime sizes: faer's left solve on the transposed view, (B L⁻ᵀ)ᵀ = L⁻¹ Bᵀ.
+/// Larger runtime sizes (`dense`): faer's left solve on the transposed view, (B L⁻ᵀ)ᵀ = L⁻¹ Bᵀ.
 #[inline(always)]
 pub fn solve_right_lower_transpose_in_place<T: Real, R: Dim, D: Dim>(
     l: &OMatrix<T, D, D>,
@@ -160,10 +162,10 @@ pub fn solve_right_lower_transpose_in_place<T: Real, R: Dim, D: Dim>(
 ) where
     DefaultAllocator: Allocator<D, D> + Allocator<R, D>,
 {
-    #[cfg(feature = "std")]
+    #[cfg(feature = "dense")]
     {
-        let size = b.nrows().max(b.ncols());
-        if !fixed_route(is_static::<D>() && is_static::<R>(), size) {
+        let (size, work) = (b.nrows().max(b.ncols()), b.ncols() * b.len() / 2);
+        if !fixed_route(is_static::<D>() && is_static::<R>(), size) && dense_route(work) {
             return T::solve_lower(view(l), view_mut(b).transpose_mut(), Operand::AsIs);
         }
     }
@@ -189,10 +191,10 @@ pub fn solve_right_lower_in_place<T: Real, R: Dim, D: Dim>(
 ) where
     DefaultAllocator: Allocator<D, D> + Allocator<R, D>,
 {
-    #[cfg(feature = "std")]
+    #[cfg(feature = "dense")]
     {
-        let size = b.nrows().max(b.ncols());
-        if !fixed_route(is_static::<D>() && is_static::<R>(), size) {
+        let (size, work) = (b.nrows().max(b.ncols()), b.ncols() * b.len() / 2);
+        if !fixed_route(is_static::<D>() && is_static::<R>(), size) && dense_route(work) {
             return T::solve_lower(view(l), view_mut(b).transpose_mut(), Operand::Transposed);
         }
     }

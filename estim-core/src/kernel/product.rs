@@ -1,12 +1,13 @@
 //! Products into a destination, dst (+)= α a op(b), on the whole of dst or its lower
 //! triangle: nalgebra's fixed-size operators on small static sizes, one runtime-size
-//! [`product`] (faer, or [`Matvec`](crate::dense::Matvec) for one column) otherwise.
+//! [`product`] (loops for small ones; faer, or [`Matvec`](crate::dense::Matvec) for one column,
+//! for larger ones) otherwise.
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, allocator::Allocator};
 
-use super::{fixed_route, is_static};
-#[cfg(feature = "std")]
-use super::{view, view_mut};
+#[cfg(feature = "dense")]
+use super::{dense_route, view, view_mut};
+use super::{fixed_route, is_static, loops};
 use crate::dense::{Accum, Operand, Part};
 use crate::scalar::Real;
 
@@ -44,10 +45,11 @@ impl Form {
 }
 
 /// dst (+)= α a op(b) on runtime sizes, b transposed and only the lower triangle of dst
-/// written as `form` says. One-column products of the [`Form::PLAIN`] form go to
-/// [`Matvec`](crate::dense::Matvec), the rest to faer. The one product behind [`mul`],
-/// [`mul_tr`], [`mul_lower`] and [`mul_tr_lower`] on the runtime route.
-#[cfg(feature = "std")]
+/// written as `form` says: the loops ([`loops::product`], the whole of dst) up to
+/// [`SMALL_RUNTIME_WORK`](super::SMALL_RUNTIME_WORK) multiply–adds or without the `dense`
+/// feature, faer above (one-column products of the [`Form::PLAIN`] form:
+/// [`Matvec`](crate::dense::Matvec)). The one product behind [`mul`], [`mul_tr`], [`mul_lower`]
+/// and [`mul_tr_lower`] on the runtime route.
 #[inline(always)]
 #[track_caller]
 fn product<T, R, C, RA, CA, RB, CB>(
@@ -67,30 +69,50 @@ fn product<T, R, C, RA, CA, RB, CB>(
     CB: Dim,
     DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RB, CB>,
 {
-    if dst.ncols() == 1 && form == Form::PLAIN {
-        assert!(
-            a.shape() == (dst.nrows(), b.nrows()) && b.ncols() == 1,
-            "matrix × vector: {:?} ← {:?} × {:?}",
-            dst.shape(),
-            a.shape(),
-            b.shape()
-        );
-        return T::matvec(dst.as_mut_slice(), accum, alpha, a.as_slice(), b.as_slice());
-    }
-    let (a, b) = (view(a), view(b));
-    let b = match form.b {
-        Operand::AsIs => b,
-        Operand::Transposed => b.transpose(),
+    let (rows, cols) = dst.shape();
+    let inner = a.ncols();
+    let b_shape = match form.b {
+        Operand::AsIs => (inner, cols),
+        Operand::Transposed => (cols, inner),
     };
-    T::matmul(view_mut(dst), accum, alpha, a, b, form.part);
+    assert!(
+        a.nrows() == rows && b.shape() == b_shape,
+        "{}: {:?} ← {:?} × {:?}{}",
+        if cols == 1 {
+            "matrix × vector"
+        } else {
+            "matrix product"
+        },
+        dst.shape(),
+        a.shape(),
+        b.shape(),
+        if form.b == Operand::Transposed {
+            "ᵀ"
+        } else {
+            ""
+        }
+    );
+    #[cfg(feature = "dense")]
+    if dense_route(rows.saturating_mul(inner).saturating_mul(cols)) {
+        return dense_product(dst, accum, alpha, a, b, form);
+    }
+    loops::product(
+        dst.as_mut_slice(),
+        (rows, cols),
+        accum,
+        alpha,
+        a.as_slice(),
+        inner,
+        b.as_slice(),
+        form.b,
+    );
 }
 
-/// [`product`] without faer (no `std`): one dot product per entry, generic over the
-/// dimensions (the whole of dst, whatever `form.part`). Unreached by estim without std (its
-/// bounds admit static sizes only); there so that the kernels keep one body for both builds.
-#[cfg(not(feature = "std"))]
+/// [`product`] on faer (shapes checked by the caller).
+#[cfg(feature = "dense")]
+#[inline(always)]
 #[track_caller]
-fn product<T, R, C, RA, CA, RB, CB>(
+fn dense_product<T, R, C, RA, CA, RB, CB>(
     dst: &mut OMatrix<T, R, C>,
     accum: Accum,
     alpha: T,
@@ -107,26 +129,15 @@ fn product<T, R, C, RA, CA, RB, CB>(
     CB: Dim,
     DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RB, CB>,
 {
-    let transpose_b = form.b == Operand::Transposed;
-    let bt = |k: usize, j: usize| if transpose_b { b[(j, k)] } else { b[(k, j)] };
-    let inner = a.ncols();
-    let (rows, cols) = dst.shape();
-    assert!(
-        a.nrows() == rows
-            && (if transpose_b { b.nrows() } else { b.ncols() }) == cols
-            && (if transpose_b { b.ncols() } else { b.nrows() }) == inner,
-        "kernel product: shapes differ"
-    );
-    for j in 0..cols {
-        for i in 0..rows {
-            let sum = (0..inner).fold(T::zero(), |sum, k| sum + a[(i, k)] * bt(k, j));
-            let d = &mut dst[(i, j)];
-            *d = match accum {
-                Accum::Add => *d + alpha * sum,
-                Accum::Replace => alpha * sum,
-            };
-        }
+    if dst.ncols() == 1 && form == Form::PLAIN {
+        return T::matvec(dst.as_mut_slice(), accum, alpha, a.as_slice(), b.as_slice());
     }
+    let (a, b) = (view(a), view(b));
+    let b = match form.b {
+        Operand::AsIs => b,
+        Operand::Transposed => b.transpose(),
+    };
+    T::matmul(view_mut(dst), accum, alpha, a, b, form.part);
 }
 
 /// Writes or adds α · `value` into `dst` (static sizes), skipping the scaling when α = 1.
@@ -250,8 +261,9 @@ pub fn mul_tr_lower<T, D, K>(
     }
 }
 
-/// Column `column` of `dst` (+)= α A x: [`Matvec`] on runtime sizes, one dot product per row
-/// on static sizes.
+/// Column `column` of `dst` (+)= α A x: [`Matvec`](crate::dense::Matvec) on larger runtime
+/// sizes (`dense` feature), the loops ([`loops::product`]) on small ones, one dot product per
+/// row on static sizes.
 ///
 /// # Panics
 /// If the shapes do not agree or `column` is out of range (a programmer error).
@@ -274,16 +286,26 @@ pub(crate) fn mul_into_column<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim
         a.shape(),
         x.shape()
     );
-    #[cfg(feature = "std")]
-    {
-        let fixed = is_static::<R>() && is_static::<RA>() && is_static::<CA>();
-        let size = rows.max(x.nrows());
-        if !fixed_route(fixed, size) {
-            let y = &mut dst.as_mut_slice()[column * rows..(column + 1) * rows];
-            return T::matvec(y, accum, alpha, a.as_slice(), x.as_slice());
-        }
+    let fixed = is_static::<R>() && is_static::<RA>() && is_static::<CA>();
+    if fixed_route(fixed, rows.max(x.nrows())) {
+        return column_by_dot_products(dst, column, accum, alpha, a, x);
     }
-    column_by_dot_products(dst, column, accum, alpha, a, x);
+    let y = &mut dst.as_mut_slice()[column * rows..(column + 1) * rows];
+    #[cfg(feature = "dense")]
+    if dense_route(rows.saturating_mul(x.nrows())) {
+        return T::matvec(y, accum, alpha, a.as_slice(), x.as_slice());
+    }
+    let shape = (rows, 1);
+    loops::product(
+        y,
+        shape,
+        accum,
+        alpha,
+        a.as_slice(),
+        x.nrows(),
+        x.as_slice(),
+        Operand::AsIs,
+    );
 }
 
 /// [`mul_into_column`] on static sizes: one dot product per row.

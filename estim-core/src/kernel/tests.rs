@@ -1,10 +1,21 @@
 //! Tests of the kernels: products, Cholesky factor and solves, against nalgebra.
 
-use super::cholesky::{FAER_STATIC_CHOLESKY_MIN, left_looking_cholesky};
+#[cfg(feature = "dense")]
+use super::cholesky::FAER_STATIC_CHOLESKY_MIN;
+use super::cholesky::left_looking_cholesky;
 use super::product::column_by_dot_products;
 use super::*;
+#[cfg(feature = "dense")]
 use crate::dense::{LOWER_TRIANGLE_MIN, Matvec};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x2};
+
+/// Without faer every static size runs the loop (the tests below then expect its bits): a
+/// bound above every size they use.
+#[cfg(not(feature = "dense"))]
+const FAER_STATIC_CHOLESKY_MIN: usize = 1024;
+/// Without faer there is no triangular kernel; the orders the tests use stay meaningful.
+#[cfg(not(feature = "dense"))]
+const LOWER_TRIANGLE_MIN: usize = 32;
 
 fn spd(n: usize) -> DMatrix<f64> {
     let g = DMatrix::from_fn(n, n, |i, j| ((i * 7 + j * 3) % 5) as f64 - 2.0);
@@ -27,6 +38,7 @@ fn dynamic_products_match_nalgebra() {
 }
 
 /// `Matvec` on one instruction set, as `kernel::mul` runs it on the best one.
+#[cfg(feature = "dense")]
 fn matvec_on<S: pulp::Simd>(
     simd: S,
     y: &mut [f64],
@@ -86,15 +98,18 @@ fn matrix_vector_products_match_nalgebra_on_every_instruction_set() {
                 let mut y = y0.clone();
                 mul(&mut y, accum, alpha, &a, &x);
                 check(&y, "dispatched");
-                let (a_, x_) = (a.as_slice(), x.as_slice());
-                let mut y = y0.clone();
-                matvec_on(pulp::Scalar::new(), y.as_mut_slice(), accum, alpha, a_, x_);
-                check(&y, "scalar");
-                #[cfg(target_arch = "x86_64")]
-                if let Some(simd) = pulp::x86::V3::try_new() {
+                #[cfg(feature = "dense")]
+                {
+                    let (a_, x_) = (a.as_slice(), x.as_slice());
                     let mut y = y0.clone();
-                    matvec_on(simd, y.as_mut_slice(), accum, alpha, a_, x_);
-                    check(&y, "AVX2");
+                    matvec_on(pulp::Scalar::new(), y.as_mut_slice(), accum, alpha, a_, x_);
+                    check(&y, "scalar");
+                    #[cfg(target_arch = "x86_64")]
+                    if let Some(simd) = pulp::x86::V3::try_new() {
+                        let mut y = y0.clone();
+                        matvec_on(simd, y.as_mut_slice(), accum, alpha, a_, x_);
+                        check(&y, "AVX2");
+                    }
                 }
                 // The static-size path of mul_into_column (run here on f64).
                 let mut d = DMatrix::from_fn(rows, 2, |i, j| if j == 0 { y0[i] } else { 7.0 });
@@ -419,4 +434,149 @@ fn large_static_cholesky_is_faers_and_agrees_with_the_loop() {
     at::<17>();
     at::<24>();
     at::<50>();
+}
+
+/// Every product form on runtime sizes around [`SMALL_RUNTIME_WORK`] (the loops below it, faer
+/// above it with `dense`; the loops at every size without), empty shapes included, both
+/// accumulations, α = 1 and not, f64 and f32, against nalgebra's allocating product:
+/// |error| ≤ (k + 2) ε (|start| + |α| |A| |B|), the dot-product bound (ε of f32 for f32, on
+/// inputs rounded to f32 first). `Replace` never reads the destination (NaN there is
+/// overwritten), `Add` adds to it.
+#[test]
+fn runtime_products_match_nalgebra_on_both_sides_of_the_small_route() {
+    // (rows, inner, cols): empty, 1-5 rows (the register and the pass-per-term loops),
+    // UKF-like (n, 2n + 1, n), at and just above the threshold, larger.
+    let at = SMALL_RUNTIME_WORK / 16;
+    let shapes = [
+        (0, 3, 2),
+        (3, 0, 2),
+        (2, 3, 0),
+        (1, 1, 1),
+        (2, 2, 2),
+        (3, 4, 2),
+        (2, 5, 2),
+        (4, 9, 4),
+        (5, 3, 5),
+        (4, 4, at),
+        (4, 4, at + 1),
+        (6, 13, 6),
+        (9, 9, 9),
+        (12, 25, 12),
+        (6, 1, 1),
+        (3, 7, 1),
+        (40, 13, 1),
+    ];
+    assert!(4 * 4 * at <= SMALL_RUNTIME_WORK && 4 * 4 * (at + 1) > SMALL_RUNTIME_WORK);
+    for (rows, inner, cols) in shapes {
+        let a = DMatrix::from_fn(rows, inner, |i, j| ((i * 3 + j * 5) as f64 * 0.61).sin());
+        let b = DMatrix::from_fn(inner, cols, |i, j| ((i * 7 + j * 2) as f64 * 0.37).cos());
+        let bt = b.transpose();
+        let start = DMatrix::from_fn(rows, cols, |i, j| 0.5 * i as f64 - 0.25 * j as f64);
+        for (accum, alpha) in [(Accum::Replace, 1.0), (Accum::Add, -0.7)] {
+            let base = match accum {
+                Accum::Replace => DMatrix::zeros(rows, cols),
+                Accum::Add => start.clone(),
+            };
+            let expected = &base + alpha * &a * &b;
+            let scale = base.abs() + alpha.abs() * a.abs() * b.abs();
+            let what = format!("{rows}×{inner}×{cols} {accum:?}");
+            let check = |dst: &DMatrix<f64>, eps: f64, lower_only: bool, form: &str| {
+                for j in 0..cols {
+                    let first = if lower_only { j } else { 0 };
+                    for i in first..rows {
+                        let bound = (inner + 2) as f64 * eps * scale[(i, j)];
+                        let error = (dst[(i, j)] - expected[(i, j)]).abs();
+                        assert!(
+                            error <= bound,
+                            "{form} {what} ({i}, {j}): {error} > {bound}"
+                        );
+                    }
+                }
+            };
+            // Replace must not read dst: start it at NaN then.
+            let initial = match accum {
+                Accum::Replace => DMatrix::from_element(rows, cols, f64::NAN),
+                Accum::Add => start.clone(),
+            };
+            let mut dst = initial.clone();
+            mul(&mut dst, accum, alpha, &a, &b);
+            check(&dst, f64::EPSILON, false, "mul");
+            let mut dst = initial.clone();
+            mul_tr(&mut dst, accum, alpha, &a, &bt);
+            check(&dst, f64::EPSILON, false, "mul_tr");
+            if rows == cols {
+                let mut dst = initial.clone();
+                mul_lower(&mut dst, accum, alpha, &a, &b);
+                check(&dst, f64::EPSILON, true, "mul_lower");
+                let mut dst = initial.clone();
+                mul_tr_lower(&mut dst, accum, alpha, &a, &bt);
+                check(&dst, f64::EPSILON, true, "mul_tr_lower");
+            }
+            if cols >= 1 {
+                // One column through mul_into_column (the last column of dst).
+                let x = b.column(cols - 1).into_owned();
+                let mut dst = initial.clone();
+                mul_into_column(&mut dst, cols - 1, accum, alpha, &a, &x);
+                for i in 0..rows {
+                    let j = cols - 1;
+                    let bound = (inner + 2) as f64 * f64::EPSILON * scale[(i, j)];
+                    assert!(
+                        (dst[(i, j)] - expected[(i, j)]).abs() <= bound,
+                        "column {what}"
+                    );
+                    for j in 0..cols - 1 {
+                        assert_eq!(dst[(i, j)].to_bits(), initial[(i, j)].to_bits(), "{what}");
+                    }
+                }
+            }
+            let (a32, b32) = (a.map(|v| v as f32), b.map(|v| v as f32));
+            let mut dst32 = initial.map(|v| v as f32);
+            mul(&mut dst32, accum, alpha as f32, &a32, &b32);
+            check(
+                &dst32.map(f64::from),
+                2.0 * f32::EPSILON as f64,
+                false,
+                "f32",
+            );
+        }
+    }
+}
+
+/// Runtime-size Cholesky factors and solves on both sides of [`SMALL_RUNTIME_CHOLESKY`] (our
+/// loop up to it, faer above with `dense`): L Lᵀ = A to the backward-error bound
+/// 4 n ε max(|L| |L|ᵀ), the solves' residuals to 1e-9 (well-conditioned matrices of entries
+/// ≤ 25 n), and the same refusals (a negative pivot, NaN).
+#[test]
+fn runtime_cholesky_and_solves_on_both_sides_of_the_small_route() {
+    for n in [
+        1,
+        2,
+        6,
+        SMALL_RUNTIME_CHOLESKY,
+        SMALL_RUNTIME_CHOLESKY + 1,
+        13,
+    ] {
+        let a = spd(n);
+        let mut scratch = CholeskyScratch::default();
+        let mut l = a.clone();
+        assert!(cholesky_in_place(&mut l, &mut scratch), "n = {n}");
+        let l = l.lower_triangle();
+        let bound = 4.0 * n as f64 * f64::EPSILON * (l.abs() * l.abs().transpose()).max();
+        assert!((&l * l.transpose() - &a).amax() <= bound, "n = {n}");
+        let b = DMatrix::from_fn(n, 3, |i, j| (i + 2 * j) as f64 - 1.5);
+        let mut x = b.clone();
+        solve_lower_in_place(&l, &mut x);
+        assert!((&l * &x - &b).amax() < 1e-9, "n = {n}");
+        let bt = b.transpose();
+        let mut y = bt.clone();
+        solve_right_lower_transpose_in_place(&l, &mut y);
+        solve_right_lower_in_place(&l, &mut y);
+        assert!((&y * &a - &bt).amax() < 1e-9, "n = {n}");
+        let mut bad = a.clone();
+        bad[(n - 1, n - 1)] = -1.0;
+        assert!(!cholesky_in_place(&mut bad, &mut scratch), "n = {n}");
+        let mut bad = a.clone();
+        bad[(n - 1, 0)] = f64::NAN;
+        assert!(!cholesky_in_place(&mut bad, &mut scratch), "n = {n}");
+    }
 }
