@@ -7,9 +7,8 @@ use estim_core::{
     error::Result, psd_factor,
 };
 
-use super::resample::{effective_sample_size, resample_with, to_f64};
+use super::resample::{effective_sample_size, normaliser, resample_with, to_f64};
 use super::rng::{ParticleRng, RESAMPLE};
-use super::step::normaliser;
 use super::{ResampleWhen, Resampling, check_trigger, fill_normals};
 use crate::gaussian_filter::{KalmanFilter, ensure_time_step};
 use crate::traits::{Estimator, Predict, Update};
