@@ -83,6 +83,7 @@ mod noise;
 mod own_noise;
 mod pmmh;
 mod rbpf;
+mod rbpf_contract;
 mod resample;
 mod rng;
 mod step;
@@ -102,7 +103,7 @@ pub use own_noise::NonGaussianFilter;
 pub use pmmh::{MAX_PMMH_ITERATIONS, PmmhChain, particle_log_likelihood, pmmh};
 pub use rbpf::{
     ConditionalMeasurement, ConditionalTransition, ConditionallyLinearMeasurement,
-    ConditionallyLinearProcess, RaoBlackwellised,
+    ConditionallyLinearProcess, RaoBlackwellised, RaoBlackwellisedSnapshot,
 };
 pub use resample::{ResampleWhen, Resampling, log_sum_exp, resample};
 pub use rng::{ParticleRng, RESAMPLE};

@@ -45,6 +45,7 @@ mod noise_id_likelihood;
 mod noise_policy;
 mod particle;
 mod particle_algorithms;
+mod rbpf_contract;
 mod rls;
 mod robust;
 mod second_order;

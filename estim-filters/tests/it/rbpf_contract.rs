@@ -1,0 +1,288 @@
+//! The Rao-Blackwellised filter through the estimator contract: the joint mixture moments,
+//! bit-exact rollback of every step (failed ones included), the fusion driver replaying a late
+//! reading, the sequence functions, a reset, and steps that allocate nothing at static sizes.
+//!
+//! The model is `SplitCv` / `SplitPosition` of the particle-algorithm tests (position xn,
+//! velocity xl); every run is seeded.
+
+use estim_core::error::Result;
+use estim_core::nalgebra::{Matrix1, Matrix2, U1, U2, Vector1, Vector2};
+use estim_core::{Error, Gaussian, Parameter, Quantity};
+use estim_filters::fusion::{FusionDriver, FusionSettings, Innovation, SensorSet, SensorSettings};
+use estim_filters::particle::{RaoBlackwellised, ResampleWhen, Resampling};
+use estim_filters::smoother::filter_sequence;
+use estim_filters::{Estimator, Predict, ProcessInput, Rollback, Update, UpdateReport};
+
+use crate::particle_algorithms::{SplitCv, SplitPosition, cv_readings};
+
+/// The joint state is (position, velocity): the process names its input there, as the step
+/// traits ask of a model that is not a `ProcessModel`.
+impl ProcessInput<f64, U2> for SplitCv {
+    type Input = ();
+}
+
+type Rbpf = RaoBlackwellised<f64, U1, U1>;
+
+/// N particles, position ~ N(0, 1), velocity ~ N(1, 1), independent.
+fn rbpf(count: usize, seed: u64) -> Rbpf {
+    let xn = Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0)).unwrap();
+    let xl = Gaussian::new(Vector1::new(1.0), Matrix1::new(1.0)).unwrap();
+    RaoBlackwellised::new(xn, xl, count, seed).unwrap()
+}
+
+/// The step traits (not the inherent methods), as generic code calls them.
+fn step<F: Predict<f64, U2, SplitCv> + Update<f64, U2, U1, SplitPosition>>(
+    f: &mut F,
+    z: f64,
+) -> Result<UpdateReport<f64, U1>> {
+    f.predict(&SplitCv, &(), 1.0)?;
+    f.update(&SplitPosition, &Vector1::new(z))
+}
+
+/// `state()` / `covariance()` are the mixture moments of (xnⁱ, N(x̂lⁱ, Plⁱ)) with weights
+/// Wⁱ, recomputed here from the particles, filters and weights the filter exposes. Both sides
+/// sum the same 300 terms of order 1 in different orders: agreement to 1e-12 is ~10⁴ ulps.
+#[test]
+fn joint_moments_are_the_mixture_moments() {
+    let mut f = rbpf(300, 4);
+    for z in cv_readings(6, 9) {
+        step(&mut f, z).unwrap();
+    }
+    let w: Vec<f64> = f.log_weights().iter().map(|lw| lw.exp()).collect();
+    let xn: Vec<f64> = f.nonlinear_particles().iter().copied().collect();
+    let xl: Vec<f64> = f.linear_filters().iter().map(|kf| kf.state()[0]).collect();
+    let pl: Vec<f64> = f
+        .linear_filters()
+        .iter()
+        .map(|kf| kf.covariance()[(0, 0)])
+        .collect();
+    let dot = |a: &[f64]| w.iter().zip(a).map(|(w, a)| w * a).sum::<f64>();
+    let (mn, ml) = (dot(&xn), dot(&xl));
+    let dn: Vec<f64> = xn.iter().map(|x| x - mn).collect();
+    let dl: Vec<f64> = xl.iter().map(|x| x - ml).collect();
+    let sq = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(a, b)| a * b).collect::<Vec<_>>();
+    let expected_p = Matrix2::new(
+        dot(&sq(&dn, &dn)),
+        dot(&sq(&dn, &dl)),
+        dot(&sq(&dn, &dl)),
+        dot(&sq(&dl, &dl)) + dot(&pl),
+    );
+    let tol = 1e-12;
+    assert!(
+        (f.state() - Vector2::new(mn, ml)).amax() < tol,
+        "{}",
+        f.state()
+    );
+    assert!(
+        (f.covariance() - expected_p).amax() < tol,
+        "{}",
+        f.covariance()
+    );
+    // The blocks agree with the part accessors, and the mixture's cross term is really there
+    // (the readings made xn and xl correlated).
+    assert!((f.covariance()[(0, 0)] - f.nonlinear_covariance()[(0, 0)]).abs() < tol);
+    assert!((f.covariance()[(1, 1)] - f.linear_covariance()[(0, 0)]).abs() < tol);
+    assert!(f.covariance()[(0, 1)].abs() > 1e-3);
+    assert_eq!(f.covariance()[(0, 1)], f.covariance()[(1, 0)]);
+}
+
+/// A snapshot restored replays every later step to the bit (resampling at every step, so the
+/// random counter and the ancestors matter), `snapshot_into` reuses a snapshot, and every
+/// failed step (through the step traits) leaves the filter bit-identical.
+#[test]
+fn rollback_replays_bits_and_failed_steps_change_nothing() {
+    for scheme in [Resampling::Multinomial, Resampling::Residual] {
+        let mut f = rbpf(64, 2)
+            .with_resampling(scheme)
+            .with_trigger(ResampleWhen::Always)
+            .unwrap();
+        let zs = cv_readings(4, 1);
+        step(&mut f, zs[0]).unwrap();
+        let mut saved = rbpf(3, 0).snapshot(); // another count: reallocated, then reused
+        f.snapshot_into(&mut saved);
+        assert_eq!(saved, f.snapshot());
+        let reports: Vec<_> = zs[1..].iter().map(|&z| step(&mut f, z).unwrap()).collect();
+        let ahead = f.clone();
+        f.restore(&saved);
+        let again: Vec<_> = zs[1..].iter().map(|&z| step(&mut f, z).unwrap()).collect();
+        assert_eq!(f, ahead, "{scheme:?}");
+        assert_eq!(reports, again);
+
+        let before = f.clone();
+        let nan = f.update(&SplitPosition, &Vector1::new(f64::NAN));
+        assert!(matches!(
+            nan,
+            Err(Error::NonFinite {
+                quantity: Quantity::Measurement,
+                ..
+            })
+        ));
+        let back = Predict::<f64, U2, SplitCv>::predict(&mut f, &SplitCv, &(), -1.0);
+        assert!(matches!(
+            back,
+            Err(Error::InvalidParameter {
+                parameter: Parameter::TimeStep,
+                ..
+            })
+        ));
+        assert_eq!(f, before);
+    }
+}
+
+/// The report of an update is the mixture predictive's: ν = Σ Wⁱ νⁱ = z − ẑ, and its
+/// log-likelihood the step's estimate Δℓ (the running total grows by it).
+#[test]
+fn update_report_is_the_mixture_predictive() {
+    let mut f = rbpf(200, 7);
+    f.predict(&SplitCv, &(), 1.0).unwrap();
+    // ẑ = Σ Wⁱ xnⁱ (h = xn, C = 0) before the update.
+    let predicted = f.nonlinear_mean()[0];
+    let spread = f.nonlinear_covariance()[(0, 0)];
+    let total = f.log_likelihood();
+    let report = f.update(&SplitPosition, &Vector1::new(2.0)).unwrap();
+    // Sums of 200 terms of order 1: 1e-12 is ~10⁴ ulps.
+    assert!((report.innovation[0] - (2.0 - predicted)).abs() < 1e-12);
+    // S = cov ẑ + R = Pn + 0.5 (each particle's Sⁱ = R).
+    assert!((report.innovation_covariance[(0, 0)] - (spread + 0.5)).abs() < 1e-12);
+    let nis = report.innovation[0].powi(2) / report.innovation_covariance[(0, 0)];
+    assert!((report.nis - nis).abs() < 1e-12);
+    assert_eq!(f.log_likelihood(), total + report.log_likelihood);
+}
+
+/// The fusion driver rolls the Rao-Blackwellised filter back for a late reading (particles,
+/// filters, weights and random counter), so fusing out of order gives the same bits as fusing
+/// in time order.
+#[test]
+fn fusion_driver_replays_a_late_reading_bit_identically() {
+    struct One;
+    impl<F: Update<f64, U2, U1, SplitPosition>> SensorSet<f64, U2, F> for One {
+        type Reading = Vector1<f64>;
+        fn count(&self) -> usize {
+            1
+        }
+        fn sensor(&self, _: &Vector1<f64>) -> usize {
+            0
+        }
+        fn dimension(&self, _: usize) -> usize {
+            1
+        }
+        fn update(&self, f: &mut F, z: &Vector1<f64>) -> Result<Innovation<f64>> {
+            f.update(&SplitPosition, z).map(|r| Innovation::of(&r))
+        }
+    }
+    let start = rbpf(100, 6);
+    let settings = FusionSettings {
+        max_step: 0.02,
+        ..FusionSettings::default()
+    };
+    let driver = || {
+        FusionDriver::new(
+            start.clone(),
+            SplitCv,
+            (),
+            One,
+            0.0,
+            settings,
+            SensorSettings::default(),
+        )
+        .unwrap()
+    };
+    let mut ordered = driver();
+    ordered.fuse(0.05, Vector1::new(0.3)).unwrap();
+    ordered.fuse(0.10, Vector1::new(-0.2)).unwrap();
+    let mut late = driver();
+    late.fuse(0.10, Vector1::new(-0.2)).unwrap();
+    let fused = late.fuse(0.05, Vector1::new(0.3)).unwrap();
+    assert_eq!(fused.replayed, 1);
+    assert_eq!(late.filter(), ordered.filter());
+    assert_ne!(late.filter(), &start);
+}
+
+/// `filter_sequence` runs the filter (update, record, predict; a missing reading skips the
+/// update) to the same bits as the hand-written loop, and a sequence that fails part-way (a
+/// NaN reading) returns the step and leaves the filter as it was.
+#[test]
+fn filter_sequence_runs_it_and_undoes_a_failed_run() {
+    let zs = cv_readings(6, 5);
+    let mut readings: Vec<Option<Vector1<f64>>> =
+        zs.iter().map(|&z| Some(Vector1::new(z))).collect();
+    readings[2] = None;
+    let inputs = vec![(); readings.len() - 1];
+    let mut f = rbpf(150, 8);
+    let mut manual = f.clone();
+    let sequence =
+        filter_sequence(&mut f, &SplitCv, &inputs, 1.0, &SplitPosition, &readings).unwrap();
+    let mut log_likelihood = 0.0;
+    for (k, z) in readings.iter().enumerate() {
+        if let Some(z) = z {
+            log_likelihood += manual.update(&SplitPosition, z).unwrap().log_likelihood;
+        }
+        assert_eq!(sequence.estimates[k].mean(), manual.state());
+        assert_eq!(sequence.estimates[k].covariance(), manual.covariance());
+        if k + 1 < readings.len() {
+            manual.predict(&SplitCv, &(), 1.0).unwrap();
+        }
+    }
+    assert_eq!(f, manual);
+    assert_eq!(sequence.log_likelihood, log_likelihood);
+    assert!(sequence.updates[2].is_none());
+
+    let before = f.clone();
+    readings[4] = Some(Vector1::new(f64::NAN));
+    let e = filter_sequence(&mut f, &SplitCv, &inputs, 1.0, &SplitPosition, &readings).unwrap_err();
+    assert_eq!(e.step, 4);
+    assert_eq!(f, before);
+}
+
+/// A reset from a Gaussian with independent blocks is the constructor with this seed and
+/// count, to the bit; a correlated prior starts each filter at the conditional of xl given
+/// the drawn xn (here velocity = 1 + 0.5 (xn − 0) / 1, variance 1 − 0.25).
+#[test]
+fn reset_redraws_as_the_constructor_and_conditions_xl() {
+    let mut f = rbpf(120, 11);
+    for z in cv_readings(3, 2) {
+        step(&mut f, z).unwrap();
+    }
+    let joint = Gaussian::new(Vector2::new(0.0, 1.0), Matrix2::identity()).unwrap();
+    f.reset(joint);
+    assert_eq!(f, rbpf(120, 11));
+    let correlated = Gaussian::new(Vector2::new(0.0, 1.0), Matrix2::new(1.0, 0.5, 0.5, 1.0));
+    f.reset(correlated.unwrap());
+    for (i, kf) in f.linear_filters().iter().enumerate() {
+        let xn = f.nonlinear_particles()[(0, i)];
+        // One multiply-add and a Cholesky solve of a 1 × 1: exact to a few ulps.
+        assert!((kf.state()[0] - (1.0 + 0.5 * xn)).abs() < 1e-14);
+        assert!((kf.covariance()[(0, 0)] - 0.75).abs() < 1e-14);
+    }
+}
+
+/// After construction, predictions and updates at static sizes allocate nothing, for every
+/// resampling scheme at every step, and neither do `snapshot_into` / `restore` of a snapshot
+/// of the same count.
+#[test]
+fn static_size_steps_allocate_nothing() {
+    use crate::counting::allocations_during;
+    for scheme in [
+        Resampling::Multinomial,
+        Resampling::Stratified,
+        Resampling::Systematic,
+        Resampling::Residual,
+    ] {
+        let mut f = rbpf(128, 3)
+            .with_resampling(scheme)
+            .with_trigger(ResampleWhen::Always)
+            .unwrap();
+        let mut report = UpdateReport::zeros(U1);
+        let mut snapshot = f.snapshot();
+        let count = allocations_during(|| {
+            for k in 0..3 {
+                f.predict(&SplitCv, &(), 1.0).unwrap();
+                f.update_into(&SplitPosition, &Vector1::new(0.1 * k as f64), &mut report)
+                    .unwrap();
+                f.snapshot_into(&mut snapshot);
+                f.restore(&snapshot);
+            }
+        });
+        assert_eq!(count, 0, "{scheme:?}");
+    }
+}
