@@ -83,6 +83,8 @@ mod noise;
 mod own_noise;
 mod pmmh;
 mod rbpf;
+#[cfg(feature = "serde")]
+mod rbpf_checkpoint;
 mod rbpf_contract;
 mod resample;
 mod rng;

@@ -118,7 +118,7 @@ where
 /// x = (xn, xl) (dimension `DimSum<Nn, Nl>`): [`Estimator`] (the mixture moments),
 /// [`Rollback`](crate::Rollback) (bit-exact), [`Predict`] (the process also names its input on
 /// the joint state, [`ProcessInput`](crate::ProcessInput)) and [`Update`], so it runs in the
-/// fusion driver and the sequence functions. Not yet: a cross-covariance Qln between wn and wl
+/// fusion driver and the sequence functions; serde checkpoints (feature `serde`). Not yet: a cross-covariance Qln between wn and wl
 /// (decorrelate the model first, Schön et al. §III-B).
 ///
 /// The moments: x̂n = Σ Wⁱ xnⁱ, Pn their weighted covariance; x̂l = Σ Wⁱ x̂lⁱ and
