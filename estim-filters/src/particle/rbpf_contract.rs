@@ -256,8 +256,19 @@ where
         snapshot.copy_from(&self.state);
     }
 
+    /// A snapshot of another particle count or size (from another filter) also restores:
+    /// the work buffers are resized (allocating) to match it.
     fn restore(&mut self, snapshot: &Self::Snapshot) {
         self.state.copy_from(snapshot);
+        let s = &self.state;
+        if self.work.linear.len() != s.linear.len()
+            || self.work.nonlinear.shape() != s.nonlinear.shape()
+            || self.work.d.nrows() != s.mean.nrows()
+        {
+            let (n, _) = s.nonlinear.shape_generic();
+            let (l, _) = s.linear[0].state().shape_generic();
+            self.work = super::rbpf::RbWork::new(n, l, &s.linear);
+        }
     }
 }
 

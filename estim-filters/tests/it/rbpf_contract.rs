@@ -180,6 +180,14 @@ fn rollback_replays_bits_and_failed_steps_change_nothing() {
         ));
         assert_eq!(f, before);
     }
+    // A snapshot of a filter with another particle count restores and steps too.
+    let mut f = rbpf(64, 2);
+    let mut small = rbpf(5, 2);
+    step(&mut small, 0.3).unwrap();
+    f.restore(&small.snapshot());
+    step(&mut f, 0.1).unwrap();
+    step(&mut small, 0.1).unwrap();
+    assert_eq!(f, small);
 }
 
 /// The report of an update is the mixture predictive's: ν = Σ Wⁱ νⁱ = z − ẑ, and its
