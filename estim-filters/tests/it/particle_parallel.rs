@@ -173,8 +173,10 @@ fn one_and_two_threads_give_the_same_bits() {
 
 /// A proposal for the growth model twice as wide as its prior: x⁺ ~ N(f(x, k), 2Q), so
 /// log p − log q does not cancel.
+#[cfg(feature = "parallel")]
 struct WideGrowth;
 
+#[cfg(feature = "parallel")]
 impl estim_filters::particle::Proposal<f64, U1, U1> for WideGrowth {
     type Input = f64;
     fn propose<R: estim_core::rand::Rng + ?Sized>(
