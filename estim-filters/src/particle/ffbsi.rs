@@ -172,8 +172,8 @@ where
         dt: T,
     ) -> Result<()>
     where
-        P: ProcessModel<T, N, Input = U> + ?Sized,
-        U: Clone,
+        P: ProcessModel<T, N, Input = U> + Sync + ?Sized,
+        U: Clone + Sync,
     {
         self.predict_with(filter, &AdditiveGaussian(process), input, dt)
     }
@@ -188,9 +188,9 @@ where
         dt: T,
     ) -> Result<()>
     where
-        P: ParticleProcess<T, N> + ?Sized,
+        P: ParticleProcess<T, N> + Sync + ?Sized,
         P::Model: ProcessModel<T, N, Input = U>,
-        U: Clone,
+        U: Clone + Sync,
     {
         self.record(filter, input.clone(), dt)?;
         if let Err(error) = filter.predict_with(process, input, dt) {

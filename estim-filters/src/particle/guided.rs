@@ -1,17 +1,18 @@
 //! Guided proposals (documented on [`Proposal`]).
 
 use estim_core::checks::{ensure_finite, ensure_shape};
-use estim_core::nalgebra::{DefaultAllocator, Dim, OVector};
+use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
 use estim_core::rand::Rng;
 use estim_core::{
     Alloc, Error, MeasurementModel, ProcessModel, Quantity, Real, Stage, error::Result,
 };
 
 use super::ParticleFilter;
+use super::chunks::{CHUNK, first_error, for_chunks, parallel, with_state};
 use super::noise::{AdditiveGaussian, ParticleMeasurement};
-use super::resample::effective_sample_size;
+use super::resample::ess_of_weights;
 use super::rng::ParticleRng;
-use super::step::{Weigher, normaliser};
+use super::step::Work;
 use super::transition::{GaussianKernel, ParticleTransition, checked_log_density};
 use crate::gaussian_filter::ensure_time_step;
 use crate::report::UpdateReport;
@@ -41,7 +42,10 @@ use crate::report::UpdateReport;
 /// p(x⁺ | x, u, Δt) is the [`ParticleTransition`] density (Gaussian from Q, which must then be
 /// positive definite, or the model's own [`TransitionDensity`](super::TransitionDensity)).
 /// The proposal draws from the stream (seed, step, j) of the particle it makes, as the
-/// bootstrap prediction does.
+/// bootstrap prediction does. The proposal pass and the weighing run by chunks of particles
+/// like the bootstrap steps (on rayon's pool under the `parallel` feature for large clouds),
+/// so a seed gives the same bits on any number of threads; the proposal, the models and the
+/// input are therefore `Sync`.
 ///
 /// A proposal q(x⁺ | x, u, Δt, z) for [`ParticleFilter::guided_step`]: draws a successor of
 /// `x` knowing the next reading `z`, and says how likely that draw was.
@@ -147,10 +151,11 @@ where
         z: &OVector<T, M>,
     ) -> Result<UpdateReport<T, M>>
     where
-        P: ProcessModel<T, N> + ?Sized,
-        Q: Proposal<T, N, M, Input = P::Input> + ?Sized,
+        P: ProcessModel<T, N> + Sync + ?Sized,
+        P::Input: Sync,
+        Q: Proposal<T, N, M, Input = P::Input> + Sync + ?Sized,
         M: Dim,
-        H: MeasurementModel<T, N, M> + ?Sized,
+        H: MeasurementModel<T, N, M> + Sync + ?Sized,
         DefaultAllocator: Alloc<N, M>,
     {
         self.guided_step_with(
@@ -176,106 +181,132 @@ where
         z: &OVector<T, M>,
     ) -> Result<UpdateReport<T, M>>
     where
-        P: ParticleTransition<T, N> + ?Sized,
-        Q: Proposal<T, N, M, Input = <P::Model as ProcessModel<T, N>>::Input> + ?Sized,
+        P: ParticleTransition<T, N> + Sync + ?Sized,
+        <P::Model as ProcessModel<T, N>>::Input: Sync,
+        Q: Proposal<T, N, M, Input = <P::Model as ProcessModel<T, N>>::Input> + Sync + ?Sized,
         M: Dim,
-        H: ParticleMeasurement<T, N, M> + ?Sized,
+        H: ParticleMeasurement<T, N, M> + Sync + ?Sized,
         DefaultAllocator: Alloc<N, M>,
     {
         ensure_time_step(dt)?;
         ensure_finite(z, Stage::Update, Quantity::Measurement)?;
         let count = self.count();
         let (n, _) = self.cloud.mean.shape_generic();
-        let step = self.cloud.step;
-        let resample = self
-            .when
-            .fires(effective_sample_size(&self.cloud.log_weights), count);
+        let m = z.shape_generic().0;
+        let (seed, step) = (self.seed, self.cloud.step);
+        let resample = self.when.fires(ess_of_weights(&self.cloud.weights), count);
+        let cloud = &self.cloud;
         let work = &mut self.work;
-        work.ancestors_from(
-            &self.cloud.log_weights,
+        Work::<T, N>::ancestors_from(
+            &mut work.ancestors,
+            &mut work.scratch,
+            &cloud.weights,
             resample,
             self.scheme,
-            self.seed,
+            seed,
             step,
         );
         let uniform = -estim_core::scalar::real::<T>(count as f64).ln();
-        // First pass: propose; log W̄ⱼ + log p(x⁺ | x) − log q into `log_eta`.
-        let mut kernel: Option<GaussianKernel<T, N>> = None;
-        let stage = Stage::Prediction;
-        work.log_eta.clear();
-        for j in 0..count {
-            let a = work.ancestors[j];
-            work.x.copy_from(&self.cloud.particles.column(a));
-            let mut rng = ParticleRng::stream(self.seed, step, j as u64);
-            let (next, log_q) = proposal.propose(&work.x, input, dt, z, &mut rng);
-            ensure_shape(&next, n.value(), 1, stage, Quantity::FunctionValue)?;
-            ensure_finite(&next, stage, Quantity::FunctionValue)?;
-            if !log_q.is_finite() {
-                return Err(Error::NonFinite {
-                    stage,
-                    quantity: Quantity::Weights,
+        // First pass, by chunks: propose into `next`; log W̄ⱼ + log p(x⁺ | x) − log q into
+        // `log_eta`.
+        let (nn, particles, zs) = (n.value(), cloud.particles.as_slice(), z.as_slice());
+        let (ancestors, log_weights) = (&work.ancestors, &cloud.log_weights);
+        work.log_eta.resize(count, T::zero());
+        for_chunks(
+            parallel(count),
+            &mut work.chunks,
+            work.next.as_mut_slice(),
+            nn * CHUNK,
+            &mut work.log_eta,
+            CHUNK,
+            |c, w, out, eta| {
+                w.error = with_state(&mut w.state, n, |s| {
+                    // The reading and the last Gaussian kernel, per chunk (a generic-size
+                    // buffer cannot be shared between threads).
+                    let z = OVector::<T, M>::from_column_slice_generic(m, U1, zs);
+                    let mut kernel: Option<GaussianKernel<T, N>> = None;
+                    let stage = Stage::Prediction;
+                    for (k, (column, eta)) in out.chunks_exact_mut(nn).zip(eta).enumerate() {
+                        let j = c * CHUNK + k;
+                        let a = ancestors[j];
+                        s.x.copy_from_slice(&particles[a * nn..(a + 1) * nn]);
+                        let mut rng = ParticleRng::stream(seed, step, j as u64);
+                        let (next, log_q) = proposal.propose(&s.x, input, dt, &z, &mut rng);
+                        let checked = ensure_shape(&next, nn, 1, stage, Quantity::FunctionValue)
+                            .and_then(|()| ensure_finite(&next, stage, Quantity::FunctionValue));
+                        if let Err(e) = checked {
+                            return Some(e);
+                        }
+                        if !log_q.is_finite() {
+                            return Some(Error::NonFinite {
+                                stage,
+                                quantity: Quantity::Weights,
+                            });
+                        }
+                        let log_p = if process.has_own_density() {
+                            let value = process
+                                .log_transition(&next, &s.x, input, dt)
+                                .unwrap_or(T::zero());
+                            checked_log_density(value, stage)
+                        } else {
+                            GaussianKernel::at(
+                                process.model(),
+                                &s.x,
+                                input,
+                                dt,
+                                kernel.as_ref(),
+                                stage,
+                            )
+                            .map(|fresh| kernel.insert(fresh).log_density(&next, &mut s.y))
+                        };
+                        let log_p = match log_p {
+                            Ok(log_p) => log_p,
+                            Err(e) => return Some(e),
+                        };
+                        let prior = if resample { uniform } else { log_weights[j] };
+                        *eta = prior + log_p - log_q;
+                        for (o, &x) in column.iter_mut().zip(next.iter()) {
+                            *o = x;
+                        }
+                    }
+                    None
                 });
-            }
-            let log_p = if process.has_own_density() {
-                let value = process
-                    .log_transition(&next, &work.x, input, dt)
-                    .unwrap_or(T::zero());
-                checked_log_density(value, stage)?
-            } else {
-                let fresh = GaussianKernel::at(
-                    process.model(),
-                    &work.x,
-                    input,
-                    dt,
-                    kernel.as_ref(),
-                    stage,
-                )?;
-                let kernel = kernel.insert(fresh);
-                kernel.log_density(&next, &mut work.y)
-            };
-            let prior = if resample {
-                uniform
-            } else {
-                self.cloud.log_weights[j]
-            };
-            work.log_eta.push(prior + log_p - log_q);
-            work.next.set_column(j, &next);
-        }
+            },
+        );
+        first_error(work.chunks.iter_mut())?;
         // Second pass: the likelihood, with predictive weights ∝ W̄ p / q for the report.
-        let max = work
-            .log_eta
+        let log_eta = core::mem::take(&mut work.log_eta);
+        let max = log_eta
             .iter()
             .fold(-T::one() / T::zero(), |m, &v| if v > m { v } else { m });
-        let mut weigher = Weigher::new(n, z.shape_generic().0);
-        let mut predictive_total = T::zero();
-        work.log_w.clear();
-        for j in 0..count {
-            let log_v = work.log_eta[j];
+        let next = core::mem::replace(&mut work.next, OMatrix::zeros_generic(n, Dyn(0)));
+        let mut log_w = core::mem::take(&mut work.log_w);
+        log_w.resize(count, T::zero());
+        let weighed = work.weigh(sensor, z, &next, &mut log_w, |j| {
+            let log_v = log_eta[j];
             let v = if max.is_finite() {
                 (log_v - max).exp()
             } else {
                 T::zero()
             };
-            predictive_total += v;
-            let log_g = weigher.log_density(sensor, z, &work.next, j, v)?;
-            work.log_w.push(log_v + log_g);
-        }
-        let increment = normaliser(&work.log_w)?;
+            (v, log_v)
+        });
+        work.next = next;
+        work.log_w = log_w;
+        work.log_eta = log_eta;
+        let increment = weighed?;
         // Committed.
-        core::mem::swap(&mut self.cloud.particles, &mut self.work.next);
-        for (lw, &new) in self
-            .cloud
-            .log_weights
-            .iter_mut()
-            .zip(self.work.log_w.iter())
-        {
-            *lw = new - increment;
-        }
+        let mut report = UpdateReport::zeros(m);
+        work.report(m, increment, &mut report);
+        core::mem::swap(&mut self.cloud.particles, &mut work.next);
+        work.normalise(
+            increment,
+            &mut self.cloud.log_weights,
+            &mut self.cloud.weights,
+        );
         self.cloud.step = step.wrapping_add(1);
         self.cloud.log_likelihood += increment;
         self.update_moments();
-        let mut report = UpdateReport::zeros(z.shape_generic().0);
-        weigher.report(predictive_total, increment, &mut report);
         Ok(report)
     }
 }

@@ -94,6 +94,9 @@ mod noise;
 mod own_noise;
 mod pmmh;
 mod rbpf;
+#[cfg(feature = "serde")]
+mod rbpf_checkpoint;
+mod rbpf_contract;
 mod resample;
 mod rng;
 mod step;
@@ -114,7 +117,7 @@ pub use own_noise::NonGaussianFilter;
 pub use pmmh::{MAX_PMMH_ITERATIONS, PmmhChain, particle_log_likelihood, pmmh};
 pub use rbpf::{
     ConditionalMeasurement, ConditionalTransition, ConditionallyLinearMeasurement,
-    ConditionallyLinearProcess, RaoBlackwellised,
+    ConditionallyLinearProcess, RaoBlackwellised, RaoBlackwellisedSnapshot,
 };
 pub use resample::{ResampleWhen, Resampling, log_sum_exp, resample};
 pub use rng::{ParticleRng, RESAMPLE};

@@ -244,8 +244,9 @@ where
     T: Real,
     N: Dim,
     M: Dim,
-    P: ProcessModel<T, N>,
-    H: MeasurementModel<T, N, M>,
+    P: ProcessModel<T, N> + Sync,
+    P::Input: Sync,
+    H: MeasurementModel<T, N, M> + Sync,
     DefaultAllocator: Alloc<N, M>,
 {
     let mut filter = ParticleFilter::new(prior.clone(), count, seed)?;

@@ -1,17 +1,18 @@
 //! The Rao-Blackwellised particle filter (documented on [`RaoBlackwellised`]).
 
-use estim_core::checks::{ensure_finite, ensure_shape};
-use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
+use estim_core::checks::{ensure_finite, ensure_shape, symmetrize};
+use estim_core::linalg::inverse_quadratic_form;
+use estim_core::nalgebra::{DefaultAllocator, Dim, DimAdd, DimSum, Dyn, OMatrix, OVector, U1};
 use estim_core::{
     Alloc, Error, Gaussian, LinearMeasurement, LinearProcess, Parameter, Quantity, Real, Stage,
     error::Result, psd_factor,
 };
 
-use super::resample::{effective_sample_size, resample_with, to_f64};
+use super::resample::{effective_sample_size, normaliser, resample_with, to_f64};
 use super::rng::{ParticleRng, RESAMPLE};
-use super::step::normaliser;
 use super::{ResampleWhen, Resampling, check_trigger, fill_normals};
 use crate::gaussian_filter::{KalmanFilter, ensure_time_step};
+use crate::report::{UpdateOutcome, UpdateReport};
 use crate::traits::{Estimator, Predict, Update};
 
 /// The conditionally linear transition at one nonlinear state xn (see [`RaoBlackwellised`]): the
@@ -110,12 +111,14 @@ where
 /// estimate of the bootstrap filter, with the same resampling schemes, trigger and random
 /// streams (seed, step, particle) as [`ParticleFilter`](super::ParticleFilter).
 ///
-/// **Scope.** Generic over the scalar and the sizes (runtime-size pieces are shape-checked;
-/// the tests run f64 at static sizes), with the step atomic on error (the new
-/// cloud is built aside and swapped in). Not yet: a cross-covariance Qln between wn and wl
-/// (decorrelate the model first, Schön et al. §III-B), the step traits, [`Rollback`](crate::Rollback)
-/// and checkpoints, and allocation-free steps (each step allocates the new cloud and clones the
-/// N filters).
+/// **Scope.** Generic over the scalar and the sizes (runtime-size pieces are shape-checked),
+/// with the step atomic on error (the new cloud is built in work buffers and swapped in), and
+/// allocation-free after construction at static sizes. It is an estimator of the joint state
+/// x = (xn, xl) (dimension `DimSum<Nn, Nl>`): [`Estimator`] (the mixture moments),
+/// [`Rollback`](crate::Rollback) (bit-exact), [`Predict`] (the process also names its input on
+/// the joint state, [`ProcessInput`](crate::ProcessInput)) and [`Update`], so it runs in the
+/// fusion driver and the sequence functions; serde checkpoints (feature `serde`). Not yet: a cross-covariance Qln between wn and wl
+/// (decorrelate the model first, Schön et al. §III-B).
 ///
 /// The moments: x̂n = Σ Wⁱ xnⁱ, Pn their weighted covariance; x̂l = Σ Wⁱ x̂lⁱ and
 /// Pl = Σ Wⁱ (Plⁱ + (x̂lⁱ − x̂l)(x̂lⁱ − x̂l)ᵀ) (the mixture's covariance).
@@ -163,23 +166,77 @@ where
 /// A Rao-Blackwellised particle filter: particles for xn, a [`KalmanFilter`] per particle
 /// for xl (above).
 #[derive(Clone, Debug)]
-pub struct RaoBlackwellised<T: Real, Nn: Dim, Nl: Dim>
+pub struct RaoBlackwellised<T: Real, Nn: DimAdd<Nl>, Nl: Dim>
 where
-    DefaultAllocator: Alloc<Nn, Nl>,
+    DefaultAllocator: Alloc<Nn, Nl> + Alloc<DimSum<Nn, Nl>, Nn>,
 {
-    seed: u64,
-    scheme: Resampling,
-    when: ResampleWhen,
-    nonlinear: OMatrix<T, Nn, Dyn>,
-    linear: Vec<KalmanFilter<T, Nl>>,
-    log_weights: Vec<T>,
-    step: u64,
-    log_likelihood: T,
+    pub(super) seed: u64,
+    pub(super) scheme: Resampling,
+    pub(super) when: ResampleWhen,
+    pub(super) state: RaoBlackwellisedSnapshot<T, Nn, Nl>,
+    pub(super) work: RbWork<T, Nn, Nl>,
 }
 
-impl<T: Real, Nn: Dim, Nl: Dim> RaoBlackwellised<T, Nn, Nl>
+/// Everything a [`RaoBlackwellised`] filter's steps change: the nonlinear particles, their
+/// Kalman filters and log-weights, the random step counter, the running log-likelihood and
+/// the joint mixture moments. Restoring one gives the same bits afterwards as at the time it
+/// was taken ([`Rollback`](crate::Rollback)).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RaoBlackwellisedSnapshot<T: Real, Nn: DimAdd<Nl>, Nl: Dim>
 where
-    DefaultAllocator: Alloc<Nn, Nl>,
+    DefaultAllocator: Alloc<Nn, Nl> + Alloc<DimSum<Nn, Nl>, Nn>,
+{
+    pub(super) nonlinear: OMatrix<T, Nn, Dyn>,
+    pub(super) linear: Vec<KalmanFilter<T, Nl>>,
+    pub(super) log_weights: Vec<T>,
+    pub(super) step: u64,
+    pub(super) log_likelihood: T,
+    pub(super) mean: OVector<T, DimSum<Nn, Nl>>,
+    pub(super) covariance: OMatrix<T, DimSum<Nn, Nl>, DimSum<Nn, Nl>>,
+}
+
+/// The buffers a step writes before it commits (swapped in on success), sized at
+/// construction so steps at static sizes allocate nothing.
+#[derive(Clone, Debug)]
+pub(super) struct RbWork<T: Real, Nn: DimAdd<Nl>, Nl: Dim>
+where
+    DefaultAllocator: Alloc<Nn, Nl> + Alloc<DimSum<Nn, Nl>, Nn>,
+{
+    pub(super) nonlinear: OMatrix<T, Nn, Dyn>,
+    pub(super) linear: Vec<KalmanFilter<T, Nl>>,
+    pub(super) log_w: Vec<T>,
+    pub(super) ancestors: Vec<usize>,
+    pub(super) weights: Vec<f64>,
+    pub(super) scratch: Vec<f64>,
+    pub(super) xn: OVector<T, Nn>,
+    pub(super) normals: OVector<T, Nn>,
+    pub(super) d: OVector<T, DimSum<Nn, Nl>>,
+}
+
+impl<T: Real, Nn: DimAdd<Nl>, Nl: Dim> RbWork<T, Nn, Nl>
+where
+    DefaultAllocator: Alloc<Nn, Nl> + Alloc<DimSum<Nn, Nl>, Nn>,
+{
+    /// Buffers for `filters.len()` particles of sizes (n, l).
+    pub(super) fn new(n: Nn, l: Nl, filters: &[KalmanFilter<T, Nl>]) -> Self {
+        let count = filters.len();
+        Self {
+            nonlinear: OMatrix::zeros_generic(n, Dyn(count)),
+            linear: filters.to_vec(),
+            log_w: vec![T::zero(); count],
+            ancestors: (0..count).collect(),
+            weights: Vec::with_capacity(count),
+            scratch: Vec::with_capacity(2 * count), // residual resampling: N + N
+            xn: OVector::zeros_generic(n, U1),
+            normals: OVector::zeros_generic(n, U1),
+            d: OVector::zeros_generic(n.add(l), U1),
+        }
+    }
+}
+
+impl<T: Real, Nn: DimAdd<Nl>, Nl: Dim> RaoBlackwellised<T, Nn, Nl>
+where
+    DefaultAllocator: Alloc<Nn, Nl> + Alloc<DimSum<Nn, Nl>, Nn>,
 {
     /// `count` particles xnⁱ drawn from `nonlinear` (streams (seed, 0, i), through a PSD
     /// factor, so a singular prior works), each with a Kalman filter started at `linear`
@@ -226,16 +283,26 @@ where
             column.gemv(T::one(), &factor, &normals, T::one());
         }
         let uniform = -estim_core::scalar::real::<T>(count as f64).ln();
-        Ok(Self {
+        let filters = vec![KalmanFilter::new(linear); count];
+        let l = filters[0].state().shape_generic().0;
+        let joint = n.add(l);
+        let mut filter = Self {
             seed,
             scheme: Resampling::default(),
             when: ResampleWhen::default(),
-            nonlinear: particles,
-            linear: vec![KalmanFilter::new(linear); count],
-            log_weights: vec![uniform; count],
-            step: 1,
-            log_likelihood: T::zero(),
-        })
+            work: RbWork::new(n, l, &filters),
+            state: RaoBlackwellisedSnapshot {
+                nonlinear: particles,
+                linear: filters,
+                log_weights: vec![uniform; count],
+                step: 1,
+                log_likelihood: T::zero(),
+                mean: OVector::zeros_generic(joint, U1),
+                covariance: OMatrix::zeros_generic(joint, joint),
+            },
+        };
+        filter.update_moments();
+        Ok(filter)
     }
 
     /// The same filter resampling by `scheme`.
@@ -254,39 +321,59 @@ where
 
     /// The number of particles N.
     pub fn count(&self) -> usize {
-        self.log_weights.len()
+        self.state.log_weights.len()
+    }
+
+    /// The seed of the random streams.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// The random step counter (1 after construction, +1 per prediction).
+    pub fn step(&self) -> u64 {
+        self.state.step
+    }
+
+    /// The resampling scheme.
+    pub fn resampling(&self) -> Resampling {
+        self.scheme
+    }
+
+    /// When the prediction resamples.
+    pub fn trigger(&self) -> ResampleWhen {
+        self.when
     }
 
     /// The nonlinear particles xnⁱ, one per column.
     pub fn nonlinear_particles(&self) -> &OMatrix<T, Nn, Dyn> {
-        &self.nonlinear
+        &self.state.nonlinear
     }
 
     /// The per-particle Kalman filters of xl.
     pub fn linear_filters(&self) -> &[KalmanFilter<T, Nl>] {
-        &self.linear
+        &self.state.linear
     }
 
     /// The normalised log-weights log Wⁱ.
     pub fn log_weights(&self) -> &[T] {
-        &self.log_weights
+        &self.state.log_weights
     }
 
     /// The effective sample size 1 / Σ Wᵢ².
     pub fn effective_sample_size(&self) -> T {
-        estim_core::scalar::real(effective_sample_size(&self.log_weights))
+        estim_core::scalar::real(effective_sample_size(&self.state.log_weights))
     }
 
     /// The running log-likelihood estimate Σ Δℓ (its exponential is unbiased for p(z₁..ₖ)).
     pub fn log_likelihood(&self) -> T {
-        self.log_likelihood
+        self.state.log_likelihood
     }
 
     /// x̂n = Σ Wⁱ xnⁱ.
     pub fn nonlinear_mean(&self) -> OVector<T, Nn> {
-        let mut mean = OVector::zeros_generic(self.nonlinear.shape_generic().0, U1);
-        for (i, &lw) in self.log_weights.iter().enumerate() {
-            mean.axpy(lw.exp(), &self.nonlinear.column(i), T::one());
+        let mut mean = OVector::zeros_generic(self.state.nonlinear.shape_generic().0, U1);
+        for (i, &lw) in self.state.log_weights.iter().enumerate() {
+            mean.axpy(lw.exp(), &self.state.nonlinear.column(i), T::one());
         }
         mean
     }
@@ -296,8 +383,8 @@ where
         let mean = self.nonlinear_mean();
         let (n, _) = mean.shape_generic();
         let mut covariance = OMatrix::zeros_generic(n, n);
-        for (i, &lw) in self.log_weights.iter().enumerate() {
-            let d = self.nonlinear.column(i) - &mean;
+        for (i, &lw) in self.state.log_weights.iter().enumerate() {
+            let d = self.state.nonlinear.column(i) - &mean;
             covariance.ger(lw.exp(), &d, &d, T::one());
         }
         covariance
@@ -305,8 +392,9 @@ where
 
     /// x̂l = Σ Wⁱ x̂lⁱ.
     pub fn linear_mean(&self) -> OVector<T, Nl> {
-        let mut mean = OVector::zeros_generic(self.linear[0].state().shape_generic().0, U1);
-        for (kf, &lw) in self.linear.iter().zip(&self.log_weights) {
+        let s = &self.state;
+        let mut mean = OVector::zeros_generic(s.linear[0].state().shape_generic().0, U1);
+        for (kf, &lw) in s.linear.iter().zip(&s.log_weights) {
             mean.axpy(lw.exp(), kf.state(), T::one());
         }
         mean
@@ -317,7 +405,7 @@ where
         let mean = self.linear_mean();
         let (n, _) = mean.shape_generic();
         let mut covariance = OMatrix::zeros_generic(n, n);
-        for (kf, &lw) in self.linear.iter().zip(&self.log_weights) {
+        for (kf, &lw) in self.state.linear.iter().zip(&self.state.log_weights) {
             let w = lw.exp();
             let d = kf.state() - &mean;
             covariance.ger(w, &d, &d, T::one());
@@ -326,8 +414,10 @@ where
         covariance
     }
 
-    /// The time update (see [`RaoBlackwellised`]): resample if the trigger fires, draw each xnⁱ⁺ from its
-    /// xl-marginalised Gaussian, condition xlⁱ on it and predict xlⁱ.
+    /// The time update (see [`RaoBlackwellised`]): resample if the trigger fires, draw each
+    /// xnⁱ⁺ from its xl-marginalised Gaussian, condition xlⁱ on it and predict xlⁱ. Also the
+    /// [`Predict`] impl (for a process that names its input on the joint state,
+    /// [`ProcessInput`](crate::ProcessInput)). Allocates nothing at static sizes.
     ///
     /// Errors (the filter unchanged): Δt negative or not finite; a transition piece of the
     /// wrong shape or not finite; An Pl Anᵀ + Qn not positive semi-definite; a Kalman step
@@ -339,39 +429,38 @@ where
     {
         ensure_time_step(dt)?;
         let count = self.count();
-        let step = self.step;
+        let state = &mut self.state;
+        let work = &mut self.work;
+        let step = state.step;
         let resample = self
             .when
-            .fires(effective_sample_size(&self.log_weights), count);
-        let mut ancestors: Vec<usize> = (0..count).collect();
+            .fires(effective_sample_size(&state.log_weights), count);
+        for (j, a) in work.ancestors.iter_mut().enumerate() {
+            *a = j;
+        }
         if resample {
-            let weights: Vec<f64> = self
-                .log_weights
-                .iter()
-                .map(|&lw| to_f64(lw).exp())
-                .collect();
+            work.weights.clear();
+            work.weights
+                .extend(state.log_weights.iter().map(|&lw| to_f64(lw).exp()));
             let mut rng = ParticleRng::stream(self.seed, step, RESAMPLE);
             resample_with(
                 self.scheme,
-                &weights,
+                &work.weights,
                 &mut rng,
-                &mut ancestors,
-                &mut Vec::new(),
+                &mut work.ancestors,
+                &mut work.scratch,
             );
         }
-        let (n, _) = self.nonlinear.shape_generic();
+        let (n, _) = state.nonlinear.shape_generic();
         let stage = Stage::Prediction;
-        let mut next = OMatrix::zeros_generic(n, Dyn(count));
-        let mut filters = Vec::with_capacity(count);
-        let mut xn = OVector::zeros_generic(n, U1);
-        let mut normals = OVector::zeros_generic(n, U1);
-        for (j, &a) in ancestors.iter().enumerate() {
-            xn.copy_from(&self.nonlinear.column(a));
-            let mut kf = self.linear[a].clone();
-            let t = process.conditional_transition(&xn, input, dt);
+        for (j, &a) in work.ancestors.iter().enumerate() {
+            work.xn.copy_from(&state.nonlinear.column(a));
+            let kf = &mut work.linear[j];
+            kf.clone_from(&state.linear[a]);
+            let t = process.conditional_transition(&work.xn, input, dt);
             check_transition(&t, n.value(), kf.state().nrows())?;
             // xn⁺ ~ N(fn + An x̂l, An Pl Anᵀ + Qn).
-            let mut mean = t.coupling.clone() * kf.state();
+            let mut mean = &t.coupling * kf.state();
             mean += &t.nonlinear_mean;
             let mut spread = &t.coupling * kf.covariance() * t.coupling.transpose();
             spread += &t.nonlinear_noise;
@@ -381,10 +470,10 @@ where
                     quantity: Quantity::ProcessNoise,
                 })?;
             fill_normals(
-                &mut normals,
+                &mut work.normals,
                 &mut ParticleRng::stream(self.seed, step, j as u64),
             );
-            mean.gemv(T::one(), &factor, &normals, T::one());
+            mean.gemv(T::one(), &factor, &work.normals, T::one());
             // Condition xl on η = xn⁺ − fn = An xl + wn (nothing to learn if An = 0).
             if t.coupling.iter().any(|&c| c != T::zero()) {
                 let eta = &mean - &t.nonlinear_mean;
@@ -402,62 +491,100 @@ where
                 noise: t.linear_noise,
             };
             kf.predict(&linear, &t.linear_mean, dt)?;
-            next.set_column(j, &mean);
-            filters.push(kf);
+            work.nonlinear.set_column(j, &mean);
         }
-        ensure_finite(&next, stage, Quantity::FunctionValue)?;
+        ensure_finite(&work.nonlinear, stage, Quantity::FunctionValue)?;
         // Committed.
-        self.nonlinear = next;
-        self.linear = filters;
+        core::mem::swap(&mut state.nonlinear, &mut work.nonlinear);
+        core::mem::swap(&mut state.linear, &mut work.linear);
         if resample {
             let uniform = -estim_core::scalar::real::<T>(count as f64).ln();
-            self.log_weights.fill(uniform);
+            state.log_weights.fill(uniform);
         }
-        self.step = step.wrapping_add(1);
+        state.step = step.wrapping_add(1);
+        self.update_moments();
         Ok(())
     }
 
-    /// The measurement update (see [`RaoBlackwellised`]): each particle's Kalman filter is updated on
-    /// z − h(xnⁱ) with observation C(xnⁱ), and its weight multiplied by the update's
-    /// likelihood N(z; h + C x̂lⁱ, C Plⁱ Cᵀ + R). Returns the step's log-likelihood
-    /// estimate Δℓ.
+    /// The measurement update (see [`RaoBlackwellised`]): each particle's Kalman filter is
+    /// updated on z − h(xnⁱ) with observation C(xnⁱ), and its weight multiplied by the
+    /// update's likelihood N(z; h + C x̂lⁱ, C Plⁱ Cᵀ + R). Also the [`Update`] impl.
+    ///
+    /// The report is the mixture predictive's: ν = Σ Wⁱ νⁱ (= z − ẑ), S = Σ Wⁱ (Sⁱ + νⁱνⁱᵀ)
+    /// − ννᵀ, NIS = νᵀS⁻¹ν (infinite if S is singular), and as log-likelihood the step's
+    /// estimate Δℓ = log Σ Wⁱ gⁱ (not a Gaussian's).
     ///
     /// Errors (the filter unchanged): z not finite; a measurement piece of the wrong shape or
     /// not finite; R such that an innovation covariance is not positive definite; every
     /// weight zero or NaN ([`Quantity::Weights`]).
-    pub fn update<M, H>(&mut self, sensor: &H, z: &OVector<T, M>) -> Result<T>
+    pub fn update<M, H>(&mut self, sensor: &H, z: &OVector<T, M>) -> Result<UpdateReport<T, M>>
+    where
+        M: Dim,
+        H: ConditionallyLinearMeasurement<T, Nn, Nl, M> + ?Sized,
+        DefaultAllocator: Alloc<Nl, M> + Alloc<Nn, M>,
+    {
+        let mut report = UpdateReport::zeros(z.shape_generic().0);
+        self.update_into(sensor, z, &mut report)?;
+        Ok(report)
+    }
+
+    /// [`update`](Self::update) writing the report into `report` (resized to z's length if
+    /// needed). Allocates nothing at static sizes. On error the filter is unchanged and
+    /// `report` unspecified.
+    pub fn update_into<M, H>(
+        &mut self,
+        sensor: &H,
+        z: &OVector<T, M>,
+        report: &mut UpdateReport<T, M>,
+    ) -> Result<()>
     where
         M: Dim,
         H: ConditionallyLinearMeasurement<T, Nn, Nl, M> + ?Sized,
         DefaultAllocator: Alloc<Nl, M> + Alloc<Nn, M>,
     {
         ensure_finite(z, Stage::Update, Quantity::Measurement)?;
-        let count = self.count();
-        let mut filters = Vec::with_capacity(count);
-        let mut log_w = Vec::with_capacity(count);
-        let mut xn = OVector::zeros_generic(self.nonlinear.shape_generic().0, U1);
-        for (i, &lw) in self.log_weights.iter().enumerate() {
-            xn.copy_from(&self.nonlinear.column(i));
-            let mut kf = self.linear[i].clone();
-            let piece = sensor.conditional_measurement(&xn);
+        let (m, _) = z.shape_generic();
+        let state = &mut self.state;
+        let work = &mut self.work;
+        let mut one = UpdateReport::zeros(m);
+        let mut nu = OVector::<T, M>::zeros_generic(m, U1);
+        let mut second = OMatrix::<T, M, M>::zeros_generic(m, m);
+        for (i, &lw) in state.log_weights.iter().enumerate() {
+            work.xn.copy_from(&state.nonlinear.column(i));
+            let kf = &mut work.linear[i];
+            kf.clone_from(&state.linear[i]);
+            let piece = sensor.conditional_measurement(&work.xn);
             check_measurement(&piece, z.nrows(), kf.state().nrows())?;
             let shifted = z - &piece.offset;
             let model = LinearMeasurement::<T, Nl, M> {
                 observation: piece.observation,
                 noise: piece.noise,
             };
-            let report = kf.update(&model, &shifted)?;
-            log_w.push(lw + report.log_likelihood);
-            filters.push(kf);
+            kf.update_into(&model, &shifted, &mut one)?;
+            work.log_w[i] = lw + one.log_likelihood;
+            let w = lw.exp();
+            nu.axpy(w, &one.innovation, T::one());
+            second.ger(w, &one.innovation, &one.innovation, T::one());
+            second.zip_apply(&one.innovation_covariance, |acc, s| *acc += w * s);
         }
-        let increment = normaliser(&log_w)?;
+        let increment = normaliser(&work.log_w)?;
         // Committed.
-        for (lw, new) in self.log_weights.iter_mut().zip(log_w) {
+        for (lw, &new) in state.log_weights.iter_mut().zip(&work.log_w) {
             *lw = new - increment;
         }
-        self.linear = filters;
-        self.log_likelihood += increment;
-        Ok(increment)
+        core::mem::swap(&mut state.linear, &mut work.linear);
+        state.log_likelihood += increment;
+        self.update_moments();
+        report.fit(m);
+        second.ger(-T::one(), &nu, &nu, T::one());
+        symmetrize(&mut second);
+        report.innovation.copy_from(&nu);
+        report.innovation_covariance.copy_from(&second);
+        report.nis = inverse_quadratic_form(&mut second, &mut nu).unwrap_or(T::one() / T::zero());
+        report.log_likelihood = increment;
+        report.outcome = UpdateOutcome::Applied;
+        report.iterations = None;
+        Ok(())
     }
 }
 

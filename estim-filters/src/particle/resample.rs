@@ -217,3 +217,31 @@ pub(crate) fn to_f64<T: estim_core::Real>(x: T) -> f64 {
 pub(crate) fn ess_of_weights(weights: &[f64]) -> f64 {
     1.0 / weights.iter().map(|w| w * w).sum::<f64>()
 }
+
+/// The effective sample size 1 / Σ Wᵢ² of normalised log-weights (log Σ Wᵢ = 0), for the
+/// filters that keep log-weights only.
+pub(crate) fn effective_sample_size<T: estim_core::Real>(log_weights: &[T]) -> f64 {
+    let sum_sq: f64 = log_weights
+        .iter()
+        .map(|&lw| {
+            let w = to_f64(lw).exp();
+            w * w
+        })
+        .sum();
+    1.0 / sum_sq
+}
+
+/// log Σᵢ exp(vᵢ) of unnormalised log-weights, in one serial pass ([`log_sum_exp`]), or the
+/// typed error of a degenerate weight set (a NaN, or every weight zero: no particle explains
+/// the measurement).
+pub(crate) fn normaliser<T: estim_core::Real>(log_w: &[T]) -> estim_core::error::Result<T> {
+    let total = log_sum_exp(log_w);
+    if total.is_finite() {
+        Ok(total)
+    } else {
+        Err(estim_core::Error::NonFinite {
+            stage: estim_core::Stage::Update,
+            quantity: estim_core::Quantity::Weights,
+        })
+    }
+}

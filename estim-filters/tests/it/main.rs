@@ -48,6 +48,7 @@ mod noise_policy;
 mod particle;
 mod particle_algorithms;
 mod particle_parallel;
+mod rbpf_contract;
 mod rls;
 mod robust;
 mod second_order;

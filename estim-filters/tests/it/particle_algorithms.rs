@@ -346,7 +346,7 @@ fn ffbsi_of_a_singular_process_noise_is_a_typed_error() {
 /// Position xn and velocity xl of a constant-velocity target: xn⁺ = xn + xl + wn,
 /// xl⁺ = xl + wl (Qn = 0.1, Ql = 0.05); z = xn + v (R = 0.5). The "nonlinear" part is linear,
 /// so the Kalman filter of the whole state is the exact answer.
-struct SplitCv;
+pub(crate) struct SplitCv;
 
 impl ConditionallyLinearProcess<f64, U1, U1> for SplitCv {
     type Input = ();
@@ -367,7 +367,7 @@ impl ConditionallyLinearProcess<f64, U1, U1> for SplitCv {
     }
 }
 
-struct SplitPosition;
+pub(crate) struct SplitPosition;
 
 impl ConditionallyLinearMeasurement<f64, U1, U1, U1> for SplitPosition {
     fn conditional_measurement(&self, xn: &Vector1<f64>) -> ConditionalMeasurement<f64, U1, U1> {
@@ -381,9 +381,9 @@ impl ConditionallyLinearMeasurement<f64, U1, U1, U1> for SplitPosition {
 
 /// The same model on the whole state (position, velocity), prior N((0, 1), I).
 /// The whole-state constant-velocity process.
-type WholeCv = NoInput<LinearProcess<f64, U2, U0>>;
+pub(crate) type WholeCv = NoInput<LinearProcess<f64, U2, U0>>;
 
-fn whole_cv() -> (WholeCv, LinearMeasurement<f64, U2, U1>, Gaussian<f64, U2>) {
+pub(crate) fn whole_cv() -> (WholeCv, LinearMeasurement<f64, U2, U1>, Gaussian<f64, U2>) {
     (
         LinearProcess::without_input(
             Matrix2::new(1.0, 1.0, 0.0, 1.0),
@@ -398,7 +398,7 @@ fn whole_cv() -> (WholeCv, LinearMeasurement<f64, U2, U1>, Gaussian<f64, U2>) {
 }
 
 /// T position readings of the constant-velocity target (seeded).
-fn cv_readings(steps: usize, seed: u64) -> Vec<f64> {
+pub(crate) fn cv_readings(steps: usize, seed: u64) -> Vec<f64> {
     let mut g = rng(seed);
     let (mut p, mut v) = (normal(&mut g), 1.0 + normal(&mut g));
     (0..steps)
@@ -565,6 +565,7 @@ fn rao_blackwellised_bad_input_gives_typed_errors_and_changes_nothing() {
     }
     assert!(rbpf.update(&Negative, &Vector1::new(0.7)).is_err());
     assert!(same(&rbpf, &before));
+    assert_eq!(rbpf, before); // the joint moments and the step counter too
     // And it still steps as the untouched copy does, to the bit.
     let mut copy = before.clone();
     rbpf.predict(&SplitCv, &(), 1.0).unwrap();

@@ -171,6 +171,72 @@ fn one_and_two_threads_give_the_same_bits() {
     }
 }
 
+/// A proposal for the growth model twice as wide as its prior: x⁺ ~ N(f(x, k), 2Q), so
+/// log p − log q does not cancel.
+#[cfg(feature = "parallel")]
+struct WideGrowth;
+
+#[cfg(feature = "parallel")]
+impl estim_filters::particle::Proposal<f64, U1, U1> for WideGrowth {
+    type Input = f64;
+    fn propose<R: estim_core::rand::Rng + ?Sized>(
+        &self,
+        x: &Vector1<f64>,
+        k: &f64,
+        dt: f64,
+        _: &Vector1<f64>,
+        rng: &mut R,
+    ) -> (Vector1<f64>, f64) {
+        use estim_core::rand_distr::{Distribution, StandardNormal};
+        let e: f64 = StandardNormal.sample(rng);
+        let var = 20.0;
+        let log_q = -0.5 * e * e - 0.5 * (std::f64::consts::TAU * var).ln();
+        (
+            Growth.transition(x, k, dt).add_scalar(var.sqrt() * e),
+            log_q,
+        )
+    }
+}
+
+/// The guided step runs its proposal pass and its weighing by chunks too: the same seed gives
+/// the same bits on 1 and 2 threads, in parallel (≥ `PARALLEL_MIN`) and serially.
+#[cfg(feature = "parallel")]
+#[test]
+fn guided_steps_give_the_same_bits_on_one_and_two_threads() {
+    use estim_filters::particle::PARALLEL_MIN;
+    let pool = |k| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(k)
+            .build()
+            .unwrap()
+    };
+    let (one, two) = (pool(1), pool(2));
+    let guided = |count| {
+        let prior = Gaussian::new(Vector1::new(0.1), Matrix1::new(2.0)).unwrap();
+        let mut pf = ParticleFilter::new(prior, count, 5)
+            .unwrap()
+            .with_trigger(ResampleWhen::EssBelow(0.7))
+            .unwrap();
+        for (k, z) in [1.2, 0.4, 5.0, 12.1].into_iter().enumerate() {
+            pf.guided_step(
+                &Growth,
+                &WideGrowth,
+                &(k as f64),
+                1.0,
+                &Square,
+                &Vector1::new(z),
+            )
+            .unwrap();
+        }
+        pf
+    };
+    for count in [PARALLEL_MIN + 77, 300] {
+        let serial = one.install(|| guided(count));
+        let parallel = two.install(|| guided(count));
+        assert_same_bits(&serial, &parallel, &format!("guided, {count} particles"));
+    }
+}
+
 /// Without rayon the run is reproducible too (the chunked sums have a fixed order).
 #[test]
 fn runs_reproduce_bit_for_bit() {
