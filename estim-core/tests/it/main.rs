@@ -18,11 +18,12 @@ mod checked;
 mod derivative;
 mod errors;
 mod gaussian;
+mod in_place;
 mod linear;
 mod manifold;
 mod no_alloc;
 mod nonlinear;
 mod papoulis;
 mod quadratic;
-mod sigma_points;
+
 mod ukf_region;

@@ -115,9 +115,7 @@ where
         work.log_w.clear();
         for (i, &lw) in self.cloud.log_weights.iter().enumerate() {
             work.x.copy_from(&self.cloud.particles.column(i));
-            process
-                .model()
-                .transition_into(&work.x, input, dt, &mut work.y);
+            estim_core::in_place::transition_into(process.model(), &work.x, input, dt, &mut work.y);
             ensure_finite(&work.y, Stage::Prediction, Quantity::FunctionValue)?;
             work.next.set_column(i, &work.y);
             let log_eta = look_ahead.log_density(sensor, z, &work.next, i, T::zero())?;

@@ -120,8 +120,8 @@ where
         } = self;
         if !process.sample_into(x, input, dt, &mut rng, y) {
             let model = process.model();
-            model.transition_into(x, input, dt, y);
-            model.process_noise_into(x, input, dt, q);
+            estim_core::in_place::transition_into(model, x, input, dt, y);
+            estim_core::in_place::process_noise_into(model, x, input, dt, q);
             let factor = match q_cache {
                 Some((cached, factor, ())) if cached == q => factor,
                 _ => {
@@ -206,7 +206,7 @@ where
     ) -> Result<T> {
         let model = sensor.model();
         self.x.copy_from(&cloud.column(i));
-        model.measure_into(&self.x, &mut self.h);
+        estim_core::in_place::measure_into(model, &self.x, &mut self.h);
         ensure_shape(
             &self.h,
             z.nrows(),
@@ -214,8 +214,8 @@ where
             Stage::Update,
             Quantity::FunctionValue,
         )?;
-        model.residual_into(z, &self.h, &mut self.r);
-        model.measurement_noise_into(&self.x, &mut self.noise);
+        estim_core::in_place::residual_into(model, z, &self.h, &mut self.r);
+        estim_core::in_place::measurement_noise_into(model, &self.x, &mut self.noise);
         let custom = sensor.log_likelihood(z, &self.x);
         let log_g = match custom {
             Some(log_g) => log_g,
