@@ -7,7 +7,8 @@
 //!   [`Update::update_into`] with one [`UpdateReport`] made before timing (`update` would
 //!   allocate a fresh report each call). The bench's nonlinear models opt in to writing their
 //!   outputs in place ([`InPlace`]), as the library's linear models do, so a `Dyn` step
-//!   allocates nothing.
+//!   allocates nothing; with `DYNAMIC_BENCH_OWNED=1` they do not, and every value, noise and
+//!   Jacobian is a fresh allocation (what a model without the opt-in costs).
 //! - `estim_static`: the same with static sizes (`Const<n>`/`Const<n/2>` for n = 2, 4, 6, 12,
 //!   16, 24, 50), for the static/dynamic crossover and the static reference at small n.
 //! - `dmatrix`: a hand-written step with nalgebra `DMatrix` operator formulas, allocating
@@ -265,6 +266,8 @@ where
 {
     f: OMatrix<f64, N, N>,
     q: OMatrix<f64, N, N>,
+    /// Opted in to [`InPlace`] (off with `DYNAMIC_BENCH_OWNED=1`, to time the owned route).
+    in_place: bool,
 }
 
 impl<N: Dim> ProcessModel<f64, N> for SineProcess<N>
@@ -284,7 +287,7 @@ where
     }
 
     fn in_place(&self) -> Option<&dyn InPlace<f64, N, N>> {
-        Some(self)
+        self.in_place.then_some(self as &dyn InPlace<f64, N, N>)
     }
 }
 
@@ -381,6 +384,8 @@ where
 {
     h: OMatrix<f64, M, N>,
     r: OMatrix<f64, M, M>,
+    /// As [`SineProcess::in_place`].
+    in_place: bool,
 }
 
 impl<N: Dim, M: Dim> MeasurementModel<f64, N, M> for SineMeasurement<N, M>
@@ -398,7 +403,7 @@ where
     }
 
     fn in_place(&self) -> Option<&dyn InPlace<f64, N, M>> {
-        Some(self)
+        self.in_place.then_some(self as &dyn InPlace<f64, N, M>)
     }
 }
 
@@ -490,6 +495,7 @@ where
         let h = OMatrix::<f64, M, N>::from_column_slice_generic(m, n, p.h.as_slice());
         let q = OMatrix::<f64, N, N>::from_column_slice_generic(n, n, p.q.as_slice());
         let r = OMatrix::<f64, M, M>::from_column_slice_generic(m, m, p.r.as_slice());
+        let in_place = std::env::var_os("DYNAMIC_BENCH_OWNED").is_none();
         Self {
             linear_process: LinearProcess {
                 transition: f.clone(),
@@ -500,8 +506,8 @@ where
                 observation: h.clone(),
                 noise: r.clone(),
             },
-            sine_process: SineProcess { f, q },
-            sine_measurement: SineMeasurement { h, r },
+            sine_process: SineProcess { f, q, in_place },
+            sine_measurement: SineMeasurement { h, r, in_place },
             z_linear: vecs(&p.z_linear),
             z_sine: vecs(&p.z_sine),
             prior: Gaussian::new(
