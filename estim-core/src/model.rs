@@ -211,10 +211,12 @@ where
 {
     const VECTOR_SPACES: VectorSpaces = VectorSpaces::of_space(S::VECTOR);
 
+    #[inline(always)]
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, N> {
         self.model.transition(x, self.input, self.dt)
     }
 
+    #[inline(always)]
     fn difference(&self, a: &OVector<T, N>, b: &OVector<T, N>) -> OVector<T, N> {
         let mut out = a.clone();
         self.space.minus_into(a, b, &mut out);
@@ -292,6 +294,7 @@ where
     S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
+    #[inline(always)]
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, N, N> {
         self.model.transition_jacobian(x, self.input, self.dt)
     }
@@ -305,6 +308,7 @@ where
     S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
+    #[inline(always)]
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.transition_hessian(x, self.input, self.dt, k)
     }
@@ -361,10 +365,12 @@ where
     // The output ⊞ stays +: the state space decides.
     const VECTOR_SPACES: VectorSpaces = VectorSpaces::of_space(S::VECTOR);
 
+    #[inline(always)]
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, M> {
         self.model.measure(x)
     }
 
+    #[inline(always)]
     fn difference(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
         self.model.residual(a, b)
     }
@@ -390,6 +396,7 @@ where
     H: MeasurementJacobian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
+    #[inline(always)]
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
         self.model.measurement_jacobian(x)
     }
@@ -404,6 +411,7 @@ where
     H: MeasurementHessian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
+    #[inline(always)]
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.measurement_hessian(x, k)
     }
