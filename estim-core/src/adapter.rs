@@ -2,14 +2,13 @@
 //! process without input takes `&()`) and [`Offset`] (a measurement z = h(x) + d).
 //!
 //! Each passes every capability of the model through (values, Jacobians, Hessians, the
-//! linear markers and the batched sigma-point forms), so the adapted model runs in every
-//! filter the original did, at the original's speed.
+//! linear markers and the [`InPlace`] opt-in), so the adapted model runs in every filter the
+//! original did, at the original's speed.
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U0};
 
 use crate::alloc::Alloc;
-use crate::error::Result;
-use crate::function::SigmaScratch;
+use crate::in_place::InPlace;
 use crate::linear::{LinearMeasurement, LinearProcess};
 use crate::model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
@@ -57,28 +56,46 @@ where
     }
 
     #[inline(always)]
-    fn transition_into(&self, x: &OVector<T, N>, _: &(), dt: T, out: &mut OVector<T, N>) {
-        self.0.transition_into(x, &none(), dt, out);
+    fn in_place(&self) -> Option<&dyn InPlace<T, N, N, ()>> {
+        self.0.in_place().map(|_| self as &dyn InPlace<T, N, N, ()>)
+    }
+}
+
+/// The model's [`InPlace`] with the zero-length input (reached only when it has one).
+impl<T: Real, N: Dim, P> InPlace<T, N, N, ()> for NoInput<P>
+where
+    DefaultAllocator: Alloc<N>,
+    P: ProcessModel<T, N, Input = OVector<T, U0>>,
+{
+    fn value_into(&self, x: &OVector<T, N>, _: &(), dt: T, out: &mut OVector<T, N>) {
+        crate::in_place::transition_into(&self.0, x, &none(), dt, out);
     }
 
-    #[inline(always)]
-    fn process_noise_into(&self, x: &OVector<T, N>, _: &(), dt: T, out: &mut OMatrix<T, N, N>) {
-        self.0.process_noise_into(x, &none(), dt, out);
+    fn noise_into(&self, x: &OVector<T, N>, _: &(), dt: T, out: &mut OMatrix<T, N, N>) {
+        crate::in_place::process_noise_into(&self.0, x, &none(), dt, out);
     }
 
-    #[inline(always)]
-    fn transition_sigma_points_into(
+    fn residual_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
+        if let Some(m) = self.0.in_place() {
+            m.residual_into(a, b, out);
+        }
+    }
+
+    fn jacobian_into(&self, x: &OVector<T, N>, _: &(), dt: T, out: &mut OMatrix<T, N, N>) {
+        if let Some(m) = self.0.in_place() {
+            m.jacobian_into(x, &none(), dt, out);
+        }
+    }
+
+    fn hessian_into<'o>(
         &self,
-        mean: &OVector<T, N>,
-        offsets: &OMatrix<T, N, N>,
+        x: &OVector<T, N>,
         _: &(),
         dt: T,
-        plus: &mut OMatrix<T, N, N>,
-        minus: &mut OMatrix<T, N, N>,
-        scratch: &mut SigmaScratch<T, N, N>,
-    ) -> Result<()> {
-        self.0
-            .transition_sigma_points_into(mean, offsets, &none(), dt, plus, minus, scratch)
+        k: usize,
+        out: &'o mut OMatrix<T, N, N>,
+    ) -> Option<&'o mut OMatrix<T, N, N>> {
+        self.0.in_place()?.hessian_into(x, &none(), dt, k, out)
     }
 }
 
@@ -89,17 +106,6 @@ where
 {
     fn transition_jacobian(&self, x: &OVector<T, N>, _: &(), dt: T) -> OMatrix<T, N, N> {
         self.0.transition_jacobian(x, &none(), dt)
-    }
-
-    #[inline(always)]
-    fn transition_jacobian_into(
-        &self,
-        x: &OVector<T, N>,
-        _: &(),
-        dt: T,
-        out: &mut OMatrix<T, N, N>,
-    ) {
-        self.0.transition_jacobian_into(x, &none(), dt, out);
     }
 }
 
@@ -116,18 +122,6 @@ where
         k: usize,
     ) -> Option<OMatrix<T, N, N>> {
         self.0.transition_hessian(x, &none(), dt, k)
-    }
-
-    #[inline(always)]
-    fn transition_hessian_into(
-        &self,
-        x: &OVector<T, N>,
-        _: &(),
-        dt: T,
-        k: usize,
-        out: &mut OMatrix<T, N, N>,
-    ) -> bool {
-        self.0.transition_hessian_into(x, &none(), dt, k, out)
     }
 }
 
@@ -222,39 +216,45 @@ where
     }
 
     #[inline(always)]
-    fn measure_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
-        self.model.measure_into(x, out);
+    fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
+        self.model.in_place().map(|_| self as &dyn InPlace<T, N, M>)
+    }
+}
+
+/// The model's [`InPlace`] with the value shifted by d (reached only when it has one).
+impl<T: Real, N: Dim, M: Dim, H> InPlace<T, N, M> for Offset<H, T, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+    H: MeasurementModel<T, N, M>,
+{
+    fn value_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OVector<T, M>) {
+        crate::in_place::measure_into(&self.model, x, out);
         *out += &self.offset;
     }
 
-    #[inline(always)]
-    fn measurement_noise_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, M>) {
-        self.model.measurement_noise_into(x, out);
+    fn noise_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, M, M>) {
+        crate::in_place::measurement_noise_into(&self.model, x, out);
     }
 
-    #[inline(always)]
     fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
-        self.model.residual_into(a, b, out);
+        crate::in_place::residual_into(&self.model, a, b, out);
     }
 
-    /// The model's sigma-point values, each column shifted by d.
-    #[inline(always)]
-    fn measure_sigma_points_into(
-        &self,
-        mean: &OVector<T, N>,
-        offsets: &OMatrix<T, N, N>,
-        plus: &mut OMatrix<T, M, N>,
-        minus: &mut OMatrix<T, M, N>,
-        scratch: &mut SigmaScratch<T, N, M>,
-    ) -> Result<()> {
-        self.model
-            .measure_sigma_points_into(mean, offsets, plus, minus, scratch)?;
-        for values in [plus, minus] {
-            for mut column in values.column_iter_mut() {
-                column += &self.offset;
-            }
+    fn jacobian_into(&self, x: &OVector<T, N>, u: &(), dt: T, out: &mut OMatrix<T, M, N>) {
+        if let Some(m) = self.model.in_place() {
+            m.jacobian_into(x, u, dt, out);
         }
-        Ok(())
+    }
+
+    fn hessian_into<'o>(
+        &self,
+        x: &OVector<T, N>,
+        u: &(),
+        dt: T,
+        k: usize,
+        out: &'o mut OMatrix<T, N, N>,
+    ) -> Option<&'o mut OMatrix<T, N, N>> {
+        self.model.in_place()?.hessian_into(x, u, dt, k, out)
     }
 }
 
@@ -266,11 +266,6 @@ where
     fn measurement_jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
         self.model.measurement_jacobian(x)
     }
-
-    #[inline(always)]
-    fn measurement_jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
-        self.model.measurement_jacobian_into(x, out);
-    }
 }
 
 impl<T: Real, N: Dim, M: Dim, H> MeasurementHessian<T, N, M> for Offset<H, T, M>
@@ -280,16 +275,6 @@ where
 {
     fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.measurement_hessian(x, k)
-    }
-
-    #[inline(always)]
-    fn measurement_hessian_into(
-        &self,
-        x: &OVector<T, N>,
-        k: usize,
-        out: &mut OMatrix<T, N, N>,
-    ) -> bool {
-        self.model.measurement_hessian_into(x, k, out)
     }
 }
 

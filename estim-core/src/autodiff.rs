@@ -351,7 +351,7 @@ where
     m
 }
 
-/// An owned Hessian from an `_into` method: `Some` if it wrote one.
+/// An owned Hessian from the cache: `Some` if `into` wrote one.
 fn owned_hessian<T: AdReal, N: Dim>(
     x: &OVector<T, N>,
     into: impl FnOnce(&mut OMatrix<T, N, N>) -> bool,
@@ -440,22 +440,6 @@ where
         };
         jacobian(&f, x)
     }
-
-    #[inline(always)]
-    fn transition_jacobian_into(
-        &self,
-        x: &OVector<T, N>,
-        u: &Self::Input,
-        dt: T,
-        out: &mut OMatrix<T, N, N>,
-    ) {
-        let f = ProcessAt {
-            model: &self.model,
-            input: u,
-            dt,
-        };
-        jacobian_into(&f, x, out);
-    }
 }
 
 impl<T, N, P> ProcessHessian<T, N> for AutoDiff<P>
@@ -473,17 +457,6 @@ where
         dt: T,
         k: usize,
     ) -> Option<OMatrix<T, N, N>> {
-        owned_hessian(x, |out| self.transition_hessian_into(x, u, dt, k, out))
-    }
-
-    fn transition_hessian_into(
-        &self,
-        x: &OVector<T, N>,
-        u: &Self::Input,
-        dt: T,
-        k: usize,
-        out: &mut OMatrix<T, N, N>,
-    ) -> bool {
         let f = ProcessAt {
             model: &self.model,
             input: u,
@@ -493,7 +466,9 @@ where
             buf.push(dt.widen());
             u.push_key(buf);
         };
-        self.cached_hessian_into(&f, Kind::Process, key, x, k, out)
+        owned_hessian(x, |out| {
+            self.cached_hessian_into(&f, Kind::Process, key, x, k, out)
+        })
     }
 }
 
@@ -532,11 +507,6 @@ where
     fn measurement_jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
         jacobian(&MeasurementAt(&self.model), x)
     }
-
-    #[inline(always)]
-    fn measurement_jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
-        jacobian_into(&MeasurementAt(&self.model), x, out);
-    }
 }
 
 impl<T, N, M, H> MeasurementHessian<T, N, M> for AutoDiff<H>
@@ -548,17 +518,10 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
-        owned_hessian(x, |out| self.measurement_hessian_into(x, k, out))
-    }
-
-    fn measurement_hessian_into(
-        &self,
-        x: &OVector<T, N>,
-        k: usize,
-        out: &mut OMatrix<T, N, N>,
-    ) -> bool {
         let h = MeasurementAt(&self.model);
-        self.cached_hessian_into(&h, Kind::Measurement, |_| {}, x, k, out)
+        owned_hessian(x, |out| {
+            self.cached_hessian_into(&h, Kind::Measurement, |_| {}, x, k, out)
+        })
     }
 }
 
@@ -587,11 +550,6 @@ where
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
         jacobian(&FunctionAt(&self.model), x)
     }
-
-    #[inline(always)]
-    fn jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
-        jacobian_into(&FunctionAt(&self.model), x, out);
-    }
 }
 
 impl<T, N, M, G> TwiceDifferentiable<T, N, M> for AutoDiff<G>
@@ -603,11 +561,9 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
-        owned_hessian(x, |out| self.hessian_into(x, k, out))
-    }
-
-    fn hessian_into(&self, x: &OVector<T, N>, k: usize, out: &mut OMatrix<T, N, N>) -> bool {
         let g = FunctionAt(&self.model);
-        self.cached_hessian_into(&g, Kind::Function, |_| {}, x, k, out)
+        owned_hessian(x, |out| {
+            self.cached_hessian_into(&g, Kind::Function, |_| {}, x, k, out)
+        })
     }
 }

@@ -79,7 +79,7 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use crate::alloc::Alloc;
 use crate::checks::{ensure_finite, ensure_shape, ensure_symmetric};
 use crate::error::{Error, Quantity, Result, Stage};
-use crate::function::SigmaScratch;
+use crate::in_place::InPlace;
 use crate::linalg::psd_factor;
 use crate::linear::{LinearMeasurement, LinearProcess};
 use crate::model::{
@@ -226,34 +226,8 @@ where
     }
 
     #[inline(always)]
-    fn transition_into(&self, x: &OVector<T, N>, u: &P::Input, dt: T, out: &mut OVector<T, N>) {
-        self.0.transition_into(x, u, dt, out);
-    }
-
-    #[inline(always)]
-    fn process_noise_into(
-        &self,
-        x: &OVector<T, N>,
-        u: &P::Input,
-        dt: T,
-        out: &mut OMatrix<T, N, N>,
-    ) {
-        self.0.process_noise_into(x, u, dt, out);
-    }
-
-    #[inline(always)]
-    fn transition_sigma_points_into(
-        &self,
-        mean: &OVector<T, N>,
-        offsets: &OMatrix<T, N, N>,
-        u: &P::Input,
-        dt: T,
-        plus: &mut OMatrix<T, N, N>,
-        minus: &mut OMatrix<T, N, N>,
-        scratch: &mut SigmaScratch<T, N, N>,
-    ) -> Result<()> {
-        self.0
-            .transition_sigma_points_into(mean, offsets, u, dt, plus, minus, scratch)
+    fn in_place(&self) -> Option<&dyn InPlace<T, N, N, P::Input>> {
+        self.0.in_place()
     }
 }
 
@@ -263,17 +237,6 @@ where
 {
     fn transition_jacobian(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OMatrix<T, N, N> {
         self.0.transition_jacobian(x, u, dt)
-    }
-
-    #[inline(always)]
-    fn transition_jacobian_into(
-        &self,
-        x: &OVector<T, N>,
-        u: &P::Input,
-        dt: T,
-        out: &mut OMatrix<T, N, N>,
-    ) {
-        self.0.transition_jacobian_into(x, u, dt, out);
     }
 }
 
@@ -289,17 +252,6 @@ where
         k: usize,
     ) -> Option<OMatrix<T, N, N>> {
         self.0.transition_hessian(x, u, dt, k)
-    }
-
-    fn transition_hessian_into(
-        &self,
-        x: &OVector<T, N>,
-        u: &P::Input,
-        dt: T,
-        k: usize,
-        out: &mut OMatrix<T, N, N>,
-    ) -> bool {
-        self.0.transition_hessian_into(x, u, dt, k, out)
     }
 }
 
@@ -325,31 +277,8 @@ where
     }
 
     #[inline(always)]
-    fn measure_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
-        self.0.measure_into(x, out);
-    }
-
-    #[inline(always)]
-    fn measurement_noise_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, M>) {
-        self.0.measurement_noise_into(x, out);
-    }
-
-    #[inline(always)]
-    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
-        self.0.residual_into(a, b, out);
-    }
-
-    #[inline(always)]
-    fn measure_sigma_points_into(
-        &self,
-        mean: &OVector<T, N>,
-        offsets: &OMatrix<T, N, N>,
-        plus: &mut OMatrix<T, M, N>,
-        minus: &mut OMatrix<T, M, N>,
-        scratch: &mut SigmaScratch<T, N, M>,
-    ) -> Result<()> {
-        self.0
-            .measure_sigma_points_into(mean, offsets, plus, minus, scratch)
+    fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
+        self.0.in_place()
     }
 }
 
@@ -361,11 +290,6 @@ where
     fn measurement_jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
         self.0.measurement_jacobian(x)
     }
-
-    #[inline(always)]
-    fn measurement_jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
-        self.0.measurement_jacobian_into(x, out);
-    }
 }
 
 impl<T: Real, N: Dim, M: Dim, H: MeasurementHessian<T, N, M>> MeasurementHessian<T, N, M>
@@ -375,15 +299,6 @@ where
 {
     fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.0.measurement_hessian(x, k)
-    }
-
-    fn measurement_hessian_into(
-        &self,
-        x: &OVector<T, N>,
-        k: usize,
-        out: &mut OMatrix<T, N, N>,
-    ) -> bool {
-        self.0.measurement_hessian_into(x, k, out)
     }
 }
 

@@ -10,17 +10,16 @@
 //! so a function without Hessians fails at compile time when given to a second-order
 //! propagator.
 //!
-//! The provided `_into` methods write into a buffer the caller owns (already of the right
-//! shape). By default they store the owned result there, which for runtime (`Dyn`) sizes
-//! allocates; override them to make dynamic-size propagation, and the filter steps built on it,
-//! allocation-free. Whatever they write is shape-checked by the caller, so a wrong size is a
-//! typed error, not a wrong answer.
+//! **Allocation-free runtime sizes.** The methods return owned values, which for `Dyn` sizes
+//! allocate. A function that should not allocate implements the one opt-in trait
+//! [`InPlace`] and returns `Some(self)` from [`VectorFunction::in_place`]; the propagators
+//! then write its values, differences and derivatives into their own buffers. Whatever is
+//! written is shape-checked by the caller, so a wrong size is a typed error, not a wrong answer.
 
-use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
+use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
-use crate::checks::ensure_shape;
-use crate::error::{Quantity, Result, Stage};
+pub use crate::in_place::InPlace;
 use crate::manifold::add_into;
 use crate::scalar::Real;
 
@@ -52,12 +51,15 @@ where
         a - b
     }
 
-    /// `true` while [`input_plus_into`](Self::input_plus_into) and
-    /// [`output_plus_into`](Self::output_plus_into) are their defaults, plain vector addition:
-    /// the unscented propagator then forms μ ± Lⱼ and g(μ) + d̄ in one fused pass (a tenth of a
-    /// static 3/2 UKF step). **Set it to `false` when you override either**; debug builds check
-    /// that the fused pass agrees with [`input_plus_into`](Self::input_plus_into).
-    const VECTOR_SPACES: bool = true;
+    /// Whether both ⊞ are plain vector addition: lets the unscented propagator form μ ± Lⱼ and
+    /// g(μ) + d̄ in one fused pass (a tenth of a static 3/2 UKF step). Only the library can say
+    /// yes ([`VectorSpaces::NO`] is the one value outside estim-core): the state-space bridges
+    /// [`Transition`](crate::Transition) and [`Observation`](crate::Observation) take it from
+    /// their space ([`StateSpace::VECTOR`](crate::StateSpace::VECTOR)). A function of your own
+    /// keeps the default, which is correct whatever its ⊞ (the points go through
+    /// [`input_plus_into`](Self::input_plus_into)).
+    #[doc(hidden)]
+    const VECTOR_SPACES: VectorSpaces = VectorSpaces::NO;
 
     /// x ⊞ δ in the input space, into `out`: the point reached from x along the tangent δ
     /// (see [`StateSpace`](crate::StateSpace)). Sigma points are formed with it. Defaults to
@@ -75,159 +77,34 @@ where
         add_into(y, delta, out);
     }
 
-    /// [`eval`](Self::eval) into `out`.
+    /// The opt-in buffer-writing form of this function ([`InPlace`]), for allocation-free
+    /// propagation at runtime sizes: `Some(self)` from a function that implements it. The
+    /// default, `None`, evaluates through the owned methods.
     #[inline(always)]
-    fn eval_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
-        *out = self.eval(x);
+    fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
+        None
+    }
+}
+
+/// Whether a function's ⊞ are plain vector addition ([`VectorFunction::VECTOR_SPACES`]): a
+/// token that only estim-core can make true, so a function cannot claim it by mistake.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VectorSpaces(bool);
+
+impl VectorSpaces {
+    /// Not (known to be) plain addition: the safe value, and the default.
+    pub const NO: Self = Self(false);
+
+    /// From a state space's [`VECTOR`](crate::StateSpace::VECTOR).
+    pub(crate) const fn of_space(vector: bool) -> Self {
+        Self(vector)
     }
 
-    /// [`difference`](Self::difference) into `out`.
+    /// `true` for plain addition.
     #[inline(always)]
-    fn difference_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
-        *out = self.difference(a, b);
+    pub const fn get(self) -> bool {
+        self.0
     }
-
-    /// g at the 2n sigma points μ ⊞ ±Lⱼ (Lⱼ the columns of the n × n `offsets`): g(μ ⊞ Lⱼ)
-    /// into column j of `plus`, g(μ ⊞ (−Lⱼ)) into column j of `minus` (both m × n).
-    ///
-    /// The default forms the points with [`input_plus_into`](Self::input_plus_into) and maps
-    /// them one at a time through [`eval_into`](Self::eval_into), using `scratch` for the
-    /// tangent, the point and the value. Override it when the points map together
-    /// more cheaply: for g(x) = A x, A μ 1ᵀ ± A L is one matrix product A L for all 2n points
-    /// ([`LinearProcess`](crate::LinearProcess) does this). The unscented propagator calls it
-    /// for runtime-sized states.
-    ///
-    /// Errors: a value whose length is not the number of rows of `plus`
-    /// ([`DimensionMismatch`](crate::Error::DimensionMismatch), quantity `FunctionValue`).
-    #[inline(always)]
-    fn eval_sigma_points_into(
-        &self,
-        mean: &OVector<T, N>,
-        offsets: &OMatrix<T, N, N>,
-        plus: &mut OMatrix<T, M, N>,
-        minus: &mut OMatrix<T, M, N>,
-        scratch: &mut SigmaScratch<T, N, M>,
-    ) -> Result<()> {
-        sigma_points_through(self, mean, offsets, plus, minus, scratch)
-    }
-}
-
-/// The tangent, point and value buffers that [`VectorFunction::eval_sigma_points_into`]'s
-/// default (one point at a time) works in. Created by the caller; an implementation that maps all
-/// points at once ignores it.
-///
-/// ```
-/// use estim_core::{SigmaScratch, VectorFunction};
-/// use estim_core::nalgebra::{Const, Matrix2, Matrix1x2, Vector1, Vector2};
-///
-/// struct Sum;
-/// impl VectorFunction<f64, Const<2>, Const<1>> for Sum {
-///     fn eval(&self, x: &Vector2<f64>) -> Vector1<f64> {
-///         Vector1::new(x.sum())
-///     }
-/// }
-/// let (mut plus, mut minus) = (Matrix1x2::zeros(), Matrix1x2::zeros());
-/// let mut scratch = SigmaScratch::new(Const::<2>, Const::<1>);
-/// let offsets = Matrix2::identity();
-/// Sum.eval_sigma_points_into(&Vector2::new(1.0, 2.0), &offsets, &mut plus, &mut minus, &mut scratch)?;
-/// assert_eq!((plus, minus), (Matrix1x2::new(4.0, 4.0), Matrix1x2::new(2.0, 2.0)));
-/// # Ok::<(), estim_core::Error>(())
-/// ```
-#[derive(Clone, Debug)]
-pub struct SigmaScratch<T: Real, N: Dim, M: Dim>
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    delta: OVector<T, N>,
-    point: OVector<T, N>,
-    value: OVector<T, M>,
-}
-
-impl<T: Real, N: Dim, M: Dim> SigmaScratch<T, N, M>
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    /// Buffers for a map from `n` to `m` dimensions.
-    pub fn new(n: N, m: M) -> Self {
-        Self {
-            delta: OVector::zeros_generic(n, U1),
-            point: OVector::zeros_generic(n, U1),
-            value: OVector::zeros_generic(m, U1),
-        }
-    }
-}
-
-/// The 2n sigma points μ ⊞ ±Lⱼ, formed by `plus_into` (x, δ, out) and mapped one at a time by
-/// `eval_into` into the columns of `plus` and `minus`: the default of every
-/// `*_sigma_points_into` method. A value of the wrong length is a dimension error (quantity
-/// `FunctionValue`, stage `Propagation`).
-///
-/// With x + δ for ⊞ this is the arithmetic of forming μ + Lⱼ and μ − Lⱼ directly: −Lⱼ is
-/// exact, and μ + (−Lⱼ) is the IEEE result of μ − Lⱼ.
-#[inline(always)]
-pub(crate) fn sigma_points_one_by_one<T: Real, N: Dim, M: Dim>(
-    mean: &OVector<T, N>,
-    offsets: &OMatrix<T, N, N>,
-    plus: &mut OMatrix<T, M, N>,
-    minus: &mut OMatrix<T, M, N>,
-    scratch: &mut SigmaScratch<T, N, M>,
-    mut plus_into: impl FnMut(&OVector<T, N>, &OVector<T, N>, &mut OVector<T, N>),
-    mut eval_into: impl FnMut(&OVector<T, N>, &mut OVector<T, M>),
-) -> Result<()>
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    let n = mean.nrows();
-    let m = plus.nrows();
-    if scratch.point.nrows() != n {
-        scratch.point = mean.clone();
-    }
-    if scratch.delta.nrows() != n {
-        scratch.delta = mean.clone();
-    }
-    for j in 0..n {
-        let column = &offsets.as_slice()[j * n..(j + 1) * n];
-        for (sign, values) in [(T::one(), &mut *plus), (-T::one(), &mut *minus)] {
-            for (di, &li) in scratch.delta.as_mut_slice().iter_mut().zip(column) {
-                *di = sign * li;
-            }
-            plus_into(mean, &scratch.delta, &mut scratch.point);
-            eval_into(&scratch.point, &mut scratch.value);
-            let stage = Stage::Propagation;
-            ensure_shape(&scratch.value, m, 1, stage, Quantity::FunctionValue)?;
-            values.as_mut_slice()[j * m..(j + 1) * m].copy_from_slice(scratch.value.as_slice());
-        }
-    }
-    Ok(())
-}
-
-/// [`VectorFunction::eval_sigma_points_into`]'s default: g at μ ⊞ ±Lⱼ one point at a time,
-/// through g's own ⊞ and value (also what a non-vector state space falls back to).
-#[inline(always)]
-pub(crate) fn sigma_points_through<T, N, M, G>(
-    g: &G,
-    mean: &OVector<T, N>,
-    offsets: &OMatrix<T, N, N>,
-    plus: &mut OMatrix<T, M, N>,
-    minus: &mut OMatrix<T, M, N>,
-    scratch: &mut SigmaScratch<T, N, M>,
-) -> Result<()>
-where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    G: VectorFunction<T, N, M> + ?Sized,
-    DefaultAllocator: Alloc<N, M>,
-{
-    sigma_points_one_by_one(
-        mean,
-        offsets,
-        plus,
-        minus,
-        scratch,
-        |x, delta, out| g.input_plus_into(x, delta, out),
-        |x, y| g.eval_into(x, y),
-    )
 }
 
 /// A [`VectorFunction`] with an analytic Jacobian.
@@ -237,12 +114,6 @@ where
 {
     /// J(x) = ∂g/∂x, an m × n matrix: row k is the gradient of gₖ.
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N>;
-
-    /// [`jacobian`](Self::jacobian) into `out`.
-    #[inline(always)]
-    fn jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
-        *out = self.jacobian(x);
-    }
 }
 
 /// A [`Differentiable`] function with analytic Hessians.
@@ -253,31 +124,6 @@ where
     /// Hₖ(x) = ∂²gₖ/∂x², the symmetric n × n Hessian of output component `k` (0-based), or
     /// `None` when gₖ is affine in x (its Hessian is zero), so no work is spent on it.
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>>;
-
-    /// [`hessian`](Self::hessian) into `out`: `true` if it wrote Hₖ, `false` if gₖ is affine
-    /// (then `out` is unspecified).
-    #[inline(always)]
-    fn hessian_into(&self, x: &OVector<T, N>, k: usize, out: &mut OMatrix<T, N, N>) -> bool {
-        store_hessian(self.hessian(x, k), out)
-    }
-}
-
-/// Stores `Some(h)` into `out` (`true`); `None` leaves it (`false`).
-#[inline(always)]
-pub(crate) fn store_hessian<T: Real, N: Dim>(
-    h: Option<OMatrix<T, N, N>>,
-    out: &mut OMatrix<T, N, N>,
-) -> bool
-where
-    DefaultAllocator: Alloc<N>,
-{
-    match h {
-        Some(h) => {
-            *out = h;
-            true
-        }
-        None => false,
-    }
 }
 
 /// Marker: g is affine, g(x) = J x + c with a constant Jacobian J, so linearisation is exact.

@@ -18,6 +18,7 @@
 //!   against a reference model (such as its automatic derivatives).
 //! - `autodiff` (feature `autodiff`): models written once over a dual-number scalar, with
 //!   their Jacobians and Hessians derived automatically (num-dual).
+//! - [`in_place`]: the one opt-in trait for allocation-free steps at runtime sizes.
 //! - [`checks`]: the checks the filters run on what they are handed (finite, shape,
 //!   symmetric, positive semi-definite), each with a typed [`Error`], for models to use too.
 //! - [`psd_factor`]: the square root of a positive semi-definite covariance.
@@ -72,8 +73,8 @@
 //!
 //! Sizes are generic: the same code serves `SVector<f64, 6>` (stack only, no heap allocation)
 //! and `DVector<f64>` (heavy kernels on faer; allocation-free once a propagator's
-//! [workspace](PropagatorWorkspace) is sized, for models that implement the `_into` methods). The allocator bounds nalgebra needs are
-//! gathered in [`Alloc`].
+//! [workspace](PropagatorWorkspace) is sized, for models that opt in through [`InPlace`]). The
+//! allocator bounds nalgebra needs are gathered in [`Alloc`].
 //!
 //! **Without std** (default feature `std` off) the crate is `#![no_std]` and allocates nothing:
 //! static sizes, `f32` and `f64`, every propagator but [`Sampled`], the angle and manifold
@@ -97,6 +98,7 @@ pub mod derivative;
 pub mod error;
 pub mod function;
 pub mod gaussian;
+pub mod in_place;
 #[doc(hidden)]
 pub mod kernel;
 #[doc(hidden)]
@@ -114,12 +116,11 @@ pub use alloc::Alloc;
 pub use angle::{wrap_angle, wrap_components};
 pub use checked::Checked;
 pub use error::{Error, Parameter, Quantity, Stage};
-pub use function::{
-    AffineFunction, Differentiable, SigmaScratch, TwiceDifferentiable, VectorFunction,
-};
+pub use function::{AffineFunction, Differentiable, TwiceDifferentiable, VectorFunction};
 pub use gaussian::Gaussian;
 #[cfg(feature = "std")]
 pub use gaussian::GaussianSampler;
+pub use in_place::InPlace;
 pub use linalg::psd_factor;
 pub use linear::{LinearMeasurement, LinearProcess};
 pub use manifold::{Euclidean, StateSpace, WrappedAngles};

@@ -10,18 +10,16 @@
 //! To check Q and R once, when the model is built (symmetric, positive semi-definite), build
 //! it with [`LinearProcess::try_new`] / [`LinearMeasurement::try_new`] ([`crate::checked`]).
 //!
-//! Both implement the `_into` forms, so with `Dyn` sizes a filter step over them allocates
-//! nothing. Matrices whose shapes disagree with the state are reported by the filter as a
+//! Both implement [`InPlace`] (their matrices copied or multiplied into the filter's buffers),
+//! so with `Dyn` sizes a filter step over them allocates nothing. Matrices whose shapes disagree with the state are reported by the filter as a
 //! [`DimensionMismatch`](crate::Error::DimensionMismatch) (or, for an inner dimension nalgebra
 //! cannot multiply, by nalgebra's panic).
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
-use crate::error::Result;
-use crate::function::{SigmaScratch, sigma_points_one_by_one};
+use crate::in_place::InPlace;
 use crate::kernel::{self, Accum};
-use crate::manifold::add_into;
 use crate::model::{
     LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
     MeasurementModel, ProcessHessian, ProcessJacobian, ProcessModel,
@@ -58,13 +56,18 @@ where
     }
 
     #[inline(always)]
-    fn transition_into(
-        &self,
-        x: &OVector<T, N>,
-        u: &OVector<T, U>,
-        _dt: T,
-        out: &mut OVector<T, N>,
-    ) {
+    fn in_place(&self) -> Option<&dyn InPlace<T, N, N, OVector<T, U>>> {
+        Some(self)
+    }
+}
+
+/// F x + B u, Q, F and no Hessians, written into the caller's buffers.
+impl<T: Real, N: Dim, U: Dim> InPlace<T, N, N, OVector<T, U>> for LinearProcess<T, N, U>
+where
+    DefaultAllocator: Alloc<N, U>,
+{
+    #[inline(always)]
+    fn value_into(&self, x: &OVector<T, N>, u: &OVector<T, U>, _dt: T, out: &mut OVector<T, N>) {
         let (f, b) = (&self.transition, &self.input);
         let fits = f.shape() == (out.nrows(), x.nrows()) && b.shape() == (out.nrows(), u.nrows());
         if fits {
@@ -81,51 +84,36 @@ where
     }
 
     #[inline(always)]
-    fn process_noise_into(
+    fn noise_into(&self, _: &OVector<T, N>, _: &OVector<T, U>, _dt: T, out: &mut OMatrix<T, N, N>) {
+        assign(out, &self.noise);
+    }
+
+    #[inline(always)]
+    fn residual_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
+        crate::manifold::subtract_into(a, b, out);
+    }
+
+    #[inline(always)]
+    fn jacobian_into(
         &self,
         _: &OVector<T, N>,
         _: &OVector<T, U>,
         _dt: T,
         out: &mut OMatrix<T, N, N>,
     ) {
-        assign(out, &self.noise);
+        assign(out, &self.transition);
     }
 
-    /// (F μ + B u) ± F Lⱼ: one matrix product F L for all 2n sigma points instead of a
-    /// matrix–vector product each.
     #[inline(always)]
-    fn transition_sigma_points_into(
+    fn hessian_into<'o>(
         &self,
-        mean: &OVector<T, N>,
-        offsets: &OMatrix<T, N, N>,
-        u: &OVector<T, U>,
-        dt: T,
-        plus: &mut OMatrix<T, N, N>,
-        minus: &mut OMatrix<T, N, N>,
-        scratch: &mut SigmaScratch<T, N, N>,
-    ) -> Result<()> {
-        let (f, b) = (&self.transition, &self.input);
-        let n = mean.nrows();
-        let fits = f.shape() == (n, n)
-            && b.shape() == (n, u.nrows())
-            && offsets.shape() == (n, n)
-            && plus.shape() == (n, n)
-            && minus.shape() == (n, n);
-        if !fits {
-            // Point by point, where the filter reports the wrong shapes.
-            let eval = |x: &OVector<T, N>, y: &mut OVector<T, N>| self.transition_into(x, u, dt, y);
-            return sigma_points_one_by_one::<T, N, N>(
-                mean, offsets, plus, minus, scratch, add_into, eval,
-            );
-        }
-        kernel::mul(plus, Accum::Replace, T::one(), f, offsets);
-        // The centre F μ + B u in the first column of `minus`, then spread.
-        if n > 0 {
-            kernel::mul_into_column(minus, 0, Accum::Replace, T::one(), f, mean);
-            kernel::mul_into_column(minus, 0, Accum::Add, T::one(), b, u);
-        }
-        centre_plus_minus(n, plus.as_mut_slice(), minus.as_mut_slice());
-        Ok(())
+        _: &OVector<T, N>,
+        _: &OVector<T, U>,
+        _dt: T,
+        _: usize,
+        _: &'o mut OMatrix<T, N, N>,
+    ) -> Option<&'o mut OMatrix<T, N, N>> {
+        None
     }
 }
 
@@ -142,31 +130,6 @@ where
     }
 }
 
-/// With `plus` holding A L (columns of `rows`) and the first column of `minus` the centre c:
-/// `plus` ← c + A Lⱼ and `minus` ← c − A Lⱼ, column by column (the first column last, as it
-/// holds c).
-fn centre_plus_minus<T: Real>(rows: usize, plus: &mut [T], minus: &mut [T]) {
-    if rows == 0 || minus.is_empty() {
-        return;
-    }
-    let (centre, rest) = minus.split_at_mut(rows);
-    let (first_plus, rest_plus) = plus.split_at_mut(rows);
-    for (p, m) in rest_plus
-        .chunks_exact_mut(rows)
-        .zip(rest.chunks_exact_mut(rows))
-    {
-        for ((pi, mi), &ci) in p.iter_mut().zip(m.iter_mut()).zip(centre.iter()) {
-            *mi = ci - *pi;
-            *pi += ci;
-        }
-    }
-    for (pi, ci) in first_plus.iter_mut().zip(centre.iter_mut()) {
-        let c = *ci;
-        *ci = c - *pi;
-        *pi += c;
-    }
-}
-
 impl<T: Real, N: Dim, U: Dim> ProcessJacobian<T, N> for LinearProcess<T, N, U>
 where
     DefaultAllocator: Alloc<N, U>,
@@ -178,17 +141,6 @@ where
         _dt: T,
     ) -> OMatrix<T, N, N> {
         self.transition.clone()
-    }
-
-    #[inline(always)]
-    fn transition_jacobian_into(
-        &self,
-        _: &OVector<T, N>,
-        _: &OVector<T, U>,
-        _dt: T,
-        out: &mut OMatrix<T, N, N>,
-    ) {
-        assign(out, &self.transition);
     }
 }
 
@@ -238,7 +190,18 @@ where
     }
 
     #[inline(always)]
-    fn measure_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
+    fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
+        Some(self)
+    }
+}
+
+/// H x, R, x − y, H and no Hessians, written into the caller's buffers.
+impl<T: Real, N: Dim, M: Dim> InPlace<T, N, M> for LinearMeasurement<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    #[inline(always)]
+    fn value_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OVector<T, M>) {
         let h = &self.observation;
         if h.shape() == (out.nrows(), x.nrows()) {
             kernel::mul(out, Accum::Replace, T::one(), h, x);
@@ -248,7 +211,7 @@ where
     }
 
     #[inline(always)]
-    fn measurement_noise_into(&self, _: &OVector<T, N>, out: &mut OMatrix<T, M, M>) {
+    fn noise_into(&self, _: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, M, M>) {
         assign(out, &self.noise);
     }
 
@@ -257,40 +220,21 @@ where
         crate::manifold::subtract_into(a, b, out);
     }
 
-    /// H μ ± H Lⱼ: one matrix product H L for all 2n sigma points.
     #[inline(always)]
-    fn measure_sigma_points_into(
+    fn jacobian_into(&self, _: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, M, N>) {
+        assign(out, &self.observation);
+    }
+
+    #[inline(always)]
+    fn hessian_into<'o>(
         &self,
-        mean: &OVector<T, N>,
-        offsets: &OMatrix<T, N, N>,
-        plus: &mut OMatrix<T, M, N>,
-        minus: &mut OMatrix<T, M, N>,
-        scratch: &mut SigmaScratch<T, N, M>,
-    ) -> Result<()> {
-        let h = &self.observation;
-        let (m, n) = (h.nrows(), mean.nrows());
-        let fits = h.ncols() == n
-            && offsets.shape() == (n, n)
-            && plus.shape() == (m, n)
-            && minus.shape() == (m, n);
-        if !fits {
-            // Point by point, where the filter reports the wrong shapes.
-            return sigma_points_one_by_one(
-                mean,
-                offsets,
-                plus,
-                minus,
-                scratch,
-                add_into,
-                |x, y| self.measure_into(x, y),
-            );
-        }
-        kernel::mul(plus, Accum::Replace, T::one(), h, offsets);
-        if n > 0 {
-            kernel::mul_into_column(minus, 0, Accum::Replace, T::one(), h, mean);
-        }
-        centre_plus_minus(m, plus.as_mut_slice(), minus.as_mut_slice());
-        Ok(())
+        _: &OVector<T, N>,
+        _: &(),
+        _: T,
+        _: usize,
+        _: &'o mut OMatrix<T, N, N>,
+    ) -> Option<&'o mut OMatrix<T, N, N>> {
+        None
     }
 }
 
@@ -300,11 +244,6 @@ where
 {
     fn measurement_jacobian(&self, _: &OVector<T, N>) -> OMatrix<T, M, N> {
         self.observation.clone()
-    }
-
-    #[inline(always)]
-    fn measurement_jacobian_into(&self, _: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
-        assign(out, &self.observation);
     }
 }
 

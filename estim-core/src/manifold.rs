@@ -56,9 +56,9 @@ pub trait StateSpace<T: Real, N: Dim>: Clone + core::fmt::Debug
 where
     DefaultAllocator: Alloc<N>,
 {
-    /// `true` only for plain vector addition and subtraction: lets batch fast paths (e.g.
-    /// [`LinearProcess`](crate::LinearProcess)'s one-product sigma points, the update's fused
-    /// x + K ν) run, which would bypass ⊞.
+    /// `true` only for plain vector addition and subtraction (the library's [`Euclidean`]):
+    /// lets fused fast paths run that would bypass ⊞ (the unscented propagator's μ ± Lⱼ, the
+    /// update's x + K ν). The default, `false`, is right for every space, only slower.
     const VECTOR: bool = false;
 
     /// out ← x ⊞ δ.

@@ -18,23 +18,21 @@
 //!
 //! Each capability has one required method (the value traits also require their noise).
 //!
-//! **Allocation-free dynamic sizes.** The provided `_into` methods write into a buffer the
-//! filter owns (already of the right shape). The defaults store the owned result, which for
-//! `Dyn` sizes allocates; a model meant for large runtime-sized states overrides the `_into`
-//! methods (as [`LinearProcess`](crate::LinearProcess) and
-//! [`LinearMeasurement`](crate::LinearMeasurement) do), and then a filter step allocates
-//! nothing. What a model writes is shape-checked: a wrong size is a
-//! [`DimensionMismatch`](crate::Error::DimensionMismatch), never a wrong answer.
+//! **Allocation-free dynamic sizes.** The methods return owned values, which for `Dyn` sizes
+//! allocate. A model meant for large runtime-sized states implements the one opt-in trait
+//! [`InPlace`] and returns `Some(self)` from its [`ProcessModel::in_place`] /
+//! [`MeasurementModel::in_place`] (as [`LinearProcess`](crate::LinearProcess) and
+//! [`LinearMeasurement`](crate::LinearMeasurement) do); then a filter step allocates nothing
+//! ([`crate::in_place`]).
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
-use crate::error::Result;
 use crate::function::{
-    AffineFunction, Differentiable, SigmaScratch, TwiceDifferentiable, VectorFunction,
-    sigma_points_one_by_one, sigma_points_through, store_hessian,
+    AffineFunction, Differentiable, TwiceDifferentiable, VectorFunction, VectorSpaces,
 };
-use crate::manifold::{Euclidean, StateSpace, add_into};
+use crate::in_place::InPlace;
+use crate::manifold::{Euclidean, StateSpace};
 use crate::scalar::Real;
 
 /// A discrete-time process model x⁺ = f(x, u, Δt) + w, w ~ N(0, Q(x, u, Δt)).
@@ -52,42 +50,11 @@ where
     /// evaluate it once per prediction, at the filtered mean x̂ the step starts from.
     fn process_noise(&self, x: &OVector<T, N>, u: &Self::Input, dt: T) -> OMatrix<T, N, N>;
 
-    /// [`transition`](Self::transition) into `out`.
+    /// Opt-in for allocation-free runtime sizes: `Some(self)` from a model that implements
+    /// [`InPlace`]; the default, `None`, evaluates through the owned methods.
     #[inline(always)]
-    fn transition_into(&self, x: &OVector<T, N>, u: &Self::Input, dt: T, out: &mut OVector<T, N>) {
-        *out = self.transition(x, u, dt);
-    }
-
-    /// [`process_noise`](Self::process_noise) into `out`.
-    #[inline(always)]
-    fn process_noise_into(
-        &self,
-        x: &OVector<T, N>,
-        u: &Self::Input,
-        dt: T,
-        out: &mut OMatrix<T, N, N>,
-    ) {
-        *out = self.process_noise(x, u, dt);
-    }
-
-    /// f(·, u, Δt) at the 2n sigma points μ ± Lⱼ into the columns of `plus` and `minus`:
-    /// see [`VectorFunction::eval_sigma_points_into`]. The default maps them one at a time
-    /// through [`transition_into`](Self::transition_into); a model that maps them with one
-    /// matrix product saves most of the unscented prediction's cost.
-    #[inline(always)]
-    fn transition_sigma_points_into(
-        &self,
-        mean: &OVector<T, N>,
-        offsets: &OMatrix<T, N, N>,
-        u: &Self::Input,
-        dt: T,
-        plus: &mut OMatrix<T, N, N>,
-        minus: &mut OMatrix<T, N, N>,
-        scratch: &mut SigmaScratch<T, N, N>,
-    ) -> Result<()> {
-        sigma_points_one_by_one(mean, offsets, plus, minus, scratch, add_into, |x, y| {
-            self.transition_into(x, u, dt, y)
-        })
+    fn in_place(&self) -> Option<&dyn InPlace<T, N, N, Self::Input>> {
+        None
     }
 }
 
@@ -98,18 +65,6 @@ where
 {
     /// F = ∂f/∂x at (x, u, Δt).
     fn transition_jacobian(&self, x: &OVector<T, N>, u: &Self::Input, dt: T) -> OMatrix<T, N, N>;
-
-    /// [`transition_jacobian`](Self::transition_jacobian) into `out`.
-    #[inline(always)]
-    fn transition_jacobian_into(
-        &self,
-        x: &OVector<T, N>,
-        u: &Self::Input,
-        dt: T,
-        out: &mut OMatrix<T, N, N>,
-    ) {
-        *out = self.transition_jacobian(x, u, dt);
-    }
 }
 
 /// A [`ProcessJacobian`] with analytic Hessians.
@@ -125,20 +80,6 @@ where
         dt: T,
         k: usize,
     ) -> Option<OMatrix<T, N, N>>;
-
-    /// [`transition_hessian`](Self::transition_hessian) into `out`: `true` if written,
-    /// `false` if fₖ is affine.
-    #[inline(always)]
-    fn transition_hessian_into(
-        &self,
-        x: &OVector<T, N>,
-        u: &Self::Input,
-        dt: T,
-        k: usize,
-        out: &mut OMatrix<T, N, N>,
-    ) -> bool {
-        store_hessian(self.transition_hessian(x, u, dt, k), out)
-    }
 }
 
 /// Marker: f is affine in x, f(x, u, Δt) = F(u, Δt) x + b(u, Δt), with F the
@@ -176,41 +117,11 @@ where
         a - b
     }
 
-    /// [`measure`](Self::measure) into `out`.
+    /// Opt-in for allocation-free runtime sizes: `Some(self)` from a model that implements
+    /// [`InPlace`]; the default, `None`, evaluates through the owned methods.
     #[inline(always)]
-    fn measure_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
-        *out = self.measure(x);
-    }
-
-    /// [`measurement_noise`](Self::measurement_noise) into `out`.
-    #[inline(always)]
-    fn measurement_noise_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, M>) {
-        *out = self.measurement_noise(x);
-    }
-
-    /// [`residual`](Self::residual) into `out`. The default stores `residual(a, b)`; a model
-    /// that keeps the default subtraction can make it allocation-free for `Dyn` sizes with
-    /// `out.copy_from(a); *out -= b;`.
-    #[inline(always)]
-    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
-        *out = self.residual(a, b);
-    }
-
-    /// h at the 2n sigma points μ ± Lⱼ into the columns of `plus` and `minus` (m × n): see
-    /// [`VectorFunction::eval_sigma_points_into`]. The default maps them one at a time through
-    /// [`measure_into`](Self::measure_into).
-    #[inline(always)]
-    fn measure_sigma_points_into(
-        &self,
-        mean: &OVector<T, N>,
-        offsets: &OMatrix<T, N, N>,
-        plus: &mut OMatrix<T, M, N>,
-        minus: &mut OMatrix<T, M, N>,
-        scratch: &mut SigmaScratch<T, N, M>,
-    ) -> Result<()> {
-        sigma_points_one_by_one(mean, offsets, plus, minus, scratch, add_into, |x, y| {
-            self.measure_into(x, y)
-        })
+    fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
+        None
     }
 }
 
@@ -221,12 +132,6 @@ where
 {
     /// H = ∂h/∂x at x.
     fn measurement_jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N>;
-
-    /// [`measurement_jacobian`](Self::measurement_jacobian) into `out`.
-    #[inline(always)]
-    fn measurement_jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
-        *out = self.measurement_jacobian(x);
-    }
 }
 
 /// A [`MeasurementJacobian`] with analytic Hessians.
@@ -236,18 +141,6 @@ where
 {
     /// ∂²hₖ/∂x² of measurement component `k`, or `None` when hₖ is affine in x.
     fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>>;
-
-    /// [`measurement_hessian`](Self::measurement_hessian) into `out`: `true` if written,
-    /// `false` if hₖ is affine.
-    #[inline(always)]
-    fn measurement_hessian_into(
-        &self,
-        x: &OVector<T, N>,
-        k: usize,
-        out: &mut OMatrix<T, N, N>,
-    ) -> bool {
-        store_hessian(self.measurement_hessian(x, k), out)
-    }
 }
 
 /// Marker: h is affine in x, h(x) = H x + c, with H the
@@ -316,15 +209,18 @@ where
     S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
-    const VECTOR_SPACES: bool = S::VECTOR;
+    const VECTOR_SPACES: VectorSpaces = VectorSpaces::of_space(S::VECTOR);
 
+    #[inline(always)]
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, N> {
         self.model.transition(x, self.input, self.dt)
     }
 
     #[inline(always)]
-    fn eval_into(&self, x: &OVector<T, N>, out: &mut OVector<T, N>) {
-        self.model.transition_into(x, self.input, self.dt, out);
+    fn difference(&self, a: &OVector<T, N>, b: &OVector<T, N>) -> OVector<T, N> {
+        let mut out = a.clone();
+        self.space.minus_into(a, b, &mut out);
+        out
     }
 
     #[inline(always)]
@@ -337,35 +233,56 @@ where
         self.space.plus_into(y, delta, out);
     }
 
-    /// The model's batch hook on a vector space; otherwise the points one at a time through
-    /// ⊞ (a batch hook forms μ ± Lⱼ with + and would bypass it).
     #[inline(always)]
-    fn eval_sigma_points_into(
-        &self,
-        mean: &OVector<T, N>,
-        offsets: &OMatrix<T, N, N>,
-        plus: &mut OMatrix<T, N, N>,
-        minus: &mut OMatrix<T, N, N>,
-        scratch: &mut SigmaScratch<T, N, N>,
-    ) -> Result<()> {
-        if S::VECTOR {
-            self.model.transition_sigma_points_into(
-                mean, offsets, self.input, self.dt, plus, minus, scratch,
-            )
-        } else {
-            sigma_points_through(self, mean, offsets, plus, minus, scratch)
+    fn in_place(&self) -> Option<&dyn InPlace<T, N, N>> {
+        self.model.in_place().map(|_| self as &dyn InPlace<T, N, N>)
+    }
+}
+
+/// The model's [`InPlace`] at this step's input and Δt (reached only when the model has one),
+/// with the state space's ⊟ as the residual.
+impl<P, U, T, N, S> InPlace<T, N, N> for Transition<'_, P, U, T, S>
+where
+    T: Real,
+    N: Dim,
+    P: ProcessModel<T, N, Input = U>,
+    S: StateSpace<T, N>,
+    DefaultAllocator: Alloc<N>,
+{
+    #[inline(always)]
+    fn value_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OVector<T, N>) {
+        crate::in_place::transition_into(self.model, x, self.input, self.dt, out);
+    }
+
+    #[inline(always)]
+    fn noise_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, N, N>) {
+        crate::in_place::process_noise_into(self.model, x, self.input, self.dt, out);
+    }
+
+    #[inline(always)]
+    fn residual_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
+        self.space.minus_into(a, b, out);
+    }
+
+    #[inline(always)]
+    fn jacobian_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, N, N>) {
+        if let Some(m) = self.model.in_place() {
+            m.jacobian_into(x, self.input, self.dt, out);
         }
     }
 
-    fn difference(&self, a: &OVector<T, N>, b: &OVector<T, N>) -> OVector<T, N> {
-        let mut out = a.clone();
-        self.space.minus_into(a, b, &mut out);
-        out
-    }
-
     #[inline(always)]
-    fn difference_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
-        self.space.minus_into(a, b, out);
+    fn hessian_into<'o>(
+        &self,
+        x: &OVector<T, N>,
+        _: &(),
+        _: T,
+        k: usize,
+        out: &'o mut OMatrix<T, N, N>,
+    ) -> Option<&'o mut OMatrix<T, N, N>> {
+        self.model
+            .in_place()?
+            .hessian_into(x, self.input, self.dt, k, out)
     }
 }
 
@@ -377,14 +294,9 @@ where
     S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
+    #[inline(always)]
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, N, N> {
         self.model.transition_jacobian(x, self.input, self.dt)
-    }
-
-    #[inline(always)]
-    fn jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, N, N>) {
-        self.model
-            .transition_jacobian_into(x, self.input, self.dt, out);
     }
 }
 
@@ -396,14 +308,9 @@ where
     S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
+    #[inline(always)]
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.transition_hessian(x, self.input, self.dt, k)
-    }
-
-    #[inline(always)]
-    fn hessian_into(&self, x: &OVector<T, N>, k: usize, out: &mut OMatrix<T, N, N>) -> bool {
-        self.model
-            .transition_hessian_into(x, self.input, self.dt, k, out)
     }
 }
 
@@ -456,19 +363,16 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     // The output ⊞ stays +: the state space decides.
-    const VECTOR_SPACES: bool = S::VECTOR;
+    const VECTOR_SPACES: VectorSpaces = VectorSpaces::of_space(S::VECTOR);
 
+    #[inline(always)]
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, M> {
         self.model.measure(x)
     }
 
+    #[inline(always)]
     fn difference(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
         self.model.residual(a, b)
-    }
-
-    #[inline(always)]
-    fn eval_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
-        self.model.measure_into(x, out);
     }
 
     #[inline(always)]
@@ -476,28 +380,10 @@ where
         self.space.plus_into(x, delta, out);
     }
 
-    /// The model's batch hook on a vector space; otherwise the points one at a time through
-    /// ⊞.
+    /// The model's own: its value, residual and derivatives in place.
     #[inline(always)]
-    fn eval_sigma_points_into(
-        &self,
-        mean: &OVector<T, N>,
-        offsets: &OMatrix<T, N, N>,
-        plus: &mut OMatrix<T, M, N>,
-        minus: &mut OMatrix<T, M, N>,
-        scratch: &mut SigmaScratch<T, N, M>,
-    ) -> Result<()> {
-        if S::VECTOR {
-            self.model
-                .measure_sigma_points_into(mean, offsets, plus, minus, scratch)
-        } else {
-            sigma_points_through(self, mean, offsets, plus, minus, scratch)
-        }
-    }
-
-    #[inline(always)]
-    fn difference_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
-        self.model.residual_into(a, b, out);
+    fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
+        self.model.in_place()
     }
 }
 
@@ -510,13 +396,9 @@ where
     H: MeasurementJacobian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
+    #[inline(always)]
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
         self.model.measurement_jacobian(x)
-    }
-
-    #[inline(always)]
-    fn jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
-        self.model.measurement_jacobian_into(x, out);
     }
 }
 
@@ -529,13 +411,9 @@ where
     H: MeasurementHessian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
+    #[inline(always)]
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.measurement_hessian(x, k)
-    }
-
-    #[inline(always)]
-    fn hessian_into(&self, x: &OVector<T, N>, k: usize, out: &mut OMatrix<T, N, N>) -> bool {
-        self.model.measurement_hessian_into(x, k, out)
     }
 }
 

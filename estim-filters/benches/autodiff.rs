@@ -58,8 +58,8 @@ where
     P: ProcessJacobian<f64, U6, Input = ()>,
     S: MeasurementJacobian<f64, U6, U4>,
 {
-    p.transition_jacobian_into(x, &(), DT, &mut d.f);
-    s.measurement_jacobian_into(x, &mut d.h);
+    d.f = p.transition_jacobian(x, &(), DT);
+    d.h = s.measurement_jacobian(x);
 }
 
 /// F, H and every Hessian of f and h through the models' traits, as the second-order EKF asks
@@ -72,10 +72,14 @@ where
     jacobians(p, s, x, d);
     d.nonlinear = 0;
     for (k, h) in d.hf.iter_mut().enumerate() {
-        d.nonlinear += usize::from(p.transition_hessian_into(x, &(), DT, k, h));
+        if let Some(hk) = p.transition_hessian(x, &(), DT, k) {
+            (*h, d.nonlinear) = (hk, d.nonlinear + 1);
+        }
     }
     for (k, h) in d.hh.iter_mut().enumerate() {
-        d.nonlinear += usize::from(s.measurement_hessian_into(x, k, h));
+        if let Some(hk) = s.measurement_hessian(x, k) {
+            (*h, d.nonlinear) = (hk, d.nonlinear + 1);
+        }
     }
 }
 

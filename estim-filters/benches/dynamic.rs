@@ -5,8 +5,10 @@
 //! - `estim`: the library through its public API with `N = M = Dyn` ([`DVector`], [`DMatrix`]):
 //!   [`KalmanFilter`], [`Ekf`], [`Ukf`], calling [`Predict::predict`] then
 //!   [`Update::update_into`] with one [`UpdateReport`] made before timing (`update` would
-//!   allocate a fresh report each call). The bench's nonlinear models implement every `_into`
-//!   method in place, as the library's linear models do, so a `Dyn` step allocates nothing.
+//!   allocate a fresh report each call). The bench's nonlinear models opt in to writing their
+//!   outputs in place ([`InPlace`]), as the library's linear models do, so a `Dyn` step
+//!   allocates nothing; with `DYNAMIC_BENCH_OWNED=1` they do not, and every value, noise and
+//!   Jacobian is a fresh allocation (what a model without the opt-in costs).
 //! - `estim_static`: the same with static sizes (`Const<n>`/`Const<n/2>` for n = 2, 4, 6, 12,
 //!   16, 24, 50), for the static/dynamic crossover and the static reference at small n.
 //! - `dmatrix`: a hand-written step with nalgebra `DMatrix` operator formulas, allocating
@@ -102,8 +104,8 @@ use estim_core::nalgebra::{
     Const, DMatrix, DVector, DVectorViewMut, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U0,
 };
 use estim_core::{
-    Alloc, Gaussian, LinearMeasurement, LinearProcess, MeasurementJacobian, MeasurementModel,
-    ProcessJacobian, ProcessModel,
+    Alloc, Gaussian, InPlace, LinearMeasurement, LinearProcess, MeasurementJacobian,
+    MeasurementModel, ProcessJacobian, ProcessModel,
 };
 use estim_filters::{Ekf, Estimator, KalmanFilter, Predict, Ukf, Update, UpdateReport};
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -264,6 +266,8 @@ where
 {
     f: OMatrix<f64, N, N>,
     q: OMatrix<f64, N, N>,
+    /// Opted in to [`InPlace`] (off with `DYNAMIC_BENCH_OWNED=1`, to time the owned route).
+    in_place: bool,
 }
 
 impl<N: Dim> ProcessModel<f64, N> for SineProcess<N>
@@ -282,19 +286,48 @@ where
         self.q.clone()
     }
 
-    fn transition_into(&self, x: &OVector<f64, N>, _: &(), _: f64, out: &mut OVector<f64, N>) {
+    fn in_place(&self) -> Option<&dyn InPlace<f64, N, N>> {
+        self.in_place.then_some(self as &dyn InPlace<f64, N, N>)
+    }
+}
+
+/// The allocation-free route (the library's one opt-in, [`InPlace`]): F x + ε sin x, Q and
+/// F + ε diag(cos x) written into the filter's buffers.
+impl<N: Dim> InPlace<f64, N, N> for SineProcess<N>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    fn value_into(&self, x: &OVector<f64, N>, _: &(), _: f64, out: &mut OVector<f64, N>) {
         product_into(out, &self.f, x);
         out.zip_apply(x, |yi, xi| *yi += EPS * xi.sin());
     }
 
-    fn process_noise_into(
+    fn noise_into(&self, _: &OVector<f64, N>, _: &(), _: f64, out: &mut OMatrix<f64, N, N>) {
+        assign(out, &self.q);
+    }
+
+    fn residual_into(&self, a: &OVector<f64, N>, b: &OVector<f64, N>, out: &mut OVector<f64, N>) {
+        assign(out, a);
+        *out -= b;
+    }
+
+    fn jacobian_into(&self, x: &OVector<f64, N>, _: &(), _: f64, out: &mut OMatrix<f64, N, N>) {
+        assign(out, &self.f);
+        for i in 0..x.nrows() {
+            out[(i, i)] += EPS * x[i].cos();
+        }
+    }
+
+    /// Never asked: the model has no Hessian traits.
+    fn hessian_into<'o>(
         &self,
         _: &OVector<f64, N>,
         _: &(),
         _: f64,
-        out: &mut OMatrix<f64, N, N>,
-    ) {
-        assign(out, &self.q);
+        _: usize,
+        _: &'o mut OMatrix<f64, N, N>,
+    ) -> Option<&'o mut OMatrix<f64, N, N>> {
+        None
     }
 }
 
@@ -341,19 +374,6 @@ where
         }
         j
     }
-
-    fn transition_jacobian_into(
-        &self,
-        x: &OVector<f64, N>,
-        _: &(),
-        _: f64,
-        out: &mut OMatrix<f64, N, N>,
-    ) {
-        assign(out, &self.f);
-        for i in 0..x.nrows() {
-            out[(i, i)] += EPS * x[i].cos();
-        }
-    }
 }
 
 /// h(x) = H x + ε sin(H x), noise R.
@@ -364,6 +384,8 @@ where
 {
     h: OMatrix<f64, M, N>,
     r: OMatrix<f64, M, M>,
+    /// As [`SineProcess::in_place`].
+    in_place: bool,
 }
 
 impl<N: Dim, M: Dim> MeasurementModel<f64, N, M> for SineMeasurement<N, M>
@@ -380,18 +402,51 @@ where
         self.r.clone()
     }
 
-    fn measure_into(&self, x: &OVector<f64, N>, out: &mut OVector<f64, M>) {
+    fn in_place(&self) -> Option<&dyn InPlace<f64, N, M>> {
+        self.in_place.then_some(self as &dyn InPlace<f64, N, M>)
+    }
+}
+
+/// H x + ε sin(H x), R, a − b and the Jacobian written into the filter's buffers.
+impl<N: Dim, M: Dim> InPlace<f64, N, M> for SineMeasurement<N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn value_into(&self, x: &OVector<f64, N>, _: &(), _: f64, out: &mut OVector<f64, M>) {
         product_into(out, &self.h, x);
         out.apply(|v| *v += EPS * v.sin());
     }
 
-    fn measurement_noise_into(&self, _: &OVector<f64, N>, out: &mut OMatrix<f64, M, M>) {
+    fn noise_into(&self, _: &OVector<f64, N>, _: &(), _: f64, out: &mut OMatrix<f64, M, M>) {
         assign(out, &self.r);
     }
 
     fn residual_into(&self, a: &OVector<f64, M>, b: &OVector<f64, M>, out: &mut OVector<f64, M>) {
         assign(out, a);
         *out -= b;
+    }
+
+    /// Row i of H scaled by 1 + ε cos((H x)ᵢ), with (H x)ᵢ as a row-times-vector dot product
+    /// (no m-vector of scratch; the order of the sum differs from `measurement_jacobian`'s
+    /// only by rounding).
+    fn jacobian_into(&self, x: &OVector<f64, N>, _: &(), _: f64, out: &mut OMatrix<f64, M, N>) {
+        assign(out, &self.h);
+        for i in 0..self.h.nrows() {
+            let s = 1.0 + EPS * self.h.row(i).tr_dot(x).cos();
+            out.row_mut(i).scale_mut(s);
+        }
+    }
+
+    /// Never asked: the model has no Hessian traits.
+    fn hessian_into<'o>(
+        &self,
+        _: &OVector<f64, N>,
+        _: &(),
+        _: f64,
+        _: usize,
+        _: &'o mut OMatrix<f64, N, N>,
+    ) -> Option<&'o mut OMatrix<f64, N, N>> {
+        None
     }
 }
 
@@ -407,17 +462,6 @@ where
             j.row_mut(i).scale_mut(s);
         }
         j
-    }
-
-    /// Row i of H scaled by 1 + ε cos((H x)ᵢ), with (H x)ᵢ as a row-times-vector dot product
-    /// (no m-vector of scratch; the order of the sum differs from `measurement_jacobian`'s
-    /// only by rounding).
-    fn measurement_jacobian_into(&self, x: &OVector<f64, N>, out: &mut OMatrix<f64, M, N>) {
-        assign(out, &self.h);
-        for i in 0..self.h.nrows() {
-            let s = 1.0 + EPS * self.h.row(i).tr_dot(x).cos();
-            out.row_mut(i).scale_mut(s);
-        }
     }
 }
 
@@ -451,6 +495,7 @@ where
         let h = OMatrix::<f64, M, N>::from_column_slice_generic(m, n, p.h.as_slice());
         let q = OMatrix::<f64, N, N>::from_column_slice_generic(n, n, p.q.as_slice());
         let r = OMatrix::<f64, M, M>::from_column_slice_generic(m, m, p.r.as_slice());
+        let in_place = std::env::var_os("DYNAMIC_BENCH_OWNED").is_none();
         Self {
             linear_process: LinearProcess {
                 transition: f.clone(),
@@ -461,8 +506,8 @@ where
                 observation: h.clone(),
                 noise: r.clone(),
             },
-            sine_process: SineProcess { f, q },
-            sine_measurement: SineMeasurement { h, r },
+            sine_process: SineProcess { f, q, in_place },
+            sine_measurement: SineMeasurement { h, r, in_place },
             z_linear: vecs(&p.z_linear),
             z_sine: vecs(&p.z_sine),
             prior: Gaussian::new(

@@ -53,7 +53,8 @@ use crate::update::{self, CovarianceUpdate, Gate, UpdateSettings};
 /// buffers the filter keeps, sized by [`prepare_predict`](Predict::prepare_predict) and
 /// [`prepare_update`](Update::prepare_update) (once per sensor) right after construction, or
 /// else by the first prediction and the first update with each measurement length; after that
-/// no step allocates, given models that implement the `_into` methods (as [`LinearProcess`](estim_core::LinearProcess) and
+/// no step allocates, given models that opt in through [`InPlace`](estim_core::InPlace) (as
+/// [`LinearProcess`](estim_core::LinearProcess) and
 /// [`LinearMeasurement`](estim_core::LinearMeasurement) do) and
 /// [`update_into`](Update::update_into) with a reused report. Which to pick, measured
 /// (BENCHMARKS.md, "Static or dynamic"): static sizes for the small states of the papers
@@ -562,8 +563,9 @@ where
             ..
         } = self;
         let map = Transition::on(&*space, model, input, dt);
-        let noise =
-            |x: &OVector<T, N>, q: &mut OMatrix<T, N, N>| model.process_noise_into(x, input, dt, q);
+        let noise = |x: &OVector<T, N>, q: &mut OMatrix<T, N, N>| {
+            estim_core::in_place::process_noise_into(model, x, input, dt, q)
+        };
         predict_step(
             propagator,
             scratch,
@@ -712,8 +714,8 @@ where
         )
         .map_err(|e| measurement_length_error(e, m))?;
     report.fit(z.shape_generic().0);
-    model.residual_into(z, &scratch.predicted.mean, &mut report.innovation);
-    model.measurement_noise_into(state, &mut scratch.noise);
+    estim_core::in_place::residual_into(model, z, &scratch.predicted.mean, &mut report.innovation);
+    estim_core::in_place::measurement_noise_into(model, state, &mut scratch.noise);
     update::apply(space, state, covariance, scratch, report, settings)
 }
 

@@ -486,7 +486,7 @@ where
     ) -> Option<Self> {
         let m = z.shape_generic().0;
         let mut noise_factor = OMatrix::zeros_generic(m, m);
-        model.measurement_noise_into(prior, &mut noise_factor);
+        estim_core::in_place::measurement_noise_into(model, prior, &mut noise_factor);
         let mut prior_factor = prior_covariance.clone();
         let mut scratch = CholeskyScratch::default();
         let ok = noise_factor.shape() == (m.value(), m.value())
@@ -539,13 +539,18 @@ where
     H: MeasurementJacobian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
-    /// h and ∂h/∂x at `point`, through the model's `_into` methods (as the EKF calls them).
+    /// h and ∂h/∂x at `point`, in place for an [`InPlace`](estim_core::InPlace) model (as the
+    /// EKF calls them).
     fn at(model: &'a H, point: &OVector<T, N>, m: M) -> Self {
         let n = point.shape_generic().0;
         let mut value = OVector::zeros_generic(m, U1);
-        model.measure_into(point, &mut value);
+        estim_core::in_place::measure_into(model, point, &mut value);
         let mut jacobian = OMatrix::zeros_generic(m, n);
-        model.measurement_jacobian_into(point, &mut jacobian);
+        estim_core::in_place::jacobian_into(
+            &estim_core::Observation::new(model),
+            point,
+            &mut jacobian,
+        );
         Self {
             model,
             point: point.clone(),
@@ -588,14 +593,6 @@ where
     fn residual(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
         self.model.residual(a, b)
     }
-
-    fn measurement_noise_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, M>) {
-        self.model.measurement_noise_into(x, out);
-    }
-
-    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
-        self.model.residual_into(a, b, out);
-    }
 }
 
 impl<H, T, N, M> MeasurementJacobian<T, N, M> for Linearization<'_, H, T, N, M>
@@ -608,13 +605,5 @@ where
 {
     fn measurement_jacobian(&self, _: &OVector<T, N>) -> OMatrix<T, M, N> {
         self.jacobian.clone()
-    }
-
-    fn measurement_jacobian_into(&self, _: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
-        if out.shape() == self.jacobian.shape() {
-            kernel::copy(out, &self.jacobian);
-        } else {
-            *out = self.jacobian.clone();
-        }
     }
 }

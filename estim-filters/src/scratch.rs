@@ -202,8 +202,8 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
         <DefaultAllocator as DimAlloc<N>>::runtime_sized::<Dyn, PredictFamily<T, Pr>>(cached)
     }
 
-    /// Drops the cached prediction scratch, after a failed step: a model's default `_into`
-    /// method may have reshaped a buffer.
+    /// Drops the cached prediction scratch, after a failed step: a model's owned value (the
+    /// route of a model without [`InPlace`](estim_core::InPlace)) may have reshaped a buffer.
     pub(crate) fn discard_predict(&mut self) {
         self.predict = None;
     }

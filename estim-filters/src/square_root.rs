@@ -543,7 +543,7 @@ where
         });
     }
     finite(predicted, stage, Quantity::FunctionValue)?;
-    model.residual_into(z, predicted, &mut report.innovation);
+    estim_core::in_place::residual_into(model, z, predicted, &mut report.innovation);
     ensure_shape(
         &report.innovation,
         z.nrows(),
@@ -611,7 +611,7 @@ where
         self.ensure_factored(Stage::Prediction)?;
         let n = self.state.shape_generic().0;
         let mut q = OMatrix::zeros_generic(n, n);
-        model.process_noise_into(&self.state, input, dt, &mut q);
+        estim_core::in_place::process_noise_into(model, &self.state, input, dt, &mut q);
         Ok(q)
     }
 

@@ -142,8 +142,8 @@ where
 
     /// Sizes ahead of time every buffer that [`predict`](Self::predict) with this model needs,
     /// by computing one prediction at the current estimate and discarding it: the estimate is
-    /// unchanged. With runtime sizes (and models that implement the `_into` methods) every
-    /// later prediction allocates nothing, the first one included; call it once after
+    /// unchanged. With runtime sizes (and models that opt in through
+    /// [`InPlace`](estim_core::InPlace)) every later prediction allocates nothing, the first one included; call it once after
     /// construction (and after a [`reset`](Estimator::reset) to another dimension). Static
     /// sizes need no preparation, and filters without runtime buffers do nothing (the
     /// default). Fails as `predict` would, leaving the filter unchanged.
@@ -179,8 +179,8 @@ where
 
     /// [`update`](Self::update), writing the report into `report` and reusing its buffers
     /// (resized if they do not have z's length; use one report per measurement size). With
-    /// runtime sizes and a model implementing the `_into` methods, a step then allocates
-    /// nothing. On error the filter is left exactly as it was and `report` is unspecified.
+    /// runtime sizes and a model that opts in through [`InPlace`](estim_core::InPlace), a
+    /// step then allocates nothing. On error the filter is left exactly as it was and `report` is unspecified.
     fn update_into(
         &mut self,
         model: &H,
@@ -191,8 +191,8 @@ where
     /// Sizes ahead of time every buffer that [`update_into`](Self::update_into) with this
     /// model needs, and `report` for its measurement length, by computing one update at the
     /// current estimate with z = h(x̂) and discarding it: the estimate is unchanged (this call
-    /// itself allocates). With runtime sizes (and models that implement the `_into` methods)
-    /// every later `update_into` with this model's measurement length allocates nothing, the
+    /// itself allocates). With runtime sizes (and models that opt in through
+    /// [`InPlace`](estim_core::InPlace)) every later `update_into` with this model's measurement length allocates nothing, the
     /// first one included; prepare once per sensor. Static sizes need no preparation, and
     /// filters without runtime buffers do nothing (the default). Fails as an update would,
     /// leaving the filter unchanged.

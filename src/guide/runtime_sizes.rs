@@ -33,6 +33,7 @@
 //! ```
 //!
 //! A static-size prior moves to runtime sizes with
-//! [`Gaussian::into_dyn`](crate::core::Gaussian::into_dyn). For a large UKF, let the model map
-//! all its sigma points at once (`ProcessModel::transition_sigma_points_into`,
-//! `MeasurementModel::measure_sigma_points_into`).
+//! [`Gaussian::into_dyn`](crate::core::Gaussian::into_dyn). A model of your own runs
+//! allocation-free when it implements [`InPlace`](crate::core::InPlace) (its value, noise,
+//! residual and derivatives written into the filter's buffers) and returns `Some(self)` from
+//! its `in_place` method, as the linear models do.

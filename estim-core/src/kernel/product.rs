@@ -268,6 +268,7 @@ pub fn mul_tr_lower<T, D, K>(
 /// # Panics
 /// If the shapes do not agree or `column` is out of range (a programmer error).
 #[track_caller]
+#[cfg_attr(not(test), allow(dead_code))]
 pub(crate) fn mul_into_column<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim>(
     dst: &mut OMatrix<T, R, C>,
     column: usize,
@@ -309,6 +310,7 @@ pub(crate) fn mul_into_column<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim
 }
 
 /// [`mul_into_column`] on static sizes: one dot product per row.
+#[cfg_attr(not(test), allow(dead_code))]
 pub(super) fn column_by_dot_products<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim>(
     dst: &mut OMatrix<T, R, C>,
     column: usize,

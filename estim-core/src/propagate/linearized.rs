@@ -8,6 +8,7 @@ use crate::alloc::Alloc;
 use crate::checks::ensure_shape;
 use crate::error::{Quantity, Result, Stage};
 use crate::function::Differentiable;
+use crate::in_place::{eval_into, jacobian_into};
 use crate::kernel::{Accum, mul, mul_lower, mul_tr, mul_tr_lower};
 use crate::scalar::Real;
 
@@ -61,10 +62,10 @@ where
 {
     let (n, m) = check_inputs(mean, covariance, out)?;
     let stage = Stage::Propagation;
-    g.eval_into(mean, out.mean);
+    eval_into(g, mean, out.mean);
     ensure_shape(&*out.mean, m.value(), 1, stage, Quantity::FunctionValue)?;
     let j = buffer(&mut workspace.jacobian, m, n);
-    g.jacobian_into(mean, j);
+    jacobian_into(g, mean, j);
     ensure_shape(j, m.value(), n.value(), stage, Quantity::Jacobian)?;
     // Only the lower triangle of the symmetric J C Jᵀ is computed (`finish` mirrors it).
     if let Some(cross) = out.cross_covariance.as_deref_mut() {

@@ -64,11 +64,12 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     let n = mean.nrows();
-    if g.hessian_into(mean, k, h) {
-        ensure_shape(h, n, n, Stage::Propagation, Quantity::Hessian)?;
-        Ok(true)
-    } else {
-        Ok(false)
+    match crate::in_place::hessian_into(g, mean, k, h) {
+        Some(h) => {
+            ensure_shape(h, n, n, Stage::Propagation, Quantity::Hessian)?;
+            Ok(true)
+        }
+        None => Ok(false),
     }
 }
 

@@ -7,8 +7,9 @@ use super::{MomentPropagator, Outputs, PropagatorWorkspace, check_inputs};
 use crate::alloc::Alloc;
 use crate::checks::ensure_shape;
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
-use crate::function::{SigmaScratch, VectorFunction};
-use crate::kernel::{self, Accum, CholeskyScratch, is_static, mul_tr, mul_tr_lower};
+use crate::function::VectorFunction;
+use crate::in_place::{difference_into, eval_into};
+use crate::kernel::{self, Accum, CholeskyScratch, mul_tr, mul_tr_lower};
 use crate::linalg::psd_factor_into;
 use crate::scalar::{Real, real};
 
@@ -240,7 +241,6 @@ where
     mean_deviation: Option<OMatrix<T, M, U1>>,
     plus: Option<OMatrix<T, M, N>>,
     minus: Option<OMatrix<T, M, N>>,
-    sigma: Option<SigmaScratch<T, N, M>>,
 }
 
 impl<T: Real, N: Dim, M: Dim> Default for UnscentedWorkspace<T, N, M>
@@ -258,7 +258,6 @@ where
             mean_deviation: None,
             plus: None,
             minus: None,
-            sigma: None,
         }
     }
 }
@@ -280,9 +279,8 @@ where
 {
     /// The deviations are stored column by column in D₊ and D₋ (m × n, in the workspace), so
     /// the sums are matrix products: cov(y) = w (D₊D₊ᵀ + D₋D₋ᵀ) + (β − α²) d̄ d̄ᵀ and, since
-    /// χ±ⱼ − μ = ±√c Lⱼ, cov(x, y) = w √c L (D₊ − D₋)ᵀ. For runtime sizes the 2n points go to g
-    /// together ([`VectorFunction::eval_sigma_points_into`]); for static sizes one at a time
-    /// here, which measured faster there.
+    /// χ±ⱼ − μ = ±√c Lⱼ, cov(x, y) = w √c L (D₊ − D₋)ᵀ. The 2n points go through g one at a
+    /// time.
     #[inline(always)]
     fn propagate_into(
         &self,
@@ -303,58 +301,39 @@ where
 
         // ȳ is formed as g(μ) ⊞ d̄: out.mean holds g(μ) until the end.
         let out_mean = &mut *out.mean;
-        g.eval_into(mean, out_mean);
+        eval_into(g, mean, out_mean);
         ensure_shape(out_mean, m, 1, stage, Quantity::FunctionValue)?;
         // The tangent ±√c Lⱼ, needed apart from the point only off vector spaces.
-        let mut delta = (!G::VECTOR_SPACES).then(|| buffer(&mut workspace.tangent, n_dim, U1));
+        let mut delta =
+            (!G::VECTOR_SPACES.get()).then(|| buffer(&mut workspace.tangent, n_dim, U1));
         let x = buffer(&mut workspace.point, n_dim, U1);
         let y = buffer(&mut workspace.value, m_dim, U1);
         let d = buffer(&mut workspace.deviation, m_dim, U1);
         let plus = buffer(&mut workspace.plus, m_dim, n_dim);
         let minus = buffer(&mut workspace.minus, m_dim, n_dim);
-        if !is_static::<N>() {
-            // All 2n points together, then their deviations from g(μ) column by column.
-            let sigma = workspace
-                .sigma
-                .get_or_insert_with(|| SigmaScratch::new(n_dim, m_dim));
-            g.eval_sigma_points_into(mean, l, plus, minus, sigma)?;
-            for deviations in [&mut *plus, &mut *minus] {
-                ensure_shape(deviations, m, n, stage, Quantity::FunctionValue)?;
-                for j in 0..n {
-                    let column = &mut deviations.as_mut_slice()[j * m..(j + 1) * m];
-                    y.as_mut_slice().copy_from_slice(column);
-                    g.difference_into(y, out_mean, d);
-                    ensure_shape(d, m, 1, stage, Quantity::FunctionValue)?;
-                    column.copy_from_slice(d.as_slice());
-                }
-            }
-        } else {
-            // One at a time. Columns of column-major storage are contiguous slices: plain
-            // slice loops here, where nalgebra's generic column views cost measurably on
-            // small static sizes.
-            for j in 0..n {
-                let column = &l.as_slice()[j * n..(j + 1) * n];
-                for (sign, deviations) in [(T::one(), &mut *plus), (-T::one(), &mut *minus)] {
-                    // χ = μ ⊞ ±√c Lⱼ; with + the bits of μ ± √c Lⱼ (−Lⱼ is exact).
-                    if let Some(delta) = delta.as_deref_mut() {
-                        for (di, &li) in delta.as_mut_slice().iter_mut().zip(column) {
-                            *di = sign * li;
-                        }
-                        g.input_plus_into(mean, delta, x);
-                    } else {
-                        let pairs = x.as_mut_slice().iter_mut().zip(mean.as_slice());
-                        for ((xi, &mi), &li) in pairs.zip(column) {
-                            *xi = mi + sign * li;
-                        }
-                        #[cfg(debug_assertions)]
-                        check_vector_input(g, mean, column, sign, x);
+        // One at a time. Columns of column-major storage are contiguous slices: plain
+        // slice loops here, where nalgebra's generic column views cost measurably on
+        // small static sizes.
+        for j in 0..n {
+            let column = &l.as_slice()[j * n..(j + 1) * n];
+            for (sign, deviations) in [(T::one(), &mut *plus), (-T::one(), &mut *minus)] {
+                // χ = μ ⊞ ±√c Lⱼ; with + the bits of μ ± √c Lⱼ (−Lⱼ is exact).
+                if let Some(delta) = delta.as_deref_mut() {
+                    for (di, &li) in delta.as_mut_slice().iter_mut().zip(column) {
+                        *di = sign * li;
                     }
-                    g.eval_into(x, y);
-                    ensure_shape(y, m, 1, stage, Quantity::FunctionValue)?;
-                    g.difference_into(y, out_mean, d);
-                    ensure_shape(d, m, 1, stage, Quantity::FunctionValue)?;
-                    deviations.as_mut_slice()[j * m..(j + 1) * m].copy_from_slice(d.as_slice());
+                    g.input_plus_into(mean, delta, x);
+                } else {
+                    let pairs = x.as_mut_slice().iter_mut().zip(mean.as_slice());
+                    for ((xi, &mi), &li) in pairs.zip(column) {
+                        *xi = mi + sign * li;
+                    }
                 }
+                eval_into(g, x, y);
+                ensure_shape(y, m, 1, stage, Quantity::FunctionValue)?;
+                difference_into(g, y, out_mean, d);
+                ensure_shape(d, m, 1, stage, Quantity::FunctionValue)?;
+                deviations.as_mut_slice()[j * m..(j + 1) * m].copy_from_slice(d.as_slice());
             }
         }
         let w = T::one() / (real::<T>(2.0) * c);
@@ -385,7 +364,7 @@ where
             mul_tr(cross, Accum::Replace, w, l, minus);
         }
         // ȳ = g(μ) ⊞ d̄, with g(μ) moved aside (with + the bits of g(μ) + d̄ in place).
-        if G::VECTOR_SPACES {
+        if G::VECTOR_SPACES.get() {
             *out.mean += &*d_bar;
         } else {
             kernel::copy(y, out.mean);
@@ -394,36 +373,4 @@ where
         }
         out.finish()
     }
-}
-
-/// Debug builds: a function that declares [`VectorFunction::VECTOR_SPACES`] must form its
-/// points by plain addition, or the fused sigma-point pass would ignore its ⊞.
-#[cfg(debug_assertions)]
-#[track_caller]
-fn check_vector_input<T, N, M, G>(
-    g: &G,
-    mean: &OVector<T, N>,
-    column: &[T],
-    sign: T,
-    x: &OVector<T, N>,
-) where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    G: VectorFunction<T, N, M> + ?Sized,
-    DefaultAllocator: Alloc<N, M>,
-{
-    let mut delta = mean.clone();
-    for (di, &li) in delta.iter_mut().zip(column) {
-        *di = sign * li;
-    }
-    let mut expected = x.clone();
-    g.input_plus_into(mean, &delta, &mut expected);
-    debug_assert!(
-        expected
-            .iter()
-            .zip(x.iter())
-            .all(|(a, b)| a == b || (a.partial_cmp(a).is_none() && b.partial_cmp(b).is_none())),
-        "VECTOR_SPACES is true but input_plus_into is not x + δ: set VECTOR_SPACES = false"
-    );
 }

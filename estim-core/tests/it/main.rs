@@ -18,6 +18,7 @@ mod checked;
 mod derivative;
 mod errors;
 mod gaussian;
+mod in_place;
 mod linear;
 mod manifold;
 mod no_alloc;
@@ -26,5 +27,4 @@ mod papoulis;
 mod quadratic;
 #[cfg(feature = "autodiff")]
 mod rotation_ad;
-mod sigma_points;
 mod ukf_region;

@@ -72,8 +72,8 @@ use estim_core::linalg::symmetric_map;
 use estim_core::nalgebra::{DMatrix, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::scalar::real;
 use estim_core::{
-    Alloc, Error, LinearMeasurementModel, MeasurementHessian, MeasurementJacobian,
-    MeasurementModel, Quantity, Real, Stage, function::SigmaScratch,
+    Alloc, Error, InPlace, LinearMeasurementModel, MeasurementHessian, MeasurementJacobian,
+    MeasurementModel, Quantity, Real, Stage, in_place,
 };
 
 use super::{NoiseIdError, Setting};
@@ -354,11 +354,22 @@ where
         self.inner.residual(a, b)
     }
 
-    fn measure_into(&self, x: &OVector<T, N>, out: &mut OVector<T, M>) {
-        self.inner.measure_into(x, out);
+    fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
+        self.inner.in_place().map(|_| self as &dyn InPlace<T, N, M>)
+    }
+}
+
+/// The inner model's [`InPlace`] with the given noise (reached only when it has one).
+impl<H, T: Real, N: Dim, M: Dim> InPlace<T, N, M> for WithNoise<'_, H, T, M>
+where
+    H: MeasurementModel<T, N, M>,
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn value_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OVector<T, M>) {
+        in_place::measure_into(self.inner, x, out);
     }
 
-    fn measurement_noise_into(&self, _: &OVector<T, N>, out: &mut OMatrix<T, M, M>) {
+    fn noise_into(&self, _: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, M, M>) {
         if out.shape() == self.noise.shape() {
             out.copy_from(self.noise);
         } else {
@@ -367,19 +378,24 @@ where
     }
 
     fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
-        self.inner.residual_into(a, b, out);
+        in_place::residual_into(self.inner, a, b, out);
     }
 
-    fn measure_sigma_points_into(
+    fn jacobian_into(&self, x: &OVector<T, N>, u: &(), dt: T, out: &mut OMatrix<T, M, N>) {
+        if let Some(m) = self.inner.in_place() {
+            m.jacobian_into(x, u, dt, out);
+        }
+    }
+
+    fn hessian_into<'o>(
         &self,
-        mean: &OVector<T, N>,
-        offsets: &OMatrix<T, N, N>,
-        plus: &mut OMatrix<T, M, N>,
-        minus: &mut OMatrix<T, M, N>,
-        scratch: &mut SigmaScratch<T, N, M>,
-    ) -> estim_core::error::Result<()> {
-        self.inner
-            .measure_sigma_points_into(mean, offsets, plus, minus, scratch)
+        x: &OVector<T, N>,
+        u: &(),
+        dt: T,
+        k: usize,
+        out: &'o mut OMatrix<T, N, N>,
+    ) -> Option<&'o mut OMatrix<T, N, N>> {
+        self.inner.in_place()?.hessian_into(x, u, dt, k, out)
     }
 }
 
@@ -391,10 +407,6 @@ where
     fn measurement_jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
         self.inner.measurement_jacobian(x)
     }
-
-    fn measurement_jacobian_into(&self, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>) {
-        self.inner.measurement_jacobian_into(x, out);
-    }
 }
 
 impl<H, T: Real, N: Dim, M: Dim> MeasurementHessian<T, N, M> for WithNoise<'_, H, T, M>
@@ -404,15 +416,6 @@ where
 {
     fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.inner.measurement_hessian(x, k)
-    }
-
-    fn measurement_hessian_into(
-        &self,
-        x: &OVector<T, N>,
-        k: usize,
-        out: &mut OMatrix<T, N, N>,
-    ) -> bool {
-        self.inner.measurement_hessian_into(x, k, out)
     }
 }
 

@@ -343,8 +343,8 @@ where
     } = s;
     if !process.sample_into(x, input, dt, &mut rng, y) {
         let model = process.model();
-        model.transition_into(x, input, dt, y);
-        model.process_noise_into(x, input, dt, q);
+        estim_core::in_place::transition_into(model, x, input, dt, y);
+        estim_core::in_place::process_noise_into(model, x, input, dt, q);
         let factor = match q_cache {
             Some((cached, factor, ())) if cached == q => factor,
             _ => {
@@ -481,7 +481,7 @@ where
 {
     let model = sensor.model();
     let z = &ms.z;
-    model.measure_into(x, &mut ms.x_h);
+    estim_core::in_place::measure_into(model, x, &mut ms.x_h);
     ensure_shape(
         &ms.x_h,
         z.nrows(),
@@ -489,8 +489,8 @@ where
         Stage::Update,
         Quantity::FunctionValue,
     )?;
-    model.residual_into(z, &ms.x_h, &mut ms.r);
-    model.measurement_noise_into(x, &mut ms.noise);
+    estim_core::in_place::residual_into(model, z, &ms.x_h, &mut ms.r);
+    estim_core::in_place::measurement_noise_into(model, x, &mut ms.noise);
     let log_g = match sensor.log_likelihood(z, x) {
         Some(log_g) => log_g,
         None => {

@@ -5,8 +5,7 @@ use estim_core::checks::ensure_shape;
 use estim_core::kernel::{self, Accum};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::{
-    Alloc, Differentiable, MeasurementJacobian, Observation, Quantity, Real, Stage, VectorFunction,
-    error::Result,
+    Alloc, Differentiable, MeasurementJacobian, Observation, Quantity, Real, Stage, error::Result,
 };
 
 use super::triangular::{Block, lower_triangularize};
@@ -33,11 +32,11 @@ where
     let n = n_dim.value();
     let mut sq = noise_factor(q, n, stage, Quantity::ProcessNoise)?;
     let mut mean = OVector::zeros_generic(n_dim, U1);
-    f.eval_into(state, &mut mean);
+    estim_core::in_place::eval_into(f, state, &mut mean);
     ensure_shape(&mean, n, 1, stage, Quantity::FunctionValue)?;
     finite(&mean, stage, Quantity::Mean)?;
     let mut jacobian = OMatrix::zeros_generic(n_dim, n_dim);
-    f.jacobian_into(state, &mut jacobian);
+    estim_core::in_place::jacobian_into(f, state, &mut jacobian);
     ensure_shape(&jacobian, n, n, stage, Quantity::Jacobian)?;
     finite(&jacobian, stage, Quantity::Jacobian)?;
     let mut fs = OMatrix::zeros_generic(n_dim, n_dim);
@@ -81,15 +80,15 @@ where
     let (n, m) = (n_dim.value(), m_dim.value());
     let h = Observation::new(model);
     let mut predicted = OVector::zeros_generic(m_dim, U1);
-    h.eval_into(state, &mut predicted);
+    estim_core::in_place::eval_into(&h, state, &mut predicted);
     ensure_shape(&predicted, m, 1, stage, Quantity::Measurement)?;
     let mut r = OMatrix::zeros_generic(m_dim, m_dim);
-    model.measurement_noise_into(state, &mut r);
+    estim_core::in_place::measurement_noise_into(model, state, &mut r);
     let mut l = noise_factor(&r, m, stage, Quantity::MeasurementNoise)?;
     report.fit(m_dim);
     innovation_into(model, z, &predicted, report)?;
     let mut jacobian = OMatrix::zeros_generic(m_dim, n_dim);
-    h.jacobian_into(state, &mut jacobian);
+    estim_core::in_place::jacobian_into(&h, state, &mut jacobian);
     ensure_shape(&jacobian, m, n, stage, Quantity::Jacobian)?;
     finite(&jacobian, stage, Quantity::Jacobian)?;
     let mut hs = OMatrix::zeros_generic(m_dim, n_dim);

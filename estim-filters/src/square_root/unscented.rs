@@ -6,8 +6,8 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::Unscented;
 use estim_core::scalar::real;
 use estim_core::{
-    Alloc, Error, MeasurementModel, Observation, Quantity, Real, SigmaScratch, Stage,
-    VectorFunction, error::Result,
+    Alloc, Error, MeasurementModel, Observation, Parameter, Quantity, Real, Stage, VectorFunction,
+    error::Result,
 };
 
 use super::triangular::{Block, lower_triangularize, rank_one_downdate};
@@ -54,13 +54,25 @@ where
     let gamma = c.sqrt();
     let offsets = s * gamma;
     let mut value = OVector::zeros_generic(m_dim, U1);
-    g.eval_into(x, &mut value);
+    estim_core::in_place::eval_into(g, x, &mut value);
     ensure_shape(&value, m, 1, stage, Quantity::FunctionValue)?;
     finite(&value, stage, Quantity::FunctionValue)?;
     let mut plus = OMatrix::zeros_generic(m_dim, n_dim);
     let mut minus = OMatrix::zeros_generic(m_dim, n_dim);
-    let mut scratch = SigmaScratch::new(n_dim, m_dim);
-    g.eval_sigma_points_into(x, &offsets, &mut plus, &mut minus, &mut scratch)?;
+    // g at x ⊞ ±γ Sⱼ, one point at a time.
+    let (mut delta, mut point) = (x.clone(), x.clone());
+    let mut point_value = value.clone();
+    for j in 0..n {
+        for (sign, values) in [(T::one(), &mut plus), (-T::one(), &mut minus)] {
+            for (di, &oi) in delta.iter_mut().zip(offsets.column(j).iter()) {
+                *di = sign * oi;
+            }
+            g.input_plus_into(x, &delta, &mut point);
+            estim_core::in_place::eval_into(g, &point, &mut point_value);
+            ensure_shape(&point_value, m, 1, stage, Quantity::FunctionValue)?;
+            values.set_column(j, &point_value);
+        }
+    }
     let weight = T::one() / (real::<T>(2.0) * c);
     let mut mean = OVector::zeros_generic(m_dim, U1);
     let mut y = OVector::zeros_generic(m_dim, U1);
@@ -71,7 +83,7 @@ where
         for j in 0..n {
             let column = &mut points.as_mut_slice()[j * m..(j + 1) * m];
             y.as_mut_slice().copy_from_slice(column);
-            g.difference_into(&y, &value, &mut d);
+            estim_core::in_place::difference_into(g, &y, &value, &mut d);
             ensure_shape(&d, m, 1, stage, Quantity::FunctionValue)?;
             column.copy_from_slice(d.as_slice());
             mean += &d;
@@ -191,7 +203,7 @@ where
     let (n, m) = (n_dim.value(), m_dim.value());
     let h = Observation::new(model);
     let mut r = OMatrix::zeros_generic(m_dim, m_dim);
-    model.measurement_noise_into(state, &mut r);
+    estim_core::in_place::measurement_noise_into(model, state, &mut r);
     let mut l = noise_factor(&r, m, stage, Quantity::MeasurementNoise)?;
     let dev = deviations(ut, state, factor, &h, m_dim, stage).map_err(|e| match e {
         Error::DimensionMismatch { .. } => Error::DimensionMismatch {

@@ -1,5 +1,5 @@
 //! Runtime sizes allocate nothing per step once the filter's workspace is sized: every filter
-//! runs predict + `update_into` on `Dyn` models that implement the `_into` methods, under a
+//! runs predict + `update_into` on `Dyn` models that opt in through [`InPlace`], under a
 //! counting global allocator. `prepare_predict` and `prepare_update` (once per sensor) size
 //! the workspace right after construction; from then on no step allocates, the first one
 //! included. Without them, the first prediction and the first update with each measurement
@@ -15,7 +15,7 @@ use std::hint::black_box;
 use estim_core::nalgebra::{DMatrix, DVector, Dyn};
 use estim_core::propagate::Unscented;
 use estim_core::{
-    Gaussian, LinearMeasurement, LinearProcess, MeasurementHessian, MeasurementJacobian,
+    Gaussian, InPlace, LinearMeasurement, LinearProcess, MeasurementHessian, MeasurementJacobian,
     MeasurementModel, ProcessHessian, ProcessJacobian, ProcessModel,
 };
 use estim_filters::{
@@ -26,40 +26,44 @@ use estim_filters::{
 const DT: f64 = 0.1;
 
 /// A chain of n damped pendulums, each pulled by the next:
-/// fᵢ(x) = xᵢ + Δt (x₍ᵢ₊₁₎ − sin xᵢ) (the last without the pull). Every `_into` method writes
-/// in place.
+/// fᵢ(x) = xᵢ + Δt (x₍ᵢ₊₁₎ − sin xᵢ) (the last without the pull). Every output is written in
+/// place ([`InPlace`]); the owned methods go through the same code.
 struct Chain;
 
 impl ProcessModel<f64, Dyn> for Chain {
     type Input = ();
     fn transition(&self, x: &DVector<f64>, u: &(), dt: f64) -> DVector<f64> {
         let mut out = x.clone();
-        self.transition_into(x, u, dt, &mut out);
+        self.value_into(x, u, dt, &mut out);
         out
     }
-    fn process_noise(&self, x: &DVector<f64>, _: &(), dt: f64) -> DMatrix<f64> {
-        DMatrix::identity(x.nrows(), x.nrows()) * (0.01 * dt)
+    fn process_noise(&self, x: &DVector<f64>, u: &(), dt: f64) -> DMatrix<f64> {
+        let mut out = DMatrix::zeros(x.nrows(), x.nrows());
+        self.noise_into(x, u, dt, &mut out);
+        out
     }
-    fn transition_into(&self, x: &DVector<f64>, _: &(), dt: f64, out: &mut DVector<f64>) {
+    fn in_place(&self) -> Option<&dyn InPlace<f64, Dyn, Dyn, ()>> {
+        Some(self)
+    }
+}
+
+impl InPlace<f64, Dyn, Dyn, ()> for Chain {
+    fn value_into(&self, x: &DVector<f64>, _: &(), dt: f64, out: &mut DVector<f64>) {
         let n = x.nrows();
         for i in 0..n {
             let pull = if i + 1 < n { x[i + 1] } else { 0.0 };
             out[i] = x[i] + dt * (pull - x[i].sin());
         }
     }
-    fn process_noise_into(&self, _: &DVector<f64>, _: &(), dt: f64, out: &mut DMatrix<f64>) {
+    fn noise_into(&self, _: &DVector<f64>, _: &(), dt: f64, out: &mut DMatrix<f64>) {
         out.fill_with_identity();
         *out *= 0.01 * dt;
     }
-}
-
-impl ProcessJacobian<f64, Dyn> for Chain {
-    fn transition_jacobian(&self, x: &DVector<f64>, u: &(), dt: f64) -> DMatrix<f64> {
-        let mut out = DMatrix::zeros(x.nrows(), x.nrows());
-        self.transition_jacobian_into(x, u, dt, &mut out);
-        out
+    fn residual_into(&self, a: &DVector<f64>, b: &DVector<f64>, out: &mut DVector<f64>) {
+        out.copy_from(a);
+        *out -= b;
     }
-    fn transition_jacobian_into(&self, x: &DVector<f64>, _: &(), dt: f64, out: &mut DMatrix<f64>) {
+    fn jacobian_into(&self, x: &DVector<f64>, _: &(), dt: f64, out: &mut DMatrix<f64>) {
         let n = x.nrows();
         out.fill(0.0);
         for i in 0..n {
@@ -68,6 +72,26 @@ impl ProcessJacobian<f64, Dyn> for Chain {
                 out[(i, i + 1)] = dt;
             }
         }
+    }
+    fn hessian_into<'o>(
+        &self,
+        x: &DVector<f64>,
+        _: &(),
+        dt: f64,
+        k: usize,
+        out: &'o mut DMatrix<f64>,
+    ) -> Option<&'o mut DMatrix<f64>> {
+        out.fill(0.0);
+        out[(k, k)] = dt * x[k].sin();
+        Some(out)
+    }
+}
+
+impl ProcessJacobian<f64, Dyn> for Chain {
+    fn transition_jacobian(&self, x: &DVector<f64>, u: &(), dt: f64) -> DMatrix<f64> {
+        let mut out = DMatrix::zeros(x.nrows(), x.nrows());
+        self.jacobian_into(x, u, dt, &mut out);
+        out
     }
 }
 
@@ -80,20 +104,8 @@ impl ProcessHessian<f64, Dyn> for Chain {
         k: usize,
     ) -> Option<DMatrix<f64>> {
         let mut out = DMatrix::zeros(x.nrows(), x.nrows());
-        self.transition_hessian_into(x, u, dt, k, &mut out)
-            .then_some(out)
-    }
-    fn transition_hessian_into(
-        &self,
-        x: &DVector<f64>,
-        _: &(),
-        dt: f64,
-        k: usize,
-        out: &mut DMatrix<f64>,
-    ) -> bool {
-        out.fill(0.0);
-        out[(k, k)] = dt * x[k].sin();
-        true
+        self.hessian_into(x, u, dt, k, &mut out)?;
+        Some(out)
     }
 }
 
@@ -103,19 +115,27 @@ struct EveryOther;
 impl MeasurementModel<f64, Dyn, Dyn> for EveryOther {
     fn measure(&self, x: &DVector<f64>) -> DVector<f64> {
         let mut out = DVector::zeros(x.nrows() / 2);
-        self.measure_into(x, &mut out);
+        self.value_into(x, &(), 0.0, &mut out);
         out
     }
     fn measurement_noise(&self, x: &DVector<f64>) -> DMatrix<f64> {
-        DMatrix::identity(x.nrows() / 2, x.nrows() / 2) * 0.05
+        let mut out = DMatrix::zeros(x.nrows() / 2, x.nrows() / 2);
+        self.noise_into(x, &(), 0.0, &mut out);
+        out
     }
-    fn measure_into(&self, x: &DVector<f64>, out: &mut DVector<f64>) {
+    fn in_place(&self) -> Option<&dyn InPlace<f64, Dyn, Dyn>> {
+        Some(self)
+    }
+}
+
+impl InPlace<f64, Dyn, Dyn> for EveryOther {
+    fn value_into(&self, x: &DVector<f64>, _: &(), _: f64, out: &mut DVector<f64>) {
         for j in 0..out.nrows() {
             let v = x[2 * j];
             out[j] = v + 0.1 * v * v;
         }
     }
-    fn measurement_noise_into(&self, _: &DVector<f64>, out: &mut DMatrix<f64>) {
+    fn noise_into(&self, _: &DVector<f64>, _: &(), _: f64, out: &mut DMatrix<f64>) {
         out.fill_with_identity();
         *out *= 0.05;
     }
@@ -123,31 +143,39 @@ impl MeasurementModel<f64, Dyn, Dyn> for EveryOther {
         out.copy_from(a);
         *out -= b;
     }
+    fn jacobian_into(&self, x: &DVector<f64>, _: &(), _: f64, out: &mut DMatrix<f64>) {
+        out.fill(0.0);
+        for j in 0..out.nrows() {
+            out[(j, 2 * j)] = 1.0 + 0.2 * x[2 * j];
+        }
+    }
+    fn hessian_into<'o>(
+        &self,
+        _: &DVector<f64>,
+        _: &(),
+        _: f64,
+        k: usize,
+        out: &'o mut DMatrix<f64>,
+    ) -> Option<&'o mut DMatrix<f64>> {
+        out.fill(0.0);
+        out[(2 * k, 2 * k)] = 0.2;
+        Some(out)
+    }
 }
 
 impl MeasurementJacobian<f64, Dyn, Dyn> for EveryOther {
     fn measurement_jacobian(&self, x: &DVector<f64>) -> DMatrix<f64> {
         let mut out = DMatrix::zeros(x.nrows() / 2, x.nrows());
-        self.measurement_jacobian_into(x, &mut out);
+        self.jacobian_into(x, &(), 0.0, &mut out);
         out
-    }
-    fn measurement_jacobian_into(&self, x: &DVector<f64>, out: &mut DMatrix<f64>) {
-        out.fill(0.0);
-        for j in 0..out.nrows() {
-            out[(j, 2 * j)] = 1.0 + 0.2 * x[2 * j];
-        }
     }
 }
 
 impl MeasurementHessian<f64, Dyn, Dyn> for EveryOther {
     fn measurement_hessian(&self, x: &DVector<f64>, k: usize) -> Option<DMatrix<f64>> {
         let mut out = DMatrix::zeros(x.nrows(), x.nrows());
-        self.measurement_hessian_into(x, k, &mut out).then_some(out)
-    }
-    fn measurement_hessian_into(&self, _: &DVector<f64>, k: usize, out: &mut DMatrix<f64>) -> bool {
-        out.fill(0.0);
-        out[(2 * k, 2 * k)] = 0.2;
-        true
+        self.hessian_into(x, &(), 0.0, k, &mut out)?;
+        Some(out)
     }
 }
 
