@@ -316,7 +316,7 @@ impl<T: Real> DerivativeCheck<T> {
         ensure_shape(&jac, m, n, stage, Quantity::Jacobian)?;
         ensure_finite(&jac, stage, Quantity::Jacobian)?;
         let mut report = DerivativeReport::empty();
-        if !G::VECTOR_SPACES {
+        if !G::VECTOR_SPACES.get() {
             self.manifold_columns(g, x, &y, &jac, &mut report)?;
             return Ok(report);
         }

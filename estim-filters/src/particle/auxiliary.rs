@@ -125,7 +125,13 @@ where
                     for (k, column) in out.chunks_exact_mut(n.value()).enumerate() {
                         let i = c * CHUNK + k;
                         s.x.copy_from_slice(&particles[i * nn..(i + 1) * nn]);
-                        estim_core::in_place::transition_into(process.model(), &s.x, input, dt, &mut s.y);
+                        estim_core::in_place::transition_into(
+                            process.model(),
+                            &s.x,
+                            input,
+                            dt,
+                            &mut s.y,
+                        );
                         let (stage, quantity) = (Stage::Prediction, Quantity::FunctionValue);
                         let checked = ensure_shape(&s.y, s.x.nrows(), 1, stage, quantity)
                             .and_then(|()| ensure_finite(&s.y, stage, quantity));

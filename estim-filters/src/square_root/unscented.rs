@@ -6,7 +6,7 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::Unscented;
 use estim_core::scalar::real;
 use estim_core::{
-    Alloc, Error, MeasurementModel, Observation, Parameter, Quantity, Real, Stage, VectorFunction,
+    Alloc, Error, MeasurementModel, Observation, Quantity, Real, Stage, VectorFunction,
     error::Result,
 };
 
