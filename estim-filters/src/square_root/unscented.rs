@@ -3,11 +3,11 @@
 
 use estim_core::checks::ensure_shape;
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
-use estim_core::propagate::Unscented;
+use estim_core::propagate::{SigmaDeviations, Unscented};
 use estim_core::scalar::real;
 use estim_core::{
-    Alloc, Error, MeasurementModel, Observation, Quantity, Real, SigmaScratch, Stage,
-    VectorFunction, error::Result,
+    Alloc, Error, MeasurementModel, Observation, Quantity, Real, Stage, VectorFunction,
+    error::Result,
 };
 
 use super::triangular::{Block, lower_triangularize, rank_one_downdate};
@@ -46,7 +46,7 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     let n_dim = x.shape_generic().0;
-    let (n, m) = (n_dim.value(), m_dim.value());
+    let n = n_dim.value();
     // The accepted region for this n, as the full-covariance UKF checks it (c > 0 and
     // α²κ + nβ ≥ 0): outside it no factor of cov(y) exists for some functions.
     ut.check_dimension(n)?;
@@ -54,27 +54,18 @@ where
     let gamma = c.sqrt();
     let offsets = s * gamma;
     let mut value = OVector::zeros_generic(m_dim, U1);
-    g.eval_into(x, &mut value);
-    ensure_shape(&value, m, 1, stage, Quantity::FunctionValue)?;
-    finite(&value, stage, Quantity::FunctionValue)?;
     let mut plus = OMatrix::zeros_generic(m_dim, n_dim);
     let mut minus = OMatrix::zeros_generic(m_dim, n_dim);
-    let mut scratch = SigmaScratch::new(n_dim, m_dim);
-    g.eval_sigma_points_into(x, &offsets, &mut plus, &mut minus, &mut scratch)?;
+    // The crate's one sigma-point generator, as the full-covariance UKF forms its points.
+    SigmaDeviations::default()
+        .deviations_into(g, x, &offsets, &mut value, &mut plus, &mut minus, stage)?;
+    finite(&value, stage, Quantity::FunctionValue)?;
     let weight = T::one() / (real::<T>(2.0) * c);
     let mut mean = OVector::zeros_generic(m_dim, U1);
-    let mut y = OVector::zeros_generic(m_dim, U1);
-    let mut d = OVector::zeros_generic(m_dim, U1);
-    for points in [&mut plus, &mut minus] {
-        ensure_shape(points, m, n, stage, Quantity::FunctionValue)?;
+    for points in [&plus, &minus] {
         finite(points, stage, Quantity::FunctionValue)?;
-        for j in 0..n {
-            let column = &mut points.as_mut_slice()[j * m..(j + 1) * m];
-            y.as_mut_slice().copy_from_slice(column);
-            g.difference_into(&y, &value, &mut d);
-            ensure_shape(&d, m, 1, stage, Quantity::FunctionValue)?;
-            column.copy_from_slice(d.as_slice());
-            mean += &d;
+        for column in points.column_iter() {
+            mean += column;
         }
     }
     mean *= weight;
