@@ -6,7 +6,7 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::propagate::{SigmaDeviations, Unscented};
 use estim_core::scalar::real;
 use estim_core::{
-    Alloc, Error, MeasurementModel, Observation, Quantity, Real, Stage, VectorFunction,
+    Alloc, Error, MeasurementModel, Observation, Quantity, Real, Stage, StateSpace, VectorFunction,
     error::Result,
 };
 
@@ -161,8 +161,10 @@ where
 /// S⁺ at once. R̃'s factor comes from [S_R | √(2w) B | √(β − α²) d̄] inside the array when
 /// β ≥ α², else from [S_R | √(2w) B] and a rank-one downdate by √(α² − β) d̄ (its failure is
 /// `NotPositiveDefinite`, `InnovationCovariance`).
-pub(super) fn unscented_update<T, N, M, H>(
+#[allow(clippy::too_many_arguments)]
+pub(super) fn unscented_update<T, N, M, H, S>(
     ut: &Unscented<T>,
+    space: &S,
     state: &OVector<T, N>,
     factor: &OMatrix<T, N, N>,
     model: &H,
@@ -175,12 +177,13 @@ where
     N: Dim,
     M: Dim,
     H: MeasurementModel<T, N, M>,
+    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N, M>,
 {
     let stage = Stage::Update;
     let (n_dim, m_dim) = (state.shape_generic().0, z.shape_generic().0);
     let (n, m) = (n_dim.value(), m_dim.value());
-    let h = Observation::new(model);
+    let h = Observation::on(space, model);
     let mut r = OMatrix::zeros_generic(m_dim, m_dim);
     model.measurement_noise_into(state, &mut r);
     let mut l = noise_factor(&r, m, stage, Quantity::MeasurementNoise)?;
@@ -244,5 +247,5 @@ where
             Block::new(odd.as_mut_slice(), prior.as_mut_slice(), n),
         ],
     );
-    finish_update(state, &l, &kbar, posterior, threshold, report)
+    finish_update(space, state, &l, &kbar, posterior, threshold, report)
 }
