@@ -42,7 +42,7 @@ pub use linearized::{Linearized, LinearizedWorkspace};
 #[cfg(feature = "std")]
 pub use sampled::Sampled;
 pub use second_order::{SecondOrder, SecondOrderGaussian, SecondOrderWorkspace};
-pub use unscented::{Unscented, UnscentedWorkspace};
+pub use unscented::{SigmaDeviations, Unscented, UnscentedWorkspace};
 
 /// E\[y\] and cov(y), as returned by
 /// [`MomentPropagator::propagate_mean_covariance`].

@@ -106,8 +106,11 @@
 //! workspace is kept yet) and use the same slice kernels, not faer. Costs against the Joseph
 //! form: BENCHMARKS.md, "Square-root filters".
 //!
-//! The state is a vector (ℝⁿ, ⊞ = +); states with angles or attitudes need the full-P
-//! [`GaussianFilter::with_state_space`](crate::GaussianFilter::with_state_space).
+//! The state is a vector (ℝⁿ, ⊞ = +) by default; states with angles or attitudes take a
+//! [`StateSpace`] with [`with_state_space`](SquareRootFilter::with_state_space), as the full-P
+//! filters do: the SR-UKF forms its sigma points x̂ ⊞ δ and deviations with ⊟ (estim-core's
+//! sigma-point generator, the UKF's), and every update corrects x̂ ⊞ K ν. The factor S lives
+//! in the tangent space at x̂, as P does for the full-P filters.
 //!
 //! ```
 //! use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
@@ -148,7 +151,7 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{Affine, Linearized, Unscented};
 use estim_core::{
     Alloc, Error, Euclidean, Gaussian, MeasurementModel, ProcessModel, Quantity, Real, Stage,
-    error::Result,
+    StateSpace, error::Result,
 };
 
 use crate::gaussian_filter::ensure_time_step;
@@ -165,7 +168,7 @@ use triangular::{Block, lower_triangularize};
 /// It implements [`Estimator`], [`Predict`] and [`Update`] for the same models as the
 /// full-covariance filter of the same name, so it drops into code written for those.
 #[derive(Clone, Debug, PartialEq)]
-pub struct SquareRootFilter<T: Real, N: Dim, Pr>
+pub struct SquareRootFilter<T: Real, N: Dim, Pr, S = Euclidean>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -177,6 +180,8 @@ where
     /// `false` when the prior's covariance could not be factorised: every step then fails.
     factored: bool,
     propagator: Pr,
+    /// The state space: sigma points x̂ ⊞ δ, deviations ⊟, correction x̂ ⊞ K ν.
+    space: S,
     settings: UpdateSettings<T>,
 }
 
@@ -254,7 +259,78 @@ where
             covariance,
             factored,
             propagator,
+            space: Euclidean,
             settings: UpdateSettings::new(),
+        }
+    }
+
+    /// A filter whose estimate is x̂ = `state` and S = `factor` exactly as given (no
+    /// refactorisation; how a checkpoint resumes bit for bit). S must be square of x̂'s
+    /// length, finite, lower triangular with a non-negative diagonal, and S Sᵀ finite.
+    #[cfg(feature = "serde")]
+    pub(crate) fn from_factor(
+        state: OVector<T, N>,
+        factor: OMatrix<T, N, N>,
+        propagator: Pr,
+    ) -> Result<Self> {
+        let (stage, n) = (Stage::Construction, state.nrows());
+        ensure_shape(&factor, n, n, stage, Quantity::Covariance)?;
+        ensure_finite(&state, stage, Quantity::Mean)?;
+        ensure_finite(&factor, stage, Quantity::Covariance)?;
+        let triangular = (0..n).all(|j| factor[(j, j)] >= T::zero())
+            && (0..n).all(|j| (0..j).all(|i| factor[(i, j)] == T::zero()));
+        if !triangular {
+            return Err(Error::NotPositiveSemiDefinite {
+                stage,
+                quantity: Quantity::Covariance,
+            });
+        }
+        let (covariance, finite) = outer_checked(&factor);
+        finite_or_error(finite, stage, Quantity::Covariance)?;
+        Ok(Self {
+            state,
+            factor,
+            covariance,
+            factored: true,
+            propagator,
+            space: Euclidean,
+            settings: UpdateSettings::new(),
+        })
+    }
+}
+
+impl<T: Real, N: Dim, Pr, S> SquareRootFilter<T, N, Pr, S>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// The same filter on the state space `space`: the SR-UKF's sigma points x̂ ⊞ δ and
+    /// deviations ⊟, and every update's correction x̂⁺ = x̂ ⊞ K ν (Hertzberg et al. 2013), as
+    /// [`GaussianFilter::with_state_space`](crate::GaussianFilter::with_state_space) does.
+    ///
+    /// ```
+    /// use estim_core::{Gaussian, WrappedAngles, nalgebra::{Matrix1, Vector1}};
+    /// use estim_core::LinearMeasurement;
+    /// use estim_filters::{Estimator, SrEkf, Update};
+    ///
+    /// let prior = Gaussian::new(Vector1::new(3.1), Matrix1::new(0.1))?;
+    /// let mut ekf = SrEkf::new(prior).with_state_space(WrappedAngles::new([0]));
+    /// let sensor = LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(0.1) };
+    /// ekf.update(&sensor, &Vector1::new(3.3))?; // x̂ = 3.1 ⊞ 0.1 = 3.2 − 2π
+    /// assert!((ekf.state()[0] - (3.2 - std::f64::consts::TAU)).abs() < 1e-12);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn with_state_space<S2: StateSpace<T, N>>(
+        self,
+        space: S2,
+    ) -> SquareRootFilter<T, N, Pr, S2> {
+        SquareRootFilter {
+            state: self.state,
+            factor: self.factor,
+            covariance: self.covariance,
+            factored: self.factored,
+            propagator: self.propagator,
+            space,
+            settings: self.settings,
         }
     }
 
@@ -323,39 +399,6 @@ where
         Ok(())
     }
 
-    /// A filter whose estimate is x̂ = `state` and S = `factor` exactly as given (no
-    /// refactorisation; how a checkpoint resumes bit for bit). S must be square of x̂'s
-    /// length, finite, lower triangular with a non-negative diagonal, and S Sᵀ finite.
-    #[cfg(feature = "serde")]
-    pub(crate) fn from_factor(
-        state: OVector<T, N>,
-        factor: OMatrix<T, N, N>,
-        propagator: Pr,
-    ) -> Result<Self> {
-        let (stage, n) = (Stage::Construction, state.nrows());
-        ensure_shape(&factor, n, n, stage, Quantity::Covariance)?;
-        ensure_finite(&state, stage, Quantity::Mean)?;
-        ensure_finite(&factor, stage, Quantity::Covariance)?;
-        let triangular = (0..n).all(|j| factor[(j, j)] >= T::zero())
-            && (0..n).all(|j| (0..j).all(|i| factor[(i, j)] == T::zero()));
-        if !triangular {
-            return Err(Error::NotPositiveSemiDefinite {
-                stage,
-                quantity: Quantity::Covariance,
-            });
-        }
-        let (covariance, finite) = outer_checked(&factor);
-        finite_or_error(finite, stage, Quantity::Covariance)?;
-        Ok(Self {
-            state,
-            factor,
-            covariance,
-            factored: true,
-            propagator,
-            settings: UpdateSettings::new(),
-        })
-    }
-
     fn ensure_factored(&self, stage: Stage) -> Result<()> {
         if self.factored {
             Ok(())
@@ -391,7 +434,7 @@ where
 }
 
 /// x̂, S and the P formed from it, copied as they are: a restore does not refactorise.
-impl<T: Real, N: Dim, Pr> Rollback for SquareRootFilter<T, N, Pr>
+impl<T: Real, N: Dim, Pr, S> Rollback for SquareRootFilter<T, N, Pr, S>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -422,7 +465,7 @@ where
     }
 }
 
-impl<T: Real, N: Dim, Pr> Estimator<T, N> for SquareRootFilter<T, N, Pr>
+impl<T: Real, N: Dim, Pr, S> Estimator<T, N> for SquareRootFilter<T, N, Pr, S>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -561,7 +604,8 @@ where
 /// (non-finite) S_zz; a non-finite posterior is an error. Inlined into both updates: a call
 /// of its own added 48 bytes to the SR-UKF 6/4 firmware step's peak stack.
 #[inline(always)]
-fn finish_update<T: Real, N: Dim, M: Dim>(
+fn finish_update<T: Real, N: Dim, M: Dim, S: StateSpace<T, N>>(
+    space: &S,
     state: &OVector<T, N>,
     l: &OMatrix<T, M, M>,
     kbar: &OMatrix<T, N, M>,
@@ -588,7 +632,15 @@ where
     }
     finite(&posterior, stage, Quantity::Covariance)?;
     let mut new_state = state.clone();
-    kernel::mul(&mut new_state, Accum::Add, T::one(), kbar, &whitened);
+    if S::VECTOR {
+        kernel::mul(&mut new_state, Accum::Add, T::one(), kbar, &whitened);
+    } else {
+        // x̂⁺ = x̂ ⊞ K̄ L⁻¹ν.
+        let mut delta = state.clone();
+        kernel::mul(&mut delta, Accum::Replace, T::one(), kbar, &whitened);
+        space.plus_into(state, &delta, &mut new_state);
+        ensure_shape(&new_state, state.nrows(), 1, stage, Quantity::Mean)?;
+    }
     finite(&new_state, stage, Quantity::Mean)?;
     Ok(Some((new_state, posterior)))
 }
@@ -596,7 +648,7 @@ where
 // ---------------------------------------------------------------------------------------
 // The step traits: one impl each, through the factor-form propagator.
 
-impl<T: Real, N: Dim, Pr> SquareRootFilter<T, N, Pr>
+impl<T: Real, N: Dim, Pr, S: StateSpace<T, N>> SquareRootFilter<T, N, Pr, S>
 where
     DefaultAllocator: Alloc<N>,
 {
@@ -630,6 +682,7 @@ where
     {
         let q = self.process_noise(model, input, dt)?;
         let (x, s) = (self.propagator).predict_factor(
+            &self.space,
             &self.state,
             &self.factor,
             model,
@@ -642,8 +695,9 @@ where
     }
 }
 
-impl<T, N, P, Pr> Predict<T, N, P> for SquareRootFilter<T, N, Pr>
+impl<T, N, P, Pr, S> Predict<T, N, P> for SquareRootFilter<T, N, Pr, S>
 where
+    S: StateSpace<T, N>,
     T: Real,
     N: Dim,
     P: ProcessModel<T, N>,
@@ -655,15 +709,15 @@ where
     }
 }
 
-/// Euclidean: the square-root forms have no ⊞/⊟ yet.
-impl<T: Real, N: Dim, Pr> OnStateSpace<T, N> for SquareRootFilter<T, N, Pr>
+/// The state space the filter was given ([`with_state_space`](SquareRootFilter::with_state_space)).
+impl<T: Real, N: Dim, Pr, S: StateSpace<T, N>> OnStateSpace<T, N> for SquareRootFilter<T, N, Pr, S>
 where
     DefaultAllocator: Alloc<N>,
 {
-    type Space = Euclidean;
+    type Space = S;
 
-    fn state_space(&self) -> &Euclidean {
-        &Euclidean
+    fn state_space(&self) -> &S {
+        &self.space
     }
 }
 
@@ -683,8 +737,9 @@ where
 /// assert!((c - f.transpose()).abs().max() < 1e-15); // cov(x, F x) = P Fᵀ with P = I
 /// # Ok::<(), estim_core::Error>(())
 /// ```
-impl<T, N, P, Pr> PredictCross<T, N, P> for SquareRootFilter<T, N, Pr>
+impl<T, N, P, Pr, S> PredictCross<T, N, P> for SquareRootFilter<T, N, Pr, S>
 where
+    S: StateSpace<T, N>,
     T: Real,
     N: Dim,
     P: ProcessModel<T, N>,
@@ -704,8 +759,9 @@ where
     }
 }
 
-impl<T, N, M, H, Pr> Update<T, N, M, H> for SquareRootFilter<T, N, Pr>
+impl<T, N, M, H, Pr, S> Update<T, N, M, H> for SquareRootFilter<T, N, Pr, S>
 where
+    S: StateSpace<T, N>,
     T: Real,
     N: Dim,
     M: Dim,
@@ -722,6 +778,7 @@ where
         self.ensure_factored(Stage::Update)?;
         let threshold = self.settings.threshold(z.nrows());
         let result = (self.propagator).update_factor(
+            &self.space,
             &self.state,
             &self.factor,
             model,

@@ -226,7 +226,7 @@ impl<T: Real> Default for Unscented<T> {
 }
 
 /// [`Unscented`]'s buffers: the scaled factor √c L, the deviations D₊ and D₋, their mean, and
-/// the tangent, point and value of one sigma point at a time.
+/// the sigma-point buffers ([`SigmaDeviations`]).
 #[derive(Debug)]
 pub struct UnscentedWorkspace<T: Real, N: Dim, M: Dim>
 where
@@ -234,13 +234,10 @@ where
 {
     factor: Option<OMatrix<T, N, N>>,
     cholesky: CholeskyScratch,
-    tangent: Option<OMatrix<T, N, U1>>,
-    point: Option<OMatrix<T, N, U1>>,
-    value: Option<OMatrix<T, M, U1>>,
-    deviation: Option<OMatrix<T, M, U1>>,
     mean_deviation: Option<OMatrix<T, M, U1>>,
     plus: Option<OMatrix<T, M, N>>,
     minus: Option<OMatrix<T, M, N>>,
+    points: SigmaDeviations<T, N, M>,
 }
 
 impl<T: Real, N: Dim, M: Dim> Default for UnscentedWorkspace<T, N, M>
@@ -251,14 +248,122 @@ where
         Self {
             factor: None,
             cholesky: CholeskyScratch::default(),
+            mean_deviation: None,
+            plus: None,
+            minus: None,
+            points: SigmaDeviations::default(),
+        }
+    }
+}
+
+/// The crate's one sigma-point generator: g at the 2n points χ±ⱼ = μ ⊞ ±Lⱼ of a scaled factor L
+/// (√c times a square root of the covariance) and their deviations dᵢ = g(χᵢ) ⊖ g(μ), with the
+/// tangent, point and value buffers it works in (sized on first use, so nothing is allocated
+/// after the first call). [`Unscented`]'s propagation and the square-root UKF both use it.
+///
+/// ```
+/// use estim_core::nalgebra::{Const, Matrix2, Matrix1x2, Vector1, Vector2};
+/// use estim_core::{Stage, VectorFunction, propagate::SigmaDeviations};
+///
+/// struct Sum;
+/// impl VectorFunction<f64, Const<2>, Const<1>> for Sum {
+///     fn eval(&self, x: &Vector2<f64>) -> Vector1<f64> {
+///         Vector1::new(x.sum())
+///     }
+/// }
+/// let (mut plus, mut minus, mut value) = (Matrix1x2::zeros(), Matrix1x2::zeros(), Vector1::zeros());
+/// let mut points = SigmaDeviations::default();
+/// let mean = Vector2::new(1.0, 2.0);
+/// points.deviations_into(&Sum, &mean, &Matrix2::identity(), &mut value, &mut plus, &mut minus, Stage::Propagation)?;
+/// // g(μ) = 3; g(μ ± eⱼ) − g(μ) = ±1.
+/// assert_eq!((value[0], plus, minus), (3.0, Matrix1x2::new(1.0, 1.0), Matrix1x2::new(-1.0, -1.0)));
+/// # Ok::<(), estim_core::Error>(())
+/// ```
+#[derive(Debug)]
+pub struct SigmaDeviations<T: Real, N: Dim, M: Dim>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    tangent: Option<OMatrix<T, N, U1>>,
+    point: Option<OMatrix<T, N, U1>>,
+    value: Option<OMatrix<T, M, U1>>,
+    deviation: Option<OMatrix<T, M, U1>>,
+}
+
+impl<T: Real, N: Dim, M: Dim> Default for SigmaDeviations<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    fn default() -> Self {
+        Self {
             tangent: None,
             point: None,
             value: None,
             deviation: None,
-            mean_deviation: None,
-            plus: None,
-            minus: None,
         }
+    }
+}
+
+impl<T: Real, N: Dim, M: Dim> SigmaDeviations<T, N, M>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    /// g(μ) into `value`, D₊ = [g(μ ⊞ Lⱼ) ⊖ g(μ)]ⱼ into `plus` and D₋ = [g(μ ⊞ −Lⱼ) ⊖ g(μ)]ⱼ
+    /// into `minus` (m × n each), L = `offsets`; ⊞ is g's
+    /// [`input_plus_into`](VectorFunction::input_plus_into), ⊖ its
+    /// [`difference`](VectorFunction::difference). The 2n points go through g one at a time. A value or deviation of the wrong length is a
+    /// dimension error (quantity `FunctionValue`, at `stage`).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn deviations_into<G>(
+        &mut self,
+        g: &G,
+        mean: &OVector<T, N>,
+        offsets: &OMatrix<T, N, N>,
+        value: &mut OVector<T, M>,
+        plus: &mut OMatrix<T, M, N>,
+        minus: &mut OMatrix<T, M, N>,
+        stage: Stage,
+    ) -> Result<()>
+    where
+        G: VectorFunction<T, N, M> + ?Sized,
+    {
+        let n_dim = mean.shape_generic().0;
+        let m_dim = plus.shape_generic().0;
+        let (n, m) = (n_dim.value(), m_dim.value());
+        eval_into(g, mean, value);
+        ensure_shape(value, m, 1, stage, Quantity::FunctionValue)?;
+        // The tangent ±Lⱼ, needed apart from the point only off vector spaces.
+        let mut delta = (!G::VECTOR_SPACES.get()).then(|| buffer(&mut self.tangent, n_dim, U1));
+        let x = buffer(&mut self.point, n_dim, U1);
+        let y = buffer(&mut self.value, m_dim, U1);
+        let d = buffer(&mut self.deviation, m_dim, U1);
+        // One at a time. Columns of column-major storage are contiguous slices: plain slice
+        // loops here, where nalgebra's generic column views cost measurably on small static
+        // sizes.
+        for j in 0..n {
+            let column = &offsets.as_slice()[j * n..(j + 1) * n];
+            for (sign, deviations) in [(T::one(), &mut *plus), (-T::one(), &mut *minus)] {
+                // χ = μ ⊞ ±Lⱼ; with + the bits of μ ± Lⱼ (−Lⱼ is exact).
+                if let Some(delta) = delta.as_deref_mut() {
+                    for (di, &li) in delta.as_mut_slice().iter_mut().zip(column) {
+                        *di = sign * li;
+                    }
+                    g.input_plus_into(mean, delta, x);
+                } else {
+                    let pairs = x.as_mut_slice().iter_mut().zip(mean.as_slice());
+                    for ((xi, &mi), &li) in pairs.zip(column) {
+                        *xi = mi + sign * li;
+                    }
+                }
+                eval_into(g, x, y);
+                ensure_shape(y, m, 1, stage, Quantity::FunctionValue)?;
+                difference_into(g, y, value, d);
+                ensure_shape(d, m, 1, stage, Quantity::FunctionValue)?;
+                deviations.as_mut_slice()[j * m..(j + 1) * m].copy_from_slice(d.as_slice());
+            }
+        }
+        Ok(())
     }
 }
 
@@ -301,41 +406,11 @@ where
 
         // ȳ is formed as g(μ) ⊞ d̄: out.mean holds g(μ) until the end.
         let out_mean = &mut *out.mean;
-        eval_into(g, mean, out_mean);
-        ensure_shape(out_mean, m, 1, stage, Quantity::FunctionValue)?;
-        // The tangent ±√c Lⱼ, needed apart from the point only off vector spaces.
-        let mut delta =
-            (!G::VECTOR_SPACES.get()).then(|| buffer(&mut workspace.tangent, n_dim, U1));
-        let x = buffer(&mut workspace.point, n_dim, U1);
-        let y = buffer(&mut workspace.value, m_dim, U1);
-        let d = buffer(&mut workspace.deviation, m_dim, U1);
         let plus = buffer(&mut workspace.plus, m_dim, n_dim);
         let minus = buffer(&mut workspace.minus, m_dim, n_dim);
-        // One at a time. Columns of column-major storage are contiguous slices: plain
-        // slice loops here, where nalgebra's generic column views cost measurably on
-        // small static sizes.
-        for j in 0..n {
-            let column = &l.as_slice()[j * n..(j + 1) * n];
-            for (sign, deviations) in [(T::one(), &mut *plus), (-T::one(), &mut *minus)] {
-                // χ = μ ⊞ ±√c Lⱼ; with + the bits of μ ± √c Lⱼ (−Lⱼ is exact).
-                if let Some(delta) = delta.as_deref_mut() {
-                    for (di, &li) in delta.as_mut_slice().iter_mut().zip(column) {
-                        *di = sign * li;
-                    }
-                    g.input_plus_into(mean, delta, x);
-                } else {
-                    let pairs = x.as_mut_slice().iter_mut().zip(mean.as_slice());
-                    for ((xi, &mi), &li) in pairs.zip(column) {
-                        *xi = mi + sign * li;
-                    }
-                }
-                eval_into(g, x, y);
-                ensure_shape(y, m, 1, stage, Quantity::FunctionValue)?;
-                difference_into(g, y, out_mean, d);
-                ensure_shape(d, m, 1, stage, Quantity::FunctionValue)?;
-                deviations.as_mut_slice()[j * m..(j + 1) * m].copy_from_slice(d.as_slice());
-            }
-        }
+        workspace
+            .points
+            .deviations_into(g, mean, l, out_mean, plus, minus, stage)?;
         let w = T::one() / (real::<T>(2.0) * c);
         let d_bar = buffer(&mut workspace.mean_deviation, m_dim, U1);
         d_bar.fill(T::zero());
@@ -367,6 +442,7 @@ where
         if G::VECTOR_SPACES.get() {
             *out.mean += &*d_bar;
         } else {
+            let y = buffer(&mut workspace.points.value, m_dim, U1);
             kernel::copy(y, out.mean);
             g.output_plus_into(y, d_bar, out.mean);
             ensure_shape(out.mean, m, 1, stage, Quantity::FunctionValue)?;

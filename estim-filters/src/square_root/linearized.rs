@@ -5,7 +5,8 @@ use estim_core::checks::ensure_shape;
 use estim_core::kernel::{self, Accum};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
 use estim_core::{
-    Alloc, Differentiable, MeasurementJacobian, Observation, Quantity, Real, Stage, error::Result,
+    Alloc, Differentiable, MeasurementJacobian, Observation, Quantity, Real, Stage, StateSpace,
+    error::Result,
 };
 
 use super::triangular::{Block, lower_triangularize};
@@ -60,7 +61,8 @@ where
 
 /// The array-form update: ẑ = h(x̂), H = ∂h/∂x, and from the pre-array [[S_R, H S], [0, S]]
 /// the factor L of S_zz, K̄ = P Hᵀ L⁻ᵀ and S⁺; then the shared tail.
-pub(super) fn linearized_update<T, N, M, H>(
+pub(super) fn linearized_update<T, N, M, H, S>(
+    space: &S,
     state: &OVector<T, N>,
     factor: &OMatrix<T, N, N>,
     model: &H,
@@ -73,12 +75,13 @@ where
     N: Dim,
     M: Dim,
     H: MeasurementJacobian<T, N, M>,
+    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N, M>,
 {
     let stage = Stage::Update;
     let (n_dim, m_dim) = (state.shape_generic().0, z.shape_generic().0);
     let (n, m) = (n_dim.value(), m_dim.value());
-    let h = Observation::new(model);
+    let h = Observation::on(space, model);
     let mut predicted = OVector::zeros_generic(m_dim, U1);
     estim_core::in_place::eval_into(&h, state, &mut predicted);
     ensure_shape(&predicted, m, 1, stage, Quantity::Measurement)?;
@@ -103,5 +106,5 @@ where
             Block::new(hs.as_mut_slice(), posterior.as_mut_slice(), n),
         ],
     );
-    finish_update(state, &l, &kbar, posterior, threshold, report)
+    finish_update(space, state, &l, &kbar, posterior, threshold, report)
 }

@@ -10,7 +10,7 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{Affine, Linearized, Unscented};
 use estim_core::{
     Alloc, LinearMeasurementModel, LinearProcessModel, MeasurementJacobian, MeasurementModel,
-    ProcessJacobian, ProcessModel, Real, Transition, error::Result,
+    ProcessJacobian, ProcessModel, Real, StateSpace, Transition, error::Result,
 };
 
 use super::linearized::{linearized_predict, linearized_update};
@@ -26,10 +26,12 @@ where
     DefaultAllocator: Alloc<N>,
 {
     /// (x̂⁻, S⁻) for x⁺ = f(x, u, Δt) + w, w ~ N(0, Q) with `noise` = Q(x̂, u, Δt), from x ~
-    /// N(x̂, S Sᵀ); C = cov(x, f(x)) into `cross` if given. Errors as the filter's `predict`.
+    /// N(x̂, S Sᵀ) on the state space `space` (sigma points x̂ ⊞ δ, deviations ⊟); C =
+    /// cov(x, f(x)) into `cross` if given. Errors as the filter's `predict`.
     #[allow(clippy::too_many_arguments)]
-    fn predict_factor(
+    fn predict_factor<S: StateSpace<T, N>>(
         &self,
+        space: &S,
         state: &OVector<T, N>,
         factor: &OMatrix<T, N, N>,
         model: &P,
@@ -46,9 +48,12 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     /// The report of the update with `z` (innovation, its covariance, NIS, log-likelihood,
-    /// outcome) and, unless the NIS exceeds `threshold`, the corrected (x̂⁺, S⁺).
-    fn update_factor(
+    /// outcome) and, unless the NIS exceeds `threshold`, the corrected (x̂⁺, S⁺), x̂⁺ = x̂ ⊞ K ν
+    /// on the state space `space`.
+    #[allow(clippy::too_many_arguments)]
+    fn update_factor<S: StateSpace<T, N>>(
         &self,
+        space: &S,
         state: &OVector<T, N>,
         factor: &OMatrix<T, N, N>,
         model: &H,
@@ -66,8 +71,9 @@ macro_rules! linear_factor_propagator {
         where
             DefaultAllocator: Alloc<N>,
         {
-            fn predict_factor(
+            fn predict_factor<S: StateSpace<T, N>>(
                 &self,
+                space: &S,
                 state: &OVector<T, N>,
                 factor: &OMatrix<T, N, N>,
                 model: &P,
@@ -76,7 +82,7 @@ macro_rules! linear_factor_propagator {
                 noise: &OMatrix<T, N, N>,
                 cross: Option<&mut OMatrix<T, N, N>>,
             ) -> Result<FactorEstimate<T, N>> {
-                let f = Transition::new(model, input, dt);
+                let f = Transition::on(space, model, input, dt);
                 linearized_predict(state, factor, &f, noise, cross)
             }
         }
@@ -86,8 +92,9 @@ macro_rules! linear_factor_propagator {
         where
             DefaultAllocator: Alloc<N, M>,
         {
-            fn update_factor(
+            fn update_factor<S: StateSpace<T, N>>(
                 &self,
+                space: &S,
                 state: &OVector<T, N>,
                 factor: &OMatrix<T, N, N>,
                 model: &H,
@@ -95,7 +102,7 @@ macro_rules! linear_factor_propagator {
                 threshold: Option<T>,
                 report: &mut UpdateReport<T, M>,
             ) -> Result<Option<FactorEstimate<T, N>>> {
-                linearized_update(state, factor, model, z, threshold, report)
+                linearized_update(space, state, factor, model, z, threshold, report)
             }
         }
     };
@@ -108,8 +115,9 @@ impl<T: Real, N: Dim, P: ProcessModel<T, N>> FactorPredict<T, N, P> for Unscente
 where
     DefaultAllocator: Alloc<N>,
 {
-    fn predict_factor(
+    fn predict_factor<S: StateSpace<T, N>>(
         &self,
+        space: &S,
         state: &OVector<T, N>,
         factor: &OMatrix<T, N, N>,
         model: &P,
@@ -118,7 +126,7 @@ where
         noise: &OMatrix<T, N, N>,
         cross: Option<&mut OMatrix<T, N, N>>,
     ) -> Result<FactorEstimate<T, N>> {
-        let f = Transition::new(model, input, dt);
+        let f = Transition::on(space, model, input, dt);
         unscented_predict(self, state, factor, &f, noise, cross)
     }
 }
@@ -128,8 +136,9 @@ impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>> FactorUpdate<T, N, M
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    fn update_factor(
+    fn update_factor<S: StateSpace<T, N>>(
         &self,
+        space: &S,
         state: &OVector<T, N>,
         factor: &OMatrix<T, N, N>,
         model: &H,
@@ -137,6 +146,6 @@ where
         threshold: Option<T>,
         report: &mut UpdateReport<T, M>,
     ) -> Result<Option<FactorEstimate<T, N>>> {
-        unscented_update(self, state, factor, model, z, threshold, report)
+        unscented_update(self, space, state, factor, model, z, threshold, report)
     }
 }

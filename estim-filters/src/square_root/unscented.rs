@@ -3,10 +3,10 @@
 
 use estim_core::checks::ensure_shape;
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
-use estim_core::propagate::Unscented;
+use estim_core::propagate::{SigmaDeviations, Unscented};
 use estim_core::scalar::real;
 use estim_core::{
-    Alloc, Error, MeasurementModel, Observation, Quantity, Real, Stage, VectorFunction,
+    Alloc, Error, MeasurementModel, Observation, Quantity, Real, Stage, StateSpace, VectorFunction,
     error::Result,
 };
 
@@ -46,7 +46,7 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     let n_dim = x.shape_generic().0;
-    let (n, m) = (n_dim.value(), m_dim.value());
+    let n = n_dim.value();
     // The accepted region for this n, as the full-covariance UKF checks it (c > 0 and
     // α²κ + nβ ≥ 0): outside it no factor of cov(y) exists for some functions.
     ut.check_dimension(n)?;
@@ -54,39 +54,18 @@ where
     let gamma = c.sqrt();
     let offsets = s * gamma;
     let mut value = OVector::zeros_generic(m_dim, U1);
-    estim_core::in_place::eval_into(g, x, &mut value);
-    ensure_shape(&value, m, 1, stage, Quantity::FunctionValue)?;
-    finite(&value, stage, Quantity::FunctionValue)?;
     let mut plus = OMatrix::zeros_generic(m_dim, n_dim);
     let mut minus = OMatrix::zeros_generic(m_dim, n_dim);
-    // g at x ⊞ ±γ Sⱼ, one point at a time.
-    let (mut delta, mut point) = (x.clone(), x.clone());
-    let mut point_value = value.clone();
-    for j in 0..n {
-        for (sign, values) in [(T::one(), &mut plus), (-T::one(), &mut minus)] {
-            for (di, &oi) in delta.iter_mut().zip(offsets.column(j).iter()) {
-                *di = sign * oi;
-            }
-            g.input_plus_into(x, &delta, &mut point);
-            estim_core::in_place::eval_into(g, &point, &mut point_value);
-            ensure_shape(&point_value, m, 1, stage, Quantity::FunctionValue)?;
-            values.set_column(j, &point_value);
-        }
-    }
+    // The crate's one sigma-point generator, as the full-covariance UKF forms its points.
+    SigmaDeviations::default()
+        .deviations_into(g, x, &offsets, &mut value, &mut plus, &mut minus, stage)?;
+    finite(&value, stage, Quantity::FunctionValue)?;
     let weight = T::one() / (real::<T>(2.0) * c);
     let mut mean = OVector::zeros_generic(m_dim, U1);
-    let mut y = OVector::zeros_generic(m_dim, U1);
-    let mut d = OVector::zeros_generic(m_dim, U1);
-    for points in [&mut plus, &mut minus] {
-        ensure_shape(points, m, n, stage, Quantity::FunctionValue)?;
+    for points in [&plus, &minus] {
         finite(points, stage, Quantity::FunctionValue)?;
-        for j in 0..n {
-            let column = &mut points.as_mut_slice()[j * m..(j + 1) * m];
-            y.as_mut_slice().copy_from_slice(column);
-            estim_core::in_place::difference_into(g, &y, &value, &mut d);
-            ensure_shape(&d, m, 1, stage, Quantity::FunctionValue)?;
-            column.copy_from_slice(d.as_slice());
-            mean += &d;
+        for column in points.column_iter() {
+            mean += column;
         }
     }
     mean *= weight;
@@ -182,8 +161,10 @@ where
 /// S⁺ at once. R̃'s factor comes from [S_R | √(2w) B | √(β − α²) d̄] inside the array when
 /// β ≥ α², else from [S_R | √(2w) B] and a rank-one downdate by √(α² − β) d̄ (its failure is
 /// `NotPositiveDefinite`, `InnovationCovariance`).
-pub(super) fn unscented_update<T, N, M, H>(
+#[allow(clippy::too_many_arguments)]
+pub(super) fn unscented_update<T, N, M, H, S>(
     ut: &Unscented<T>,
+    space: &S,
     state: &OVector<T, N>,
     factor: &OMatrix<T, N, N>,
     model: &H,
@@ -196,12 +177,13 @@ where
     N: Dim,
     M: Dim,
     H: MeasurementModel<T, N, M>,
+    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N, M>,
 {
     let stage = Stage::Update;
     let (n_dim, m_dim) = (state.shape_generic().0, z.shape_generic().0);
     let (n, m) = (n_dim.value(), m_dim.value());
-    let h = Observation::new(model);
+    let h = Observation::on(space, model);
     let mut r = OMatrix::zeros_generic(m_dim, m_dim);
     estim_core::in_place::measurement_noise_into(model, state, &mut r);
     let mut l = noise_factor(&r, m, stage, Quantity::MeasurementNoise)?;
@@ -265,5 +247,5 @@ where
             Block::new(odd.as_mut_slice(), prior.as_mut_slice(), n),
         ],
     );
-    finish_update(state, &l, &kbar, posterior, threshold, report)
+    finish_update(space, state, &l, &kbar, posterior, threshold, report)
 }
