@@ -1,46 +1,4 @@
-//! The Gaussian-sum filter (Sorenson & Alspach 1971; Alspach & Sorenson 1972): a weighted
-//! sum of Gaussians, each carried by a filter of the family, with the number of components
-//! bounded by Runnalls' merging.
-//!
-//! ```text
-//! p(x) ≈ Σᵢ wᵢ N(x; x̂ᵢ, Pᵢ)                       (each component a filter)
-//! predict:        each component through the model (weights unchanged)
-//! mixture noise:  w ~ Σₗ αₗ N(0, Qₗ): component i through model l, weight wᵢ αₗ (K·L of them)
-//! update:         each component updates; wᵢ ← wᵢ exp(ℓᵢ) / Σⱼ wⱼ exp(ℓⱼ)   (in logs)
-//! reduce:         while more than `max_components`, merge the pair with the least Runnalls
-//!                 cost B(i, j) = ½ [(wᵢ + wⱼ) ln|Pᵢⱼ| − wᵢ ln|Pᵢ| − wⱼ ln|Pⱼ|], an upper
-//!                 bound on the Kullback–Leibler discrimination the merge adds (Runnalls 2007),
-//!                 into its moments: w = wᵢ + wⱼ, x̂ = (wᵢx̂ᵢ + wⱼx̂ⱼ)/w,
-//!                 Pᵢⱼ = (wᵢPᵢ + wⱼPⱼ)/w + (wᵢwⱼ/w²)(x̂ᵢ − x̂ⱼ)(x̂ᵢ − x̂ⱼ)ᵀ
-//! estimate:       the mixture's moments
-//! ```
-//!
-//! Without mixture noise and without merging the filter is exact for a linear model with a
-//! mixture prior (each component is the Kalman filter of its prior, the weights Bayes'
-//! rule); with mixture noise the number of components grows as Lᵏ and merging is the
-//! approximation (measured in `tests/it/gaussian_sum.rs` against the enumeration).
-//! Every step is atomic: on an error every component and weight is as before. It implements
-//! the step traits and [`Rollback`] (a clone of every component and weight).
-//!
-//! ```
-//! use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Vector1, Vector2};
-//! use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
-//! use estim_filters::imm::GaussianSum;
-//! use estim_filters::{Estimator, KalmanFilter};
-//!
-//! // Is the cart at 0 or at 10? A two-component prior, then position measurements.
-//! let model = LinearProcess::without_input(Matrix2::new(1.0, 1.0, 0.0, 1.0), Matrix2::identity() * 1e-3);
-//! let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.5) };
-//! let at = |p: f64| KalmanFilter::new(Gaussian::new(Vector2::new(p, 0.0), Matrix2::identity()).unwrap());
-//! let mut gsf = GaussianSum::new(vec![(0.5, at(0.0)), (0.5, at(10.0))], 2)?;
-//! for z in [9.8, 10.1, 10.0] {
-//!     gsf.predict(&model, &(), 1.0)?;
-//!     gsf.update(&sensor, &Vector1::new(z))?;
-//! }
-//! assert!(gsf.weights()[1] > 0.999);
-//! assert!((gsf.state()[0] - 10.0).abs() < 0.5);
-//! # Ok::<(), estim_core::Error>(())
-//! ```
+//! The Gaussian-sum filter (documented on [`GaussianSum`]).
 
 use estim_core::kernel::{self, CholeskyScratch};
 use estim_core::nalgebra::{DVector, DefaultAllocator, Dim, OMatrix, OVector};
@@ -56,8 +14,51 @@ fn vector<T: Real>(values: Vec<T>) -> DVector<T> {
     DVector::from_vec(values)
 }
 
-/// A Gaussian-sum filter over components of the filter type `F` (see the [module
-/// docs](self)).
+/// A Gaussian-sum filter over components of the filter type `F`.
+///
+/// The Gaussian-sum filter (Sorenson & Alspach 1971; Alspach & Sorenson 1972): a weighted
+/// sum of Gaussians, each carried by a filter of the family, with the number of components
+/// bounded by Runnalls' merging.
+///
+/// ```text
+/// p(x) ≈ Σᵢ wᵢ N(x; x̂ᵢ, Pᵢ)                       (each component a filter)
+/// predict:        each component through the model (weights unchanged)
+/// mixture noise:  w ~ Σₗ αₗ N(0, Qₗ): component i through model l, weight wᵢ αₗ (K·L of them)
+/// update:         each component updates; wᵢ ← wᵢ exp(ℓᵢ) / Σⱼ wⱼ exp(ℓⱼ)   (in logs)
+/// reduce:         while more than `max_components`, merge the pair with the least Runnalls
+///                 cost B(i, j) = ½ [(wᵢ + wⱼ) ln|Pᵢⱼ| − wᵢ ln|Pᵢ| − wⱼ ln|Pⱼ|], an upper
+///                 bound on the Kullback–Leibler discrimination the merge adds (Runnalls 2007),
+///                 into its moments: w = wᵢ + wⱼ, x̂ = (wᵢx̂ᵢ + wⱼx̂ⱼ)/w,
+///                 Pᵢⱼ = (wᵢPᵢ + wⱼPⱼ)/w + (wᵢwⱼ/w²)(x̂ᵢ − x̂ⱼ)(x̂ᵢ − x̂ⱼ)ᵀ
+/// estimate:       the mixture's moments
+/// ```
+///
+/// Without mixture noise and without merging the filter is exact for a linear model with a
+/// mixture prior (each component is the Kalman filter of its prior, the weights Bayes'
+/// rule); with mixture noise the number of components grows as Lᵏ and merging is the
+/// approximation (measured in `tests/it/gaussian_sum.rs` against the enumeration).
+/// Every step is atomic: on an error every component and weight is as before. It implements
+/// the step traits and [`Rollback`] (a clone of every component and weight).
+///
+/// ```
+/// use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Vector1, Vector2};
+/// use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+/// use estim_filters::imm::GaussianSum;
+/// use estim_filters::{Estimator, KalmanFilter};
+///
+/// // Is the cart at 0 or at 10? A two-component prior, then position measurements.
+/// let model = LinearProcess::without_input(Matrix2::new(1.0, 1.0, 0.0, 1.0), Matrix2::identity() * 1e-3);
+/// let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.5) };
+/// let at = |p: f64| KalmanFilter::new(Gaussian::new(Vector2::new(p, 0.0), Matrix2::identity()).unwrap());
+/// let mut gsf = GaussianSum::new(vec![(0.5, at(0.0)), (0.5, at(10.0))], 2)?;
+/// for z in [9.8, 10.1, 10.0] {
+///     gsf.predict(&model, &(), 1.0)?;
+///     gsf.update(&sensor, &Vector1::new(z))?;
+/// }
+/// assert!(gsf.weights()[1] > 0.999);
+/// assert!((gsf.state()[0] - 10.0).abs() < 0.5);
+/// # Ok::<(), estim_core::Error>(())
+/// ```
 #[derive(Clone, Debug)]
 pub struct GaussianSum<T: Real, N: Dim, F>
 where
