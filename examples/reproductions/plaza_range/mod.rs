@@ -14,6 +14,29 @@
 //! the interval, update with it, and predict on to the row's time (the estimates are scored at
 //! those times, against the ground truth interpolated there). The first row's increment is not
 //! used (its interval's start is not in the log).
+//!
+//! ## Results on the Plaza run, and the NIS explained
+//!
+//! Position RMSE against the GPS ground truth (whole run, 1,933 s, 3,529 ranges; `--json`):
+//! smoother 0.86 m; EKF 1.04, UKF 1.04, iterated EKF 1.02, particle filter (1,000) 1.14; dead
+//! reckoning from the *true* start 1.93. The filters' own 3σ covers 97-99 % of the position
+//! error components (the particle filter's 93 %), and the mean NIS of the ranges is 0.91.
+//!
+//! UWB range errors are correlated in time (multipath changes over tens of metres of driving),
+//! so a white-noise range model cannot be both accurate and consistent. The example runs two
+//! beside the model above (the same EKF and smoother, no per-beacon bias states):
+//!
+//! | ranges modelled as | mean NIS | EKF RMSE | EKF 3σ coverage | smoother RMSE | smoother coverage |
+//! |---|---|---|---|---|---|
+//! | white, σ_w = 0.5 m | 1.75 | 1.49 m | 41 % | 1.38 m | 30 % |
+//! | white, σ = √(σ_w² + σ_g²) = 1.12 m | 0.53 | 1.33 m | 68 % | 1.17 m | 52 % |
+//! | σ_w + Gauss-Markov bias per beacon (this model) | 0.91 | 1.04 m | 99 % | 0.86 m | 97 % |
+//!
+//! The first trusts each reading too much (NIS 1.75, 1.8 % of the ranges gated). The second
+//! has a NIS that looks conservative and is still overconfident in position: it averages
+//! readings whose errors are the same for tens of seconds as if they were independent, so its
+//! covariance shrinks faster than its error. Modelled as states, the correlated part is
+//! estimated and carried (its uncertainty stays in P): both accurate and consistent.
 
 pub mod data;
 pub mod model;

@@ -16,9 +16,9 @@
 //! beacons: c), while multipath, non-line-of-sight paths and each beacon's antenna delay differ
 //! per beacon and change as the robot moves (gⱼ, zero-mean, correlated over tens of seconds).
 //! One bias cannot follow the second part; per-beacon biases alone would have to learn the
-//! large common part four times from a zero-mean prior. On the Plaza run the filter ends with
-//! c ≈ 2.6 m and gⱼ between −1.3 and +1.6 m (the data README's per-beacon means, +1.9 to
-//! +3.4 m, are c + gⱼ).
+//! large common part four times from a zero-mean prior. On the Plaza run the EKF ends with
+//! c ≈ 2.6 m and gⱼ between −1.3 and +1.6 m (the per-beacon mean range errors against the
+//! ground truth, +1.9 to +3.4 m in the data's README, are time averages of c + gⱼ).
 //!
 //! c and gⱼ are first-order Gauss-Markov processes (`GaussMarkov`): ranges have
 //! time-correlated errors, and modelling them as states is what lets the filter be both
