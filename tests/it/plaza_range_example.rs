@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use crate::plaza_range::data::{DataError, load, write_csv};
+use crate::plaza_range::model::MAX_BEACONS;
 use crate::plaza_range::{Config, run_config, vendored};
 
 /// The slice: the first 300 s (48 s at rest, then about 250 m driven), the EKF with its
@@ -122,7 +123,7 @@ fn a_time_going_backwards_is_named_by_file_and_line() {
 }
 
 #[test]
-fn a_missing_file_or_unknown_beacon_is_named() {
+fn a_missing_file_or_a_bad_beacon_is_named() {
     let dir = scratch("missing");
     tiny(&dir);
     std::fs::remove_file(dir.join("GT.csv")).unwrap();
@@ -139,6 +140,14 @@ fn a_missing_file_or_unknown_beacon_is_named() {
     let err = load(&dir).unwrap_err();
     assert!(
         matches!(err, DataError::Beacon { line: 2, id, .. } if id == 7.0),
+        "{err:?}"
+    );
+    // More beacons than the state has room for: the first one too many is named.
+    let survey: String = (0..=MAX_BEACONS).map(|i| format!("{i},{i},0\n")).collect();
+    write_csv(&dir, "TL", &survey).unwrap();
+    let err = load(&dir).unwrap_err();
+    assert!(
+        matches!(err, DataError::Beacon { line, .. } if line == MAX_BEACONS + 1),
         "{err:?}"
     );
     let _ = std::fs::remove_dir_all(&dir);

@@ -17,6 +17,8 @@ use std::path::{Path, PathBuf};
 
 use flate2::read::MultiGzDecoder;
 
+use super::model::MAX_BEACONS;
+
 /// What went wrong reading the recording. Lines are counted from 1 (the files have no header).
 #[derive(Debug)]
 pub enum DataError {
@@ -256,7 +258,7 @@ pub struct Recording {
 
 /// Reads `GT`, `DR`, `TD` and `TL` from `dir`: `GT` and `DR` in time order (`DR` strictly, an
 /// increment needs an interval), `TD` sorted by time; ranges must name a beacon of `TL` (each
-/// listed once) and be positive.
+/// listed once, at most [`MAX_BEACONS`]) and be positive.
 pub fn load(dir: &Path) -> Result<Recording, DataError> {
     let tl = read(dir, "TL", 3, false)?;
     let mut beacons: Vec<Beacon> = Vec::new();
@@ -267,6 +269,14 @@ pub fn load(dir: &Path) -> Result<Recording, DataError> {
                 line,
                 id: r[0],
                 what: "is listed twice",
+            });
+        }
+        if beacons.len() == MAX_BEACONS {
+            return Err(DataError::Beacon {
+                file: tl.file.clone(),
+                line,
+                id: r[0],
+                what: "is one more than the example's state has room for (MAX_BEACONS)",
             });
         }
         beacons.push(Beacon {

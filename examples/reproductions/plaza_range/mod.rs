@@ -55,9 +55,7 @@ use estim_filters::smoother::Rts;
 use estim_filters::{Ekf, Estimator, Gate, Iekf, PredictCross, Ukf, Update};
 
 use data::{DataError, Recording};
-use model::{
-    BiasedRange, COMMON, MAX_BEACONS, Motion, N, Noise, SampledMotion, State, TolerantRange,
-};
+use model::{BiasedRange, COMMON, Motion, N, Noise, SampledMotion, State, TolerantRange};
 
 /// The vendored recording: `examples/data/plaza1`.
 pub fn vendored() -> PathBuf {
@@ -492,13 +490,6 @@ fn dead_reckoning(rec: &Recording, end: f64) -> Result<Vec<Estimate>, DataError>
 pub fn run_config(config: &Config) -> Result<PlazaResult, Box<dyn std::error::Error>> {
     let clock = Instant::now();
     let rec = data::load(&config.data)?;
-    if rec.beacons.len() > MAX_BEACONS {
-        return Err(format!(
-            "{} beacons in TL; the example's state has room for {MAX_BEACONS}",
-            rec.beacons.len()
-        )
-        .into());
-    }
     if rec.odometry.len() < 2 {
         return Err(DataError::Empty {
             file: config.data.join("DR.csv"),
