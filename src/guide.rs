@@ -10,7 +10,7 @@
 //! | [`noise_identification`] | learning Q and R from data: EM, maximum likelihood, online matching |
 //! | [`particle_filters`] | when a Gaussian is not enough: multimodal posteriors, non-Gaussian noise |
 //! | [`sensor_fusion`] | timestamped sensors: late measurements, gating outcomes, faulty sensors |
-//! | [`gps_ins`] | a GPS/INS: strapdown mechanisation, alignment, the attitude manifold, latency |
+//! | [`gps_ins`] | a GPS/INS: the nav model set, alignment, IMU samples and late fixes in the driver |
 //! | [`single_precision`] | what changes in `f32`, and the settings that survive it |
 //! | [`from_filterpy`] | a table of FilterPy (and pykalman) equivalents |
 //!
@@ -19,6 +19,7 @@
 
 pub mod choosing_a_filter;
 pub mod from_filterpy;
+#[cfg(feature = "models")]
 pub mod gps_ins;
 pub mod noise_identification;
 pub mod particle_filters;

@@ -1,38 +1,112 @@
 //! # A GPS/INS in estim
 //!
-//! A strapdown inertial navigator integrates the IMU (gyroscopes, accelerometers) and is
-//! corrected by GNSS fixes. [`estim::models::nav`](crate::models::nav) has the pieces as
-//! models: the 15-state error-state mechanisation [`Strapdown`](crate::models::nav::Strapdown)
-//! (attitude, velocity and position in a local NED frame, gyro and accelerometer biases), the
-//! GNSS, barometer, magnetometer and heading sensors, static alignment and WGS-84 gravity. The
-//! filters, the fusion driver and the derivative checks take them as they take any model, so an
-//! EKF becomes a UKF by changing one word. The `flight_ins` example runs this over a real
-//! aerobatic flight (`cargo run --release --example flight_ins`) and compares it with the
-//! autopilot's own EKF3.
+//! A strapdown inertial navigator corrected by GNSS, set up the way the repository's
+//! `flight_ins` example runs it over a real ArduPilot flight (`cargo run --release --example
+//! flight_ins`; its body is `examples/reproductions/flight_ins/`). The models are
+//! [`estim::models::nav`](crate::models::nav); the filter is any of the family on the nav
+//! state space; the fusion driver ([`estim::filters::fusion`](crate::filters::fusion)) puts
+//! each IMU sample and each fix at its own time.
 //!
-//! ## The steps
+//! 1. **The frame**: an [`Origin`](crate::models::nav::Origin) (geodetic latitude, longitude,
+//!    height: the autopilot's home, else the first fix). Positions are NED metres about it
+//!    ([`Origin::ned`](crate::models::nav::Origin::ned) converts a fix), gravity is the WGS-84
+//!    normal gravity there.
+//! 2. **The state**: 15 components, attitude error, velocity, position, gyro and accelerometer
+//!    biases ([`ATTITUDE`](crate::models::nav::ATTITUDE) … ), on the state space
+//!    [`state_space()`](crate::models::nav::state_space): the attitude composes on the
+//!    quaternion manifold, so the covariance is that of the body-frame attitude error, and the
+//!    attitude lives in the filter's own state (the driver's replays restore it).
+//! 3. **The start**: [`static_alignment`](crate::models::nav::static_alignment) levels the
+//!    vehicle from the mean accelerometer reading at rest and sets the heading from the
+//!    magnetometer and the field's direction; the mean gyro reading at rest is the first gyro
+//!    bias. The prior covariance says how well that is known (degrees of roll and pitch, tens
+//!    of degrees of heading from a disturbed compass).
+//! 4. **The process**: [`Strapdown`](crate::models::nav::Strapdown) with the IMU's noise
+//!    densities ([`InsSettings`](crate::models::nav::InsSettings); `flight_ins` reads them from
+//!    the autopilot's own parameters), its input an [`Imu`](crate::models::nav::Imu) sample.
+//!    An IMU sample is the mean over the interval *before* its time: tell the driver so with
+//!    [`InputConvention::Preceding`](crate::filters::fusion::InputConvention::Preceding)
+//!    (each span is predicted with the sample that covers it, not with the one before).
+//! 5. **The sensors**: [`GnssPosition`](crate::models::nav::GnssPosition) and
+//!    [`GnssVelocity`](crate::models::nav::GnssVelocity) (also `BaroHeight`, `Magnetometer`,
+//!    `Heading`) as one [`SensorSet`](crate::filters::fusion::SensorSet). A receiver reports a
+//!    fix after it was taken (0.1-0.2 s for a u-blox): fuse it at the time it was *taken*; the
+//!    driver rolls the filter back and replays the IMU samples since. On the vendored flight
+//!    that is the difference between 0.45 m and 3.15 m of NE position error against the
+//!    autopilot's EKF3.
 //!
-//! 1. **Origin and noise.** An [`Origin`](crate::models::nav::Origin) (latitude, longitude,
-//!    height) fixes the local frame and gravity. The IMU's noise densities come from its data
-//!    sheet or the autopilot's parameters ([`InsSettings`](crate::models::nav::InsSettings);
-//!    ArduPilot's `EK3_GYRO_P_NSE`, `EK3_ACC_P_NSE`, … are these densities).
-//! 2. **Alignment.** At rest, the mean accelerometer reading gives roll and pitch and the
-//!    magnetometer the heading ([`static_alignment`](crate::models::nav::static_alignment)).
-//!    The mean gyro reading is the gyro bias (plus the earth rate, if you model it).
-//! 3. **The filter on the attitude manifold.** The attitude block is a rotation: give the filter
-//!    [`nav::state_space`](crate::models::nav::state_space), so ⊞ composes rotations
-//!    (q ⊞ δθ = q ⊗ Exp(δθ)) and the covariance is that of the body-frame attitude error (the
-//!    multiplicative EKF). The attitude lives in the filter's own state: snapshots, rollback
-//!    and checkpoints carry it.
-//! 4. **Time.** An IMU sample is the mean over the interval *before* its timestamp: in the
-//!    [fusion driver](crate::filters::fusion) use
-//!    [`InputConvention::Preceding`](crate::filters::fusion::InputConvention::Preceding). A GNSS
-//!    fix is valid some 0.1–0.2 s before it arrives: fuse it at the time it was *taken*; the
-//!    driver rolls the filter back and replays the IMU samples since (see
-//!    [`sensor_fusion`](super::sensor_fusion)). On the flight log, fusing on arrival instead
-//!    costs a factor 3–7 in accuracy (attitude median 0.66° → 1.91°, NE position 0.45 → 3.15 m).
+//! A vehicle at rest, level, heading north, 1 s of 50 Hz IMU samples and one fix taken
+//! 0.15 s before it arrives:
 //!
-//! ## At rest, with position fixes
+//! ```
+//! use estim::prelude::*;
+//! use estim::filters::fusion::InputConvention;
+//! use estim::models::nav::{
+//!     ATTITUDE, GYRO_BIAS, GnssPosition, Imu, InsSettings, Origin, POSITION, Strapdown,
+//!     attitude, state_space, static_alignment,
+//! };
+//! use estim::nalgebra::{Const, Matrix3, SMatrix, SVector, Vector3};
+//!
+//! // 1. The frame, and what a level IMU at rest reads there.
+//! let origin = Origin::from_degrees(51.642, -2.526, 100.0)?;
+//! let g = origin.gravity(0.0);
+//! let gyro_bias = Vector3::new(0.002, -0.001, 0.0005);
+//! let at_rest = Imu { gyro: gyro_bias, accel: Vector3::new(0.0, 0.0, -g) };
+//!
+//! // 3. The start: level from the accelerometer, heading from a field pointing north and down.
+//! let field = Vector3::new(0.19, 0.0, 0.45);
+//! let q0 = static_alignment(&at_rest.accel, &field, &field)?;
+//! let mut x = SVector::<f64, 15>::zeros();
+//! x.fixed_rows_mut::<3>(ATTITUDE).copy_from(&estim::core::manifold::so3_log(&q0));
+//! x.fixed_rows_mut::<3>(GYRO_BIAS).copy_from(&at_rest.gyro);
+//! // σ: attitude 3° (heading 10°), 0.5 m/s, 2 m, gyro bias 3 mrad/s, accelerometer bias 0.3 m/s².
+//! let sd = [0.05, 0.05, 0.17, 0.5, 0.5, 0.5, 2.0, 2.0, 2.0, 3e-3, 3e-3, 3e-3, 0.3, 0.3, 0.3];
+//! let p = SMatrix::<f64, 15, 15>::from_diagonal(&SVector::from_fn(|i, _| sd[i] * sd[i]));
+//! let filter = Ekf::new(Gaussian::new(x, p)?).with_state_space(state_space());
+//!
+//! // 5. One sensor: the GNSS position, 0.5 m horizontally, 1 m vertically.
+//! struct Gnss(GnssPosition);
+//! impl<F: Update<f64, Const<15>, Const<3>, GnssPosition>> SensorSet<f64, Const<15>, F> for Gnss {
+//!     type Reading = Vector3<f64>;
+//!     fn count(&self) -> usize { 1 }
+//!     fn sensor(&self, _: &Vector3<f64>) -> usize { 0 }
+//!     fn dimension(&self, _: usize) -> usize { 3 }
+//!     fn update(&self, f: &mut F, z: &Vector3<f64>) -> estim::core::error::Result<Innovation<f64>> {
+//!         f.update(&self.0, z).map(|r| Innovation::of(&r))
+//!     }
+//! }
+//! let gnss = Gnss(GnssPosition { noise: Matrix3::from_diagonal(&Vector3::new(0.25, 0.25, 1.0)) });
+//!
+//! // 4. The process and the driver: IMU samples cover the interval before them; steps of at
+//! // most 1.25 IMU periods; a history reaching back over the GPS latency.
+//! let ins = Strapdown::new(origin, InsSettings::default())?;
+//! let settings = FusionSettings { horizon: 0.5, max_step: 0.025, ..FusionSettings::default() };
+//! let mut driver = FusionDriver::new(filter, ins, Imu::default(), gnss, 0.0, settings, SensorSettings::gated(0.99999))?
+//!     .with_input_convention(InputConvention::Preceding)?;
+//! for k in 1..=50 {
+//!     let t = 0.02 * k as f64;
+//!     driver.set_input(t, at_rest)?;
+//!     if k == 40 {
+//!         // A fix at the origin arrives at 0.8 s; it was taken at 0.65 s.
+//!         assert!(driver.fuse(0.65, origin.ned(51.642, -2.526, 100.0))?.outcome.applied());
+//!     }
+//! }
+//! let x = driver.filter().state();
+//! // Still at the origin, still level and facing north.
+//! assert!(x.fixed_rows::<3>(POSITION).norm() < 0.05);
+//! assert!(attitude(x).angle_to(&q0) < 1e-3);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! What `flight_ins` adds over this: the recording's parameters (noise densities, GPS latency,
+//! declination) read from the log, both position and velocity fixes, the UKF beside the EKF
+//! (one constructor changed), and the comparison with the autopilot's EKF3 (attitude against
+//! its quaternion, NE position and velocity against its output, each filter's 3σ coverage).
+//! The range-only counterpart, `plaza_range`, uses the planar models of
+//! [`estim::models::motion`](crate::models::motion) and
+//! [`augment`](crate::models::augment) instead.
+//!
+//! ## What is observable at rest
 //!
 //! A vehicle standing level, heading 30°, with a GNSS position fix every 0.2 s for 20 s. A tilt
 //! error δθ turns gravity into a horizontal acceleration g δθ, which the position fixes see;
@@ -95,22 +169,6 @@
 //! assert!(deg(2) >= 0.17f64.to_degrees() * 0.999, "heading {}", deg(2));
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
-//!
-//! ## What the flight example adds
-//!
-//! - **Settings from the recording**: noise densities and the GPS delay from the log's
-//!   parameters, the origin from its home position, nothing tuned to the one flight
-//!   (`--data DIR` runs another log of the same kind).
-//! - **GNSS velocity as well as position** ([`GnssVelocity`](crate::models::nav::GnssVelocity)),
-//!   through one [`SensorSet`](crate::filters::fusion::SensorSet) enum, gated at 1 − 10⁻⁵ so only
-//!   gross errors are refused.
-//! - **No magnetometer in the filter**: in aerobatics its field direction scattered ±10–15°
-//!   (motor currents); GPS velocity makes the heading observable once the vehicle moves. At rest,
-//!   before take-off, the heading is as uncertain as the alignment left it (the whole log's
-//!   attitude p95 of 17° comes from that phase).
-//! - **Results** (airborne, against EKF3 core 0): attitude median 0.66°, p95 1.79°; NE position
-//!   0.45 m and velocity 0.263 m/s RMS; the filter's own 3σ covers 97–100 % of the errors. EKF3's
-//!   two cores differ from each other by 1.42° / 3.44°.
 //!
 //! ## Checking your own navigation model
 //!
