@@ -19,3 +19,4 @@ pub mod lu_calibration;
 pub mod lu_delays;
 pub mod lu_noise_id;
 pub mod lv2_fusion;
+pub mod sharding;

@@ -34,6 +34,7 @@ use estim_reproductions::lu_calibration;
 use estim_reproductions::lu_delays;
 use estim_reproductions::lu_noise_id;
 use estim_reproductions::lv2_fusion;
+use estim_reproductions::sharding;
 
 // The tests, one module per example (or per paper for Boje's four).
 #[cfg(feature = "autodiff")]
@@ -53,3 +54,4 @@ mod lu_noise_id_example;
 mod lv2_fusion_example;
 mod manoeuvring_target_example;
 mod particle_growth_example;
+mod sharding_flags;
