@@ -15,10 +15,16 @@
 //! `--bench` runs only the consistent filter's Monte Carlo (5000 × 6000 steps, or 500 with
 //! `--quick`) and prints its wall time (for BENCHMARKS.md).
 //!
-//! `cargo run --release --example lu_calibration [-- --json] [-- --quick] [-- --sequential] [-- --bench]`
+//! `--shard I/N --out FILE` runs shard I of N of its Monte Carlos and writes it to FILE;
+//! `--merge FILE...` merges the N files and prints what one process prints (wall time aside),
+//! bit for bit (`estim_reproductions::sharding`; the Slurm recipe is in
+//! `estim::filters::monte_carlo`). Not with `--bench`.
+//!
+//! `cargo run --release --example lu_calibration [-- --json] [-- --quick] [-- --sequential] [-- --bench] [-- --shard I/N --out FILE | --merge FILE...] [-- --stats FILE]`
 
 use estim_reproductions::common;
 use estim_reproductions::lu_calibration;
+use estim_reproductions::sharding::{self, Mode, Session};
 
 use lu_calibration::{Execution, MonteCarloConfig, run_monte_carlo};
 
@@ -28,7 +34,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     } else {
         Execution::Default
     };
+    let quick = common::quick_requested();
+    let session = Session::from_args("lu_calibration", sharding::settings(quick))?;
     if std::env::args().any(|a| a == "--bench") {
+        if *session.mode() != Mode::Whole {
+            return Err("--bench times one whole run: it does not shard".into());
+        }
         let config = if common::quick_requested() {
             MonteCarloConfig::quick()
         } else {
@@ -45,8 +56,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         return Ok(());
     }
-    let output = lu_calibration::run_with(common::quick_requested(), execution)?;
-    if common::json_requested() {
+    let output = lu_calibration::run_in(quick, execution, &session)?;
+    session.finish()?;
+    if let Some(output) = output
+        && common::json_requested()
+    {
         println!("{}", output.json);
     }
     Ok(())

@@ -4,14 +4,25 @@
 //! Prints the table (ANEES, RMS error, detection delay), writes figures to `target/figures/`,
 //! and with `--json` prints one JSON line last.
 //!
-//! `cargo run --release --example lu_delays [-- --json] [-- --quick]`
+//! `--shard I/N --out FILE` runs shard I of N of its Monte Carlos and writes it to FILE;
+//! `--merge FILE...` merges the N files and prints what one process prints (wall time aside),
+//! bit for bit (`estim_reproductions::sharding`; the Slurm recipe is in
+//! `estim::filters::monte_carlo`).
+//!
+//! `cargo run --release --example lu_delays [-- --json] [-- --quick] [-- --shard I/N --out FILE | --merge FILE...] [-- --stats FILE]`
 
 use estim_reproductions::common;
 use estim_reproductions::lu_delays;
+use estim_reproductions::sharding::{self, Session};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let output = lu_delays::run(common::quick_requested())?;
-    if common::json_requested() {
+    let quick = common::quick_requested();
+    let session = Session::from_args("lu_delays", sharding::settings(quick))?;
+    let output = lu_delays::run_in(quick, &session)?;
+    session.finish()?;
+    if let Some(output) = output
+        && common::json_requested()
+    {
         println!("{}", output.json);
     }
     Ok(())

@@ -24,7 +24,8 @@ use std::time::Instant;
 
 use crate::common::{Headline, Output};
 use crate::lee_huang::SectionIvConfig;
-use crate::lu_calibration::{MonteCarloConfig, run_monte_carlo};
+use crate::lu_calibration::{MonteCarloConfig, run_monte_carlo_in};
+use crate::sharding::Session;
 use estim::core::Error;
 use estim::filters::ValidationError;
 use estim::filters::consistency::{Check, Outcome, Verdict};
@@ -300,11 +301,28 @@ where
 
 /// The Boje circle Monte Carlo (Table 1, t_end = 20 s, correct ICs) with the EKF.
 pub fn boje(runs: usize, process: BojeProcess) -> Result<Run, Box<dyn std::error::Error>> {
+    Ok(crate::sharding::whole(boje_in(
+        runs,
+        process,
+        &Session::whole(),
+    )?)?)
+}
+
+/// [`boje`] as `session` says: whole, one shard (`None`) or the merge of the shards.
+pub fn boje_in(
+    runs: usize,
+    process: BojeProcess,
+    session: &Session,
+) -> Result<Option<Run>, Box<dyn std::error::Error>> {
     let config = CircleConfig::paper();
     let slots = config.steps() / config.fix_every() - 1;
     let mc = MonteCarlo::new(runs, slots)?
         .with_seed(SEED)
         .with_residual_pair(BOJE_RESIDUAL_SLOTS.0, BOJE_RESIDUAL_SLOTS.1)?;
+    let (key, label) = match process {
+        BojeProcess::Linear => ("boje_ekf", "Boje circle EKF (paper's linear process)"),
+        BojeProcess::Nonlinear => ("boje_ekf_nonlinear", "Boje circle EKF, nonlinear process"),
+    };
     let start = Instant::now();
     let stats = match process {
         BojeProcess::Linear => {
@@ -312,25 +330,28 @@ pub fn boje(runs: usize, process: BojeProcess) -> Result<Run, Box<dyn std::error
                 half_separation: config.half_separation,
                 variances: config.variances(),
             };
-            mc.run(|_, seed, rec| boje_realization(&config, &p, seed, rec))?
+            session.run(key, &mc, |_, seed, rec| {
+                boje_realization(&config, &p, seed, rec)
+            })?
         }
         BojeProcess::Nonlinear => {
             let p = NonlinearPlanarProcess {
                 half_separation: config.half_separation,
                 variances: config.variances(),
             };
-            mc.run(|_, seed, rec| boje_realization(&config, &p, seed, rec))?
+            session.run(key, &mc, |_, seed, rec| {
+                boje_realization(&config, &p, seed, rec)
+            })?
         }
     };
     let wall_s = start.elapsed().as_secs_f64();
-    let (key, label) = match process {
-        BojeProcess::Linear => ("boje_ekf", "Boje circle EKF (paper's linear process)"),
-        BojeProcess::Nonlinear => ("boje_ekf_nonlinear", "Boje circle EKF, nonlinear process"),
+    let Some(stats) = stats else {
+        return Ok(None);
     };
     let times: Vec<f64> = (1..=slots)
         .map(|k| (k * config.fix_every()) as f64 * config.dt)
         .collect();
-    Ok(Run {
+    Ok(Some(Run {
         key,
         label,
         slots,
@@ -338,7 +359,7 @@ pub fn boje(runs: usize, process: BojeProcess) -> Result<Run, Box<dyn std::error
         fixed_truth: true,
         wall_s,
         nees_profile: nees_profile(&stats, &times, &[1.0, 2.0, 5.0, 9.0, 12.0, 15.0, 19.0])?,
-    })
+    }))
 }
 
 /// Which Lee & Huang filter, on which data.
@@ -391,6 +412,19 @@ where
 
 /// The Lee & Huang section IV Monte Carlo of `case`.
 pub fn lee_huang_case(runs: usize, case: LeeHuangCase) -> Result<Run, Box<dyn std::error::Error>> {
+    Ok(crate::sharding::whole(lee_huang_case_in(
+        runs,
+        case,
+        &Session::whole(),
+    )?)?)
+}
+
+/// [`lee_huang_case`] as `session` says: whole, one shard (`None`) or the merge of the shards.
+pub fn lee_huang_case_in(
+    runs: usize,
+    case: LeeHuangCase,
+    session: &Session,
+) -> Result<Option<Run>, Box<dyn std::error::Error>> {
     let config = SectionIvConfig::paper();
     let steps = config.steps();
     let unbiased = matches!(
@@ -426,8 +460,20 @@ pub fn lee_huang_case(runs: usize, case: LeeHuangCase) -> Result<Run, Box<dyn st
     let mc = MonteCarlo::new(runs, slots)?
         .with_seed(SEED)
         .with_residual_pair(LEE_HUANG_RESIDUAL_SLOTS.0, LEE_HUANG_RESIDUAL_SLOTS.1)?;
+    let (key, label) = match case {
+        LeeHuangCase::Ckf => ("lee_huang_ckf", "Lee & Huang CKF (section IV)"),
+        LeeHuangCase::CkfOte => ("lee_huang_ckf_ote", "Lee & Huang CKF+OTE (section IV)"),
+        LeeHuangCase::CkfNoBiasDrawnPrior => (
+            "lee_huang_ckf_no_bias",
+            "Lee & Huang CKF, no bias, D(0) error drawn from P(0) (diagnostic)",
+        ),
+        LeeHuangCase::EkfFullJacobianNoBiasDrawnPrior => (
+            "lee_huang_ekf_full_jacobian_no_bias",
+            "Lee & Huang full-Jacobian EKF, no bias, D(0) error drawn from P(0) (diagnostic)",
+        ),
+    };
     let start = Instant::now();
-    let stats = mc.run(|_, seed, rec| -> Result<(), ValidationError> {
+    let stats = session.run(key, &mc, |_, seed, rec| -> Result<(), ValidationError> {
         let sim = simulate(&config.scenario, &sensors, seed)?;
         let mut initial = config.scenario.initial_state;
         if unbiased {
@@ -459,22 +505,13 @@ pub fn lee_huang_case(runs: usize, case: LeeHuangCase) -> Result<Run, Box<dyn st
         lee_huang_loop(&mut filter, predict, &measurement, ote, &sim, rec)
     })?;
     let wall_s = start.elapsed().as_secs_f64();
-    let (key, label) = match case {
-        LeeHuangCase::Ckf => ("lee_huang_ckf", "Lee & Huang CKF (section IV)"),
-        LeeHuangCase::CkfOte => ("lee_huang_ckf_ote", "Lee & Huang CKF+OTE (section IV)"),
-        LeeHuangCase::CkfNoBiasDrawnPrior => (
-            "lee_huang_ckf_no_bias",
-            "Lee & Huang CKF, no bias, D(0) error drawn from P(0) (diagnostic)",
-        ),
-        LeeHuangCase::EkfFullJacobianNoBiasDrawnPrior => (
-            "lee_huang_ekf_full_jacobian_no_bias",
-            "Lee & Huang full-Jacobian EKF, no bias, D(0) error drawn from P(0) (diagnostic)",
-        ),
+    let Some(stats) = stats else {
+        return Ok(None);
     };
     let times: Vec<f64> = (1..=slots)
         .map(|k| (k * LEE_HUANG_SLOT_STEPS) as f64 * config.dt)
         .collect();
-    Ok(Run {
+    Ok(Some(Run {
         key,
         label,
         slots,
@@ -482,7 +519,7 @@ pub fn lee_huang_case(runs: usize, case: LeeHuangCase) -> Result<Run, Box<dyn st
         fixed_truth: true,
         wall_s,
         nees_profile: nees_profile(&stats, &times, &[0.5, 1.0, 2.0, 5.0, 10.0, 20.0])?,
-    })
+    }))
 }
 
 /// The section IV CKF ([`LeeHuangCase::Ckf`]) or, with `ote`, CKF+OTE
@@ -501,11 +538,18 @@ pub fn lee_huang(runs: usize, ote: bool) -> Result<Run, Box<dyn std::error::Erro
 /// The Lu calibration filter's own Monte Carlo (the consistent configuration, 30 s, every GPS
 /// update, residuals at 20 s × 30 s) with `runs` realizations.
 pub fn lu(runs: usize) -> Result<Run, Box<dyn std::error::Error>> {
+    Ok(crate::sharding::whole(lu_in(runs, &Session::whole())?)?)
+}
+
+/// [`lu`] as `session` says: whole, one shard (`None`) or the merge of the shards.
+pub fn lu_in(runs: usize, session: &Session) -> Result<Option<Run>, Box<dyn std::error::Error>> {
     let config = MonteCarloConfig::full().with_runs(runs);
     let start = Instant::now();
-    let r = run_monte_carlo(&config)?;
+    let Some(r) = run_monte_carlo_in(&config, session)? else {
+        return Ok(None);
+    };
     let wall_s = start.elapsed().as_secs_f64();
-    Ok(Run {
+    Ok(Some(Run {
         key: "lu",
         label: "Lu calibration filter (consistent configuration)",
         slots: r.time.len(),
@@ -513,7 +557,7 @@ pub fn lu(runs: usize) -> Result<Run, Box<dyn std::error::Error>> {
         verdict: r.verdict,
         fixed_truth: false,
         wall_s,
-    })
+    }))
 }
 
 /// Run counts: (Boje, Lee & Huang, Lu).
@@ -527,17 +571,29 @@ pub fn run_counts(quick: bool) -> (usize, usize, usize) {
 
 /// The example body.
 pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
+    Ok(crate::sharding::whole(run_in(quick, &Session::whole())?)?)
+}
+
+/// The example body as `session` says (whole, one shard: `None`, or the merge of the shards).
+pub fn run_in(
+    quick: bool,
+    session: &Session,
+) -> Result<Option<Output>, Box<dyn std::error::Error>> {
     let (n_boje, n_lh, n_lu) = run_counts(quick);
     let start = Instant::now();
-    let runs = vec![
-        boje(n_boje, BojeProcess::Linear)?,
-        boje(n_boje, BojeProcess::Nonlinear)?,
-        lu(n_lu)?,
-        lee_huang(n_lh, false)?,
-        lee_huang(n_lh, true)?,
-        lee_huang_case(n_lh, LeeHuangCase::CkfNoBiasDrawnPrior)?,
-        lee_huang_case(n_lh, LeeHuangCase::EkfFullJacobianNoBiasDrawnPrior)?,
+    let runs = [
+        boje_in(n_boje, BojeProcess::Linear, session)?,
+        boje_in(n_boje, BojeProcess::Nonlinear, session)?,
+        lu_in(n_lu, session)?,
+        lee_huang_case_in(n_lh, LeeHuangCase::Ckf, session)?,
+        lee_huang_case_in(n_lh, LeeHuangCase::CkfOte, session)?,
+        lee_huang_case_in(n_lh, LeeHuangCase::CkfNoBiasDrawnPrior, session)?,
+        lee_huang_case_in(n_lh, LeeHuangCase::EkfFullJacobianNoBiasDrawnPrior, session)?,
     ];
+    // Every experiment runs (its shard) before a shard stops here.
+    let Some(runs) = runs.into_iter().collect::<Option<Vec<_>>>() else {
+        return Ok(None);
+    };
     for r in &runs {
         println!("== {} ==", r.label);
         print!("{}", r.verdict);
@@ -568,8 +624,8 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
             },
         })
         .collect();
-    Ok(Output {
+    Ok(Some(Output {
         json: serde_json::Value::Object(json),
         headlines,
-    })
+    }))
 }

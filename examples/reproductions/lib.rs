@@ -20,3 +20,4 @@ pub mod lu_delays;
 pub mod lu_noise_id;
 pub mod lv2_fusion;
 pub mod plaza_range;
+pub mod sharding;

@@ -17,6 +17,7 @@
 use std::time::Instant;
 
 use crate::common::{Band, Headline, Output, Series, band_plot, line_plot, progress_bar};
+use crate::sharding::Session;
 use estim::core::Gaussian;
 use estim::filters::ValidationError;
 use estim::filters::consistency::{Check, Verdict};
@@ -289,7 +290,21 @@ impl MonteCarloResult {
 /// simulator and the filter over the whole run, recording at t = 0 and at every GPS update the
 /// error state δx against the filter (error, P, estimate δx̂), the NIS, and the residuals at
 /// the two residual times.
-pub fn run_monte_carlo(config: &MonteCarloConfig) -> Result<MonteCarloResult, ValidationError> {
+pub fn run_monte_carlo(
+    config: &MonteCarloConfig,
+) -> Result<MonteCarloResult, Box<dyn std::error::Error>> {
+    Ok(crate::sharding::whole(run_monte_carlo_in(
+        config,
+        &Session::whole(),
+    )?)?)
+}
+
+/// [`run_monte_carlo`] as `session` says: whole, one shard (`None`) or the merge of the
+/// shards (keyed by the configuration's label).
+pub fn run_monte_carlo_in(
+    config: &MonteCarloConfig,
+    session: &Session,
+) -> Result<Option<MonteCarloResult>, Box<dyn std::error::Error>> {
     let scenario = config.scenario;
     let settings = config.filter;
     // Fail early (not inside a run) on an invalid scenario or prior.
@@ -328,12 +343,19 @@ pub fn run_monte_carlo(config: &MonteCarloConfig) -> Result<MonteCarloResult, Va
     let start = Instant::now();
     let bar = progress_bar("Lu Monte Carlo", config.runs);
     let progress = |p: Progress| bar.set_position(p.runs_done as u64);
-    let stats = match config.execution {
-        Execution::Default => mc.run_with_progress(realization, progress),
-        Execution::Sequential => mc.run_sequential_with_progress(realization, progress),
-    }
-    .map_err(ValidationError::from)?;
+    let stats = session.run_with(
+        &config.label,
+        &mc,
+        realization,
+        |mc, realization| match config.execution {
+            Execution::Default => mc.run_with_progress(realization, progress),
+            Execution::Sequential => mc.run_sequential_with_progress(realization, progress),
+        },
+    )?;
     bar.finish_and_clear();
+    let Some(stats) = stats else {
+        return Ok(None);
+    };
     let wall_s = start.elapsed().as_secs_f64();
     let verdict = stats.verdict(config.confidence)?;
 
@@ -397,7 +419,7 @@ pub fn run_monte_carlo(config: &MonteCarloConfig) -> Result<MonteCarloResult, Va
             }
         }
     }
-    Ok(out)
+    Ok(Some(out))
 }
 
 /// The whole experiment of the example.
@@ -465,12 +487,31 @@ pub struct LuResult {
 /// Runs the experiment: the consistent Monte Carlo, the variants, the covariance history and
 /// the long-horizon gains, and one realization.
 pub fn run_experiment(config: &LuConfig) -> Result<LuResult, Box<dyn std::error::Error>> {
-    let monte_carlo = run_monte_carlo(&config.monte_carlo)?;
+    Ok(crate::sharding::whole(run_experiment_in(
+        config,
+        &Session::whole(),
+    )?)?)
+}
+
+/// [`run_experiment`] as `session` says: whole, one shard of each Monte Carlo (`None`) or
+/// the merge of the shards.
+pub fn run_experiment_in(
+    config: &LuConfig,
+    session: &Session,
+) -> Result<Option<LuResult>, Box<dyn std::error::Error>> {
+    let monte_carlo = run_monte_carlo_in(&config.monte_carlo, session)?;
     let variants = config
         .variants
         .iter()
-        .map(run_monte_carlo)
+        .map(|v| run_monte_carlo_in(v, session))
         .collect::<Result<Vec<_>, _>>()?;
+    // Every variant runs (its shard) before a shard stops here.
+    let (Some(monte_carlo), Some(variants)) = (
+        monte_carlo,
+        variants.into_iter().collect::<Option<Vec<_>>>(),
+    ) else {
+        return Ok(None);
+    };
     let mc = &config.monte_carlo;
     let covariance = covariance_history(&mc.scenario, &mc.filter, mc.scenario.steps)?;
     let long = mc.scenario.with_duration(config.long_horizon);
@@ -478,7 +519,7 @@ pub fn run_experiment(config: &LuConfig) -> Result<LuResult, Box<dyn std::error:
     let last = long_history.posterior.len() - 1;
     let realization = run_realization(&mc.scenario, &mc.filter, config.realization_seed)?;
     let smoothed = run_smoothed_realization(&mc.scenario, &mc.filter, config.realization_seed)?;
-    Ok(LuResult {
+    Ok(Some(LuResult {
         config: config.clone(),
         monte_carlo,
         variants,
@@ -487,7 +528,7 @@ pub fn run_experiment(config: &LuConfig) -> Result<LuResult, Box<dyn std::error:
         covariance,
         realization,
         smoothed,
-    })
+    }))
 }
 
 /// One realization filtered forward and smoothed backward (Rauch–Tung–Striebel over the whole
@@ -1242,6 +1283,20 @@ fn figures(r: &LuResult) -> Vec<String> {
 
 /// The example body with the given execution of the Monte Carlo runs.
 pub fn run_with(quick: bool, execution: Execution) -> Result<Output, Box<dyn std::error::Error>> {
+    Ok(crate::sharding::whole(run_in(
+        quick,
+        execution,
+        &Session::whole(),
+    )?)?)
+}
+
+/// [`run_with`] as `session` says: whole, one shard of each Monte Carlo (`None`) or the merge
+/// of the shards.
+pub fn run_in(
+    quick: bool,
+    execution: Execution,
+    session: &Session,
+) -> Result<Option<Output>, Box<dyn std::error::Error>> {
     let mc = if quick {
         MonteCarloConfig::quick()
     } else {
@@ -1249,7 +1304,9 @@ pub fn run_with(quick: bool, execution: Execution) -> Result<Output, Box<dyn std
     }
     .with_execution(execution);
     let config = LuConfig::with_monte_carlo(mc);
-    let r = run_experiment(&config)?;
+    let Some(r) = run_experiment_in(&config, session)? else {
+        return Ok(None);
+    };
     let m = &r.monte_carlo;
     let sc = &m.config.scenario;
     let n = m.config.runs;
@@ -1349,5 +1406,5 @@ pub fn run_with(quick: bool, execution: Execution) -> Result<Output, Box<dyn std
         "wall_s": m.wall_s,
         "smoothed": smoothing_json(&r.smoothed),
     });
-    Ok(Output { json, headlines })
+    Ok(Some(Output { json, headlines }))
 }

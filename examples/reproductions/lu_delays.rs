@@ -39,6 +39,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use crate::common::{Band, Headline, Output, Series, band_plot, line_plot};
+use crate::sharding::Session;
 use estim::core::{Gaussian, LinearMeasurement, error::Result as EstimResult};
 use estim::filters::fusion::{
     FusionDriver, FusionError, FusionSettings, Innovation, MonitorSettings, ResetSettings,
@@ -312,8 +313,23 @@ struct Delivery {
     velocity: f64,
 }
 
+/// What one shard keeps beside the runner's statistics: (run, detection delay, early
+/// exclusions) of each of its runs, and the fixes it dropped.
+type PerShard = (Vec<(usize, Option<f64>, u64)>, usize);
+
 /// Runs one configuration on the Monte Carlo runner.
 pub fn run_config(config: &DelayConfig) -> Result<DelayResult, Box<dyn std::error::Error>> {
+    Ok(crate::sharding::whole(run_config_in(
+        config,
+        &Session::whole(),
+    )?)?)
+}
+
+/// [`run_config`] as `session` says: whole, one shard (`None`) or the merge of the shards.
+pub fn run_config_in(
+    config: &DelayConfig,
+    session: &Session,
+) -> Result<Option<DelayResult>, Box<dyn std::error::Error>> {
     let scenario = config.scenario;
     scenario.validate()?;
     make_driver(&scenario, config.method)?;
@@ -333,10 +349,18 @@ pub fn run_config(config: &DelayConfig) -> Result<DelayResult, Box<dyn std::erro
         *dropped.lock().expect("no panic holds it") += drop;
         Ok(())
     };
-    let stats = mc.run(realization).map_err(ValidationError::from)?;
-    let mut per_run = per_run.into_inner().expect("no panic holds it");
+    let key = format!("{} / {}", config.scenario_label(), config.method.label());
+    let stats = session.run(&key, &mc, realization)?;
+    let mine: PerShard = (
+        per_run.into_inner().expect("no panic holds it"),
+        dropped.into_inner().expect("no panic holds it"),
+    );
+    let (Some(stats), Some(shards)) = (stats, session.extra(&key, mine)?) else {
+        return Ok(None);
+    };
+    let mut per_run: Vec<_> = shards.iter().flat_map(|s| s.0.iter().copied()).collect();
     per_run.sort_by_key(|r| r.0);
-    Ok(DelayResult {
+    Ok(Some(DelayResult {
         config: config.clone(),
         time: (0..slots)
             .map(|k| if k == 0 { 0.0 } else { scenario.update_time(k) })
@@ -344,8 +368,8 @@ pub fn run_config(config: &DelayConfig) -> Result<DelayResult, Box<dyn std::erro
         stats,
         detection_delay: per_run.iter().map(|r| r.1).collect(),
         early_exclusions: per_run.iter().map(|r| r.2).collect(),
-        dropped: dropped.into_inner().expect("no panic holds it"),
-    })
+        dropped: shards.iter().map(|s| s.1).sum(),
+    }))
 }
 
 /// One realization: simulates, delivers the fixes late, fuses them, records the real-time
@@ -511,11 +535,23 @@ fn as_series<'a>(curves: &'a [(&'static str, Vec<(f64, f64)>)]) -> Vec<Series<'a
 
 /// The example body.
 pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
+    Ok(crate::sharding::whole(run_in(quick, &Session::whole())?)?)
+}
+
+/// The example body as `session` says (whole, one shard: `None`, or the merge of the shards).
+pub fn run_in(
+    quick: bool,
+    session: &Session,
+) -> Result<Option<Output>, Box<dyn std::error::Error>> {
     let start = Instant::now();
     let results = configs(quick)
         .iter()
-        .map(run_config)
+        .map(|c| run_config_in(c, session))
         .collect::<Result<Vec<_>, _>>()?;
+    // Every configuration runs (its shard) before a shard stops here.
+    let Some(results) = results.into_iter().collect::<Option<Vec<_>>>() else {
+        return Ok(None);
+    };
     let wall_s = start.elapsed().as_secs_f64();
     let first = &results[0].config;
     println!(
@@ -652,8 +688,8 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
     for h in &headlines {
         println!("- {h}");
     }
-    Ok(Output {
+    Ok(Some(Output {
         json: serde_json::json!({ "configs": rows, "wall_s": wall_s }),
         headlines,
-    })
+    }))
 }

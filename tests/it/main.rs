@@ -35,6 +35,7 @@ use estim_reproductions::lu_delays;
 use estim_reproductions::lu_noise_id;
 use estim_reproductions::lv2_fusion;
 use estim_reproductions::plaza_range;
+use estim_reproductions::sharding;
 
 // The tests, one module per example (or per paper for Boje's four).
 #[cfg(feature = "autodiff")]
@@ -55,3 +56,4 @@ mod lv2_fusion_example;
 mod manoeuvring_target_example;
 mod particle_growth_example;
 mod plaza_range_example;
+mod sharding_flags;

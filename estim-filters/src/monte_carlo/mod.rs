@@ -91,6 +91,17 @@
 //!    `mc.merge_shards(shards)`, which refuses shards of another experiment or a missing or
 //!    repeated chunk.
 //!
+//! On a Slurm cluster, this job-array script runs a program that takes `--shard I/N --out
+//! FILE` (task I of N writes shard I) and `--merge FILE...` (the merge), as estim's Monte
+//! Carlo examples do (`cargo run --example lu_delays -- --quick --shard 0/4 --out s0.json`).
+//! It is `estim-filters/src/monte_carlo/job_array.sbatch` in the repository, the very file the
+//! CI submits to a one-node cluster (`.ci/slurm`) before checking the merge against a single
+//! process's run bit for bit:
+//!
+//! ```sh
+#![doc = include_str!("job_array.sbatch")]
+//! ```
+//!
 //! serde_json with its `float_roundtrip` feature (or a binary format) reads back every finite
 //! `f64` exactly (the accumulators hold only finite values), so the merged statistics are those
 //! of a single run; serde_json's default parser may be an ulp off. A shard holds one accumulator per chunk:

@@ -1,0 +1,193 @@
+//! The examples' `--shard I/N --out FILE` / `--merge FILE...` flags (`sharding`): parsing, and
+//! shard files through a session on a tiny Monte Carlo (one slot, 40 runs: milliseconds).
+
+use std::path::PathBuf;
+
+use crate::sharding::{Args, Mode, Session, parse};
+use estim::filters::ValidationError;
+use estim::filters::monte_carlo::{MonteCarlo, Recorder};
+use estim::nalgebra::{Matrix1, Vector1};
+
+fn err(args: &[&str]) -> String {
+    parse(args.iter().copied()).unwrap_err().to_string()
+}
+
+#[test]
+fn flags_parse_and_bad_ones_are_refused_with_a_reason() {
+    let shard = parse(["--quick", "--shard", "2/4", "--out", "s2.json", "--json"]).unwrap();
+    assert_eq!(
+        shard.mode,
+        Mode::Shard {
+            index: 2,
+            count: 4,
+            out: PathBuf::from("s2.json")
+        }
+    );
+    let merge = parse([
+        "--merge", "a.json", "b.json", "--quick", "--stats", "m.json",
+    ])
+    .unwrap();
+    assert_eq!(
+        merge,
+        Args {
+            mode: Mode::Merge {
+                files: vec![PathBuf::from("a.json"), PathBuf::from("b.json")]
+            },
+            stats: Some(PathBuf::from("m.json")),
+        }
+    );
+    assert_eq!(parse(["--quick"]).unwrap().mode, Mode::Whole);
+
+    for (args, reason) in [
+        (&["--shard", "4/4", "--out", "f"][..], "below N = 4"),
+        (&["--shard", "0/0", "--out", "f"], "N >= 1"),
+        (&["--shard", "1-4", "--out", "f"], "takes I/N"),
+        (&["--shard", "-1/4", "--out", "f"], "takes I/N"),
+        (&["--shard", "--out", "f"], "needs a value"),
+        (&["--shard", "x/4", "--out", "f"], "takes I/N"),
+        (&["--shard", "1/4"], "--shard needs --out"),
+        (&["--out", "f"], "--out goes with --shard"),
+        (&["--merge"], "--merge needs the shard files"),
+        (&["--merge", "--quick"], "--merge needs the shard files"),
+        (
+            &["--shard", "0/2", "--out", "f", "--merge", "a"],
+            "cannot be combined",
+        ),
+        (
+            &["--shard", "0/2", "--out", "f", "--stats", "s"],
+            "not a shard",
+        ),
+        (
+            &["--shard", "0/2", "--shard", "1/2", "--out", "f"],
+            "given twice",
+        ),
+    ] {
+        let message = err(args);
+        assert!(message.contains(reason), "{args:?}: {message}");
+        assert!(message.contains("usage"), "{args:?}: {message}");
+    }
+}
+
+/// A file name of its own under the temporary folder.
+fn temp(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("estim-sharding-{}-{name}", std::process::id()))
+}
+
+/// The statistics (their `Debug`, which prints every f64 exactly) and the runs of each shard.
+type Merged = (String, Vec<Vec<usize>>);
+
+/// A tiny experiment: 40 runs of a 1-state "filter" at one slot, each run's estimate a
+/// function of its seed; per shard, the list of its runs (what `Session::extra` carries).
+fn experiment(session: &Session, runs: usize) -> Result<Option<Merged>, String> {
+    let mc = MonteCarlo::new(runs, 1).unwrap().with_seed(5);
+    let seen = std::sync::Mutex::new(Vec::new());
+    let simulate = |run: usize, seed: u64, rec: &mut Recorder| -> Result<(), ValidationError> {
+        seen.lock().unwrap().push(run);
+        let x = Vector1::new((seed % 1000) as f64 / 1000.0 - 0.5);
+        rec.record_estimate(0, &x, &(x * 0.5), &Matrix1::new(1.0 / 48.0))
+    };
+    let stats = session
+        .run("tiny", &mc, simulate)
+        .map_err(|e| e.to_string())?;
+    let mut mine = seen.into_inner().unwrap();
+    mine.sort();
+    let extra = session.extra("tiny", mine).map_err(|e| e.to_string())?;
+    Ok(stats.zip(extra).map(|(s, e)| (format!("{s:?}"), e)))
+}
+
+fn session(args: &[&str], settings: &str) -> Result<Session, String> {
+    let args = parse(args.iter().copied()).map_err(|e| e.to_string())?;
+    Session::new("tiny", settings, args).map_err(|e| e.to_string())
+}
+
+#[test]
+fn shards_written_and_merged_equal_the_whole_run_and_bad_files_are_refused() {
+    let files: Vec<PathBuf> = (0..3).map(|i| temp(&format!("s{i}.json"))).collect();
+    let names: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
+    let (whole_stats, merged_stats) = (temp("whole-stats.json"), temp("merged-stats.json"));
+
+    let whole = session(&["--stats", &whole_stats.display().to_string()], "--quick").unwrap();
+    let (expected, all_runs) = experiment(&whole, 40).unwrap().unwrap();
+    whole.finish().unwrap();
+    assert_eq!(all_runs, [(0..40).collect::<Vec<_>>()]);
+
+    for (i, name) in names.iter().enumerate() {
+        let s = session(&["--shard", &format!("{i}/3"), "--out", name], "--quick").unwrap();
+        assert_eq!(experiment(&s, 40).unwrap(), None);
+        s.finish().unwrap();
+    }
+    // In any order: the merge sorts them by shard index.
+    let merge_args = [
+        "--merge",
+        &names[2],
+        &names[0],
+        &names[1],
+        "--stats",
+        &merged_stats.display().to_string(),
+    ];
+    let merge = session(&merge_args, "--quick").unwrap();
+    let (merged, per_shard) = experiment(&merge, 40).unwrap().unwrap();
+    merge.finish().unwrap();
+    // Bit for bit: the statistics' Debug prints every f64 exactly (shortest round-trip form),
+    // and the --stats files are the same bytes.
+    assert_eq!(merged, expected);
+    assert_eq!(
+        std::fs::read(&merged_stats).unwrap(),
+        std::fs::read(&whole_stats).unwrap()
+    );
+    assert_eq!(per_shard.concat(), all_runs[0]);
+    assert_eq!(per_shard.len(), 3);
+
+    // What the merge refuses, with the reason.
+    let refused = |args: &[&str], settings: &str| match session(args, settings) {
+        Err(e) => e,
+        Ok(s) => experiment(&s, 40).unwrap_err(),
+    };
+    let missing = refused(&["--merge", &names[0], &names[2]], "--quick");
+    assert!(missing.contains("shards 1 of 3 are missing"), "{missing}");
+    let twice = refused(&["--merge", &names[0], &names[1], &names[1]], "--quick");
+    assert!(twice.contains("given twice"), "{twice}");
+    let flags = refused(&["--merge", &names[0], &names[1], &names[2]], "full");
+    assert!(flags.contains("settings '--quick'"), "{flags}");
+    // The same files, merged into an experiment of 41 runs.
+    let merge = session(&["--merge", &names[0], &names[1], &names[2]], "--quick").unwrap();
+    let size = experiment(&merge, 41).unwrap_err();
+    assert!(size.contains("not this run's"), "{size}");
+    let absent = temp("absent.json");
+    let gone = refused(&["--merge", &absent.display().to_string()], "--quick");
+    assert!(gone.contains("cannot read"), "{gone}");
+    let corrupt = temp("corrupt.json");
+    let text = std::fs::read_to_string(&files[1]).unwrap();
+    std::fs::write(&corrupt, &text[..text.len() / 2]).unwrap();
+    let broken = refused(
+        &[
+            "--merge",
+            &names[0],
+            &corrupt.display().to_string(),
+            &names[2],
+        ],
+        "--quick",
+    );
+    assert!(
+        broken.contains("is not a shard file or is corrupt"),
+        "{broken}"
+    );
+    let other = temp("other.json");
+    std::fs::write(
+        &other,
+        text.replace("\"example\":\"tiny\"", "\"example\":\"lu_delays\""),
+    )
+    .unwrap();
+    let foreign = refused(&["--merge", &other.display().to_string()], "--quick");
+    assert!(
+        foreign.contains("shards of lu_delays, not of tiny"),
+        "{foreign}"
+    );
+
+    for f in files
+        .iter()
+        .chain([&whole_stats, &merged_stats, &corrupt, &other])
+    {
+        let _ = std::fs::remove_file(f);
+    }
+}
