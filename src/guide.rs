@@ -5,7 +5,7 @@
 //! | [`choosing_a_filter`] | which filter for which model, and the one-line swap |
 //! | [`runtime_sizes`] | states whose size comes from configuration (`DVector`) |
 //! | [`verifying`] | NEES/NIS, the Monte Carlo runner, checking your derivatives |
-//! | [`writing_a_model`] | analytic derivatives, checking them, automatic derivatives (`autodiff`) |
+//! | [`writing_a_model`] | analytic derivatives, checking them, automatic derivatives (`autodiff`), a missing derivative's error, generic code over the filter (`FilterOver`, `Smoothable`) |
 //! | [`smoothing`] | Rauch–Tung–Striebel, fixed lag, and whole recorded sequences |
 //! | [`noise_identification`] | learning Q and R from data: EM, maximum likelihood, online matching |
 //! | [`particle_filters`] | when a Gaussian is not enough: multimodal posteriors, non-Gaussian noise |

@@ -168,7 +168,7 @@ where
 }
 
 /// The adapter: implements the value, Jacobian and Hessian capabilities of a model written
-/// once over [`AdScalar`] (see the [module](self) docs).
+/// once over [`AdScalar`] (see the `autodiff` module docs: what to implement, and how).
 ///
 /// It owns the model (reach it with [`model`](Self::model); [`model_mut`](Self::model_mut)
 /// clears the Hessian cache) and is `Send + Sync` when the model is.

@@ -37,6 +37,10 @@ use crate::scalar::Real;
 /// }
 /// assert_eq!(Norm2.eval(&Vector2::new(3.0, 4.0))[0], 25.0);
 /// ```
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` is not a vector function from {N} to {M} components: implement `VectorFunction<{T}, {N}, {M}>` for it (y = g(x))",
+    label = "not a `VectorFunction<{T}, {N}, {M}>`"
+)]
 pub trait VectorFunction<T: Real, N: Dim, M: Dim>
 where
     DefaultAllocator: Alloc<N, M>,
@@ -108,6 +112,10 @@ impl VectorSpaces {
 }
 
 /// A [`VectorFunction`] with an analytic Jacobian.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` has no Jacobian: implement `Differentiable<{T}, {N}, {M}>` for it (J = ∂g/∂x; for a model: `ProcessJacobian` or `MeasurementJacobian`), or use the unscented propagator",
+    label = "the linearised propagator needs `Differentiable<{T}, {N}, {M}>`"
+)]
 pub trait Differentiable<T: Real, N: Dim, M: Dim>: VectorFunction<T, N, M>
 where
     DefaultAllocator: Alloc<N, M>,
@@ -117,6 +125,10 @@ where
 }
 
 /// A [`Differentiable`] function with analytic Hessians.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` has no Hessians: implement `TwiceDifferentiable<{T}, {N}, {M}>` for it (∂²gₖ/∂x²; for a model: `ProcessHessian` or `MeasurementHessian`), or use a first-order propagator",
+    label = "the second-order propagators need `TwiceDifferentiable<{T}, {N}, {M}>`"
+)]
 pub trait TwiceDifferentiable<T: Real, N: Dim, M: Dim>: Differentiable<T, N, M>
 where
     DefaultAllocator: Alloc<N, M>,

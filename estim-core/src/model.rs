@@ -36,6 +36,10 @@ use crate::manifold::{Euclidean, StateSpace};
 use crate::scalar::Real;
 
 /// A discrete-time process model x⁺ = f(x, u, Δt) + w, w ~ N(0, Q(x, u, Δt)).
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` is not a process model of a {N}-dimensional state: implement `ProcessModel<{T}, {N}>` for it (x⁺ = f(x, u, Δt) + w)",
+    label = "not a `ProcessModel<{T}, {N}>`"
+)]
 pub trait ProcessModel<T: Real, N: Dim>
 where
     DefaultAllocator: Alloc<N>,
@@ -59,6 +63,10 @@ where
 }
 
 /// A [`ProcessModel`] with an analytic Jacobian.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` has no process Jacobian: implement `ProcessJacobian<{T}, {N}>` for it (F = ∂f/∂x), or use a filter that needs none (`Ukf`)",
+    label = "this filter linearises the process model: it needs `ProcessJacobian<{T}, {N}>`"
+)]
 pub trait ProcessJacobian<T: Real, N: Dim>: ProcessModel<T, N>
 where
     DefaultAllocator: Alloc<N>,
@@ -68,6 +76,10 @@ where
 }
 
 /// A [`ProcessJacobian`] with analytic Hessians.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` has no process Hessians: implement `ProcessHessian<{T}, {N}>` for it (∂²fₖ/∂x², `None` where fₖ is affine), or use a first-order filter (`Ekf`, `Ukf`)",
+    label = "this second-order filter needs `ProcessHessian<{T}, {N}>`"
+)]
 pub trait ProcessHessian<T: Real, N: Dim>: ProcessJacobian<T, N>
 where
     DefaultAllocator: Alloc<N>,
@@ -93,6 +105,10 @@ where
 /// derived from this marker: a blanket impl would make the Hessian traits impossible to
 /// implement for models generic over their scalar (overlapping impls), and would let a
 /// nonlinear model that forgot its Hessians pass with zeros.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` is not marked linear: implement `LinearProcessModel<{T}, {N}>` for it if f is affine in x (the `KalmanFilter` takes only such models), or use `Ekf`",
+    label = "the linear Kalman filter needs `LinearProcessModel<{T}, {N}>`"
+)]
 pub trait LinearProcessModel<T: Real, N: Dim>: ProcessJacobian<T, N>
 where
     DefaultAllocator: Alloc<N>,
@@ -100,6 +116,10 @@ where
 }
 
 /// A measurement model z = h(x) + v, v ~ N(0, R(x)), with `M` components.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` is not a measurement model of {M} components of a {N}-dimensional state: implement `MeasurementModel<{T}, {N}, {M}>` for it (z = h(x) + v)",
+    label = "not a `MeasurementModel<{T}, {N}, {M}>`"
+)]
 pub trait MeasurementModel<T: Real, N: Dim, M: Dim>
 where
     DefaultAllocator: Alloc<N, M>,
@@ -126,6 +146,10 @@ where
 }
 
 /// A [`MeasurementModel`] with an analytic Jacobian.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` has no measurement Jacobian: implement `MeasurementJacobian<{T}, {N}, {M}>` for it (H = ∂h/∂x), or use a filter that needs none (`Ukf`)",
+    label = "this filter linearises the measurement model: it needs `MeasurementJacobian<{T}, {N}, {M}>`"
+)]
 pub trait MeasurementJacobian<T: Real, N: Dim, M: Dim>: MeasurementModel<T, N, M>
 where
     DefaultAllocator: Alloc<N, M>,
@@ -135,6 +159,10 @@ where
 }
 
 /// A [`MeasurementJacobian`] with analytic Hessians.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` has no measurement Hessians: implement `MeasurementHessian<{T}, {N}, {M}>` for it (∂²hₖ/∂x², `None` where hₖ is affine), or use a first-order filter (`Ekf`, `Ukf`)",
+    label = "this second-order filter needs `MeasurementHessian<{T}, {N}, {M}>`"
+)]
 pub trait MeasurementHessian<T: Real, N: Dim, M: Dim>: MeasurementJacobian<T, N, M>
 where
     DefaultAllocator: Alloc<N, M>,
@@ -147,6 +175,10 @@ where
 /// [`measurement_jacobian`](MeasurementJacobian::measurement_jacobian). The linear Kalman filter
 /// accepts only such models. For the second-order filters, implement [`MeasurementHessian`]
 /// with `None` for every component (see [`LinearProcessModel`] for why that is not derived).
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` is not marked linear: implement `LinearMeasurementModel<{T}, {N}, {M}>` for it if h is affine in x (the `KalmanFilter` takes only such models), or use `Ekf`",
+    label = "the linear Kalman filter needs `LinearMeasurementModel<{T}, {N}, {M}>`"
+)]
 pub trait LinearMeasurementModel<T: Real, N: Dim, M: Dim>: MeasurementJacobian<T, N, M>
 where
     DefaultAllocator: Alloc<N, M>,

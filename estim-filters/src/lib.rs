@@ -81,6 +81,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+mod bounds;
 #[cfg(feature = "serde")]
 pub mod checkpoint;
 #[cfg(feature = "std")]
@@ -116,6 +117,7 @@ pub mod update;
 #[cfg(feature = "std")]
 pub mod validation;
 
+pub use bounds::{FilterOver, Smoothable};
 #[cfg(feature = "std")]
 pub use consistency::Verdict;
 pub use correlated::Decorrelated;

@@ -48,6 +48,8 @@ pub struct Output {
 
 use plotters::prelude::*;
 
+pub mod svg_check;
+
 /// Whether `--json` was passed: then the example prints one JSON object as its last stdout line.
 pub fn json_requested() -> bool {
     std::env::args().any(|a| a == "--json")
@@ -113,7 +115,7 @@ pub fn line_plot(
 }
 
 /// [`line_plot`] with shaded `bands` under the lines (a ±σ envelope reads as one region, not
-/// as two more curves).
+/// as two more curves; each band's edges are drawn too, so overlapping bands stay apart).
 pub fn band_plot(
     file: &str,
     title: &str,
@@ -123,7 +125,37 @@ pub fn band_plot(
     bands: &[Band<'_>],
 ) -> Result<PathBuf, Box<dyn std::error::Error>> {
     let path = figure_dir().join(file);
-    draw(&path, title, x_label, y_label, series, bands)?;
+    draw(&path, title, (x_label, y_label), series, &[], bands, false)?;
+    Ok(path)
+}
+
+/// [`line_plot`] of `lines`, with `dots` drawn as markers over them: a value that should
+/// follow a line (an ensemble statistic against the filter's own) stays visible where it
+/// does, instead of an identical curve hiding under it.
+pub fn lines_and_dots_plot(
+    file: &str,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    lines: &[Series<'_>],
+    dots: &[Series<'_>],
+) -> Result<PathBuf, Box<dyn std::error::Error>> {
+    let path = figure_dir().join(file);
+    draw(&path, title, (x_label, y_label), lines, dots, &[], false)?;
+    Ok(path)
+}
+
+/// [`line_plot`] with one unit on x as long as one on y (ellipses look like ellipses): the
+/// shorter range is widened about its centre to the plot area's aspect.
+pub fn equal_axes_plot(
+    file: &str,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series<'_>],
+) -> Result<PathBuf, Box<dyn std::error::Error>> {
+    let path = figure_dir().join(file);
+    draw(&path, title, (x_label, y_label), series, &[], &[], true)?;
     Ok(path)
 }
 
@@ -152,19 +184,39 @@ fn tick(v: f64, span: f64) -> String {
     text.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
-/// Renders the plot of [`band_plot`] into `path`: the chart on the left, its legend in a
-/// panel of its own on the right, so it never covers the data.
+/// The canvas height, the plot's width (the legend panel is to its right) and the legend's
+/// font size, in pixels.
+const HEIGHT: u32 = 540;
+const PLOT_WIDTH: u32 = 860;
+const LEGEND_FONT: f64 = 14.0;
+const TITLE_FONT: f64 = 20.0;
+
+/// The legend panel's width: the longest label at [`svg_check::text_width`]'s estimate after
+/// its swatch (42 px), and a margin; at least 240 px.
+fn legend_width(labels: impl Iterator<Item = usize>) -> u32 {
+    let longest = labels.max().unwrap_or(0) as f64;
+    (42.0 + svg_check::CHAR_WIDTH * LEGEND_FONT * longest + 16.0)
+        .ceil()
+        .max(240.0) as u32
+}
+
+/// Renders the plot of [`band_plot`] into `path`: the title across the top, the chart on the
+/// left, its legend in a panel of its own on the right (as wide as its longest label needs),
+/// so it never covers the data; then checks that every text and shape is inside the canvas
+/// ([`svg_check`]) and returns an error naming what is not.
 fn draw(
     path: &std::path::Path,
     title: &str,
-    x_label: &str,
-    y_label: &str,
+    (x_label, y_label): (&str, &str),
     series: &[Series<'_>],
+    dots: &[Series<'_>],
     bands: &[Band<'_>],
+    equal_axes: bool,
 ) -> Result<(), Box<dyn std::error::Error>> {
     let finite = |&(x, y): &(f64, f64)| x.is_finite() && y.is_finite();
     let points = series
         .iter()
+        .chain(dots)
         .flat_map(|s| s.points.iter().copied())
         .chain(
             bands
@@ -190,16 +242,47 @@ fn draw(
     if !(y0 < y1) {
         y1 = y0 + 1.0;
     }
+    // Data never touches the frame: 5 % of the span on y, and on x too for a picture in the
+    // plane (equal axes); a time axis keeps its ends.
     let pad = 0.05 * (y1 - y0);
-    let root = SVGBackend::new(path, (1100, 540)).into_drawing_area();
+    (y0, y1) = (y0 - pad, y1 + pad);
+    if equal_axes {
+        let pad = 0.05 * (x1 - x0);
+        (x0, x1) = (x0 - pad, x1 + pad);
+    }
+    let labels = bands
+        .iter()
+        .map(|b| b.label)
+        .chain(series.iter().chain(dots).map(|s| s.label));
+    let width = PLOT_WIDTH + legend_width(labels.map(|l| l.chars().count()));
+    let root = SVGBackend::new(path, (width, HEIGHT)).into_drawing_area();
     root.fill(&WHITE)?;
-    let (plot_area, legend_area) = root.split_horizontally(860);
-    let mut chart = ChartBuilder::on(&plot_area)
-        .caption(title, ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))?;
+    // The title across the whole canvas, its font shrunk if it would not fit in it.
+    let room = f64::from(width) - 24.0;
+    let title_font =
+        TITLE_FONT.min(room / (svg_check::CHAR_WIDTH * title.chars().count().max(1) as f64));
+    let root = root.titled(title, ("sans-serif", title_font.floor()))?;
+    let (plot_area, legend_area) = root.split_horizontally(PLOT_WIDTH);
+    let builder = |x: (f64, f64), y: (f64, f64)| {
+        ChartBuilder::on(&plot_area)
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(x.0..x.1, y.0..y.1)
+    };
+    if equal_axes {
+        // Units per pixel equal on both axes: widen the range with fewer about its centre.
+        let (w, h) = builder((x0, x1), (y0, y1))?.plotting_area().dim_in_pixel();
+        let (per_x, per_y) = ((x1 - x0) / f64::from(w), (y1 - y0) / f64::from(h));
+        if per_x > per_y {
+            let (c, half) = ((y0 + y1) / 2.0, per_x * f64::from(h) / 2.0);
+            (y0, y1) = (c - half, c + half);
+        } else {
+            let (c, half) = ((x0 + x1) / 2.0, per_y * f64::from(w) / 2.0);
+            (x0, x1) = (c - half, c + half);
+        }
+    }
+    let mut chart = builder((x0, x1), (y0, y1))?;
     chart
         .configure_mesh()
         .x_desc(x_label)
@@ -222,8 +305,16 @@ fn draw(
             .chain(kept.iter().rev().map(|&(x, lo, _)| (x, lo)));
         chart.draw_series(std::iter::once(Polygon::new(
             outline.collect::<Vec<_>>(),
-            colour(i).mix(0.18).filled(),
+            colour(i).mix(0.08).filled(),
         )))?;
+        // The edges, thin and in the band's colour: two overlapping bands (±√P of x and of
+        // y) would otherwise blend into one tint.
+        for edge in [
+            kept.iter().map(|&(x, lo, _)| (x, lo)).collect::<Vec<_>>(),
+            kept.iter().map(|&(x, _, hi)| (x, hi)).collect(),
+        ] {
+            chart.draw_series(LineSeries::new(edge, colour(i).mix(0.8).stroke_width(1)))?;
+        }
     }
     for (i, s) in series.iter().enumerate() {
         let style = colour(i).stroke_width(2);
@@ -232,13 +323,17 @@ fn draw(
             style,
         ))?;
     }
-    // The legend panel: one row per band (a swatch) and per line (a stroke).
-    let row = |k: usize| 60 + 26 * k as i32;
-    let font = ("sans-serif", 14).into_font();
+    // The legend panel: one row per band (a swatch with its edge) and per line (a stroke).
+    let row = |k: usize| 40 + 26 * k as i32;
+    let font = ("sans-serif", LEGEND_FONT).into_font();
     for (k, b) in bands.iter().enumerate() {
         legend_area.draw(&Rectangle::new(
             [(8, row(k) - 6), (34, row(k) + 6)],
-            colour(k).mix(0.18).filled(),
+            colour(k).mix(0.08).filled(),
+        ))?;
+        legend_area.draw(&Rectangle::new(
+            [(8, row(k) - 6), (34, row(k) + 6)],
+            colour(k).mix(0.8).stroke_width(1),
         ))?;
         legend_area.draw(&Text::new(b.label, (42, row(k) - 7), font.clone()))?;
     }
@@ -250,7 +345,28 @@ fn draw(
         ))?;
         legend_area.draw(&Text::new(s.label, (42, row(k) - 7), font.clone()))?;
     }
+    // Dots: hollow circles in the colours after the lines', every `stride`-th point (about
+    // 60 per curve, so the line under them stays visible).
+    for (j, d) in dots.iter().enumerate() {
+        let c = colour(series.len() + j);
+        let stride = (d.points.len() / 60).max(1);
+        chart.draw_series(
+            d.points
+                .iter()
+                .copied()
+                .filter(finite)
+                .step_by(stride)
+                .map(|p| Circle::new(p, 4, c.stroke_width(2))),
+        )?;
+        let k = bands.len() + series.len() + j;
+        legend_area.draw(&Circle::new((21, row(k)), 4, c.stroke_width(2)))?;
+        legend_area.draw(&Text::new(d.label, (42, row(k) - 7), font.clone()))?;
+    }
     root.present()?;
+    let problems = svg_check::outside_canvas(&std::fs::read_to_string(path)?, 1.0)?;
+    if !problems.is_empty() {
+        return Err(format!("{}: {}", path.display(), problems.join("; ")).into());
+    }
     Ok(())
 }
 

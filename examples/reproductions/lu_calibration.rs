@@ -16,7 +16,9 @@
 
 use std::time::Instant;
 
-use crate::common::{Band, Headline, Output, Series, band_plot, line_plot, progress_bar};
+use crate::common::{
+    Band, Headline, Output, Series, band_plot, line_plot, lines_and_dots_plot, progress_bar,
+};
 use crate::sharding::Session;
 use estim::core::Gaussian;
 use estim::filters::ValidationError;
@@ -1146,12 +1148,6 @@ fn figures(r: &LuResult) -> Vec<String> {
     let mc = &r.monte_carlo;
     let n = mc.config.runs;
     let mut out = Vec::new();
-    let mut plot = |file: &str, title: String, y: &str, s: &[Series<'_>]| match line_plot(
-        file, &title, "t [s]", y, s,
-    ) {
-        Ok(path) => out.push(path.display().to_string()),
-        Err(e) => eprintln!("figure {file} failed: {e}"),
-    };
     let series = |label: &'static str, f: &dyn Fn(usize) -> f64| Series {
         label,
         points: (1..mc.time.len()).map(|k| (mc.time[k], f(k))).collect(),
@@ -1161,19 +1157,33 @@ fn figures(r: &LuResult) -> Vec<String> {
         ("velocity", "dv [m/s]"),
         ("bias", "b [m/s^2]"),
     ];
+    // The filter is consistent, so the ensemble std follows sqrt P to within the Monte Carlo
+    // error (1/sqrt(2N) relative): drawn as two lines of one width, the second hid the first
+    // (lu_sigma_bias looked like one curve). The ensemble std is drawn as dots on the line.
     for (i, (name, unit)) in names.iter().enumerate() {
-        plot(
-            &format!("lu_sigma_{name}.svg"),
-            format!("Lu: filter sqrt P vs ensemble std of the {name} error, N = {n}"),
+        let file = format!("lu_sigma_{name}.svg");
+        match lines_and_dots_plot(
+            &file,
+            &format!("Lu: filter sqrt P vs ensemble std of the {name} error, N = {n}"),
+            "t [s]",
             unit,
-            &[
-                series("filter sqrt P", &|k| mc.filter_variance[k][i].sqrt()),
-                series("ensemble std (Monte Carlo)", &|k| {
-                    mc.ensemble_variance[k][i].sqrt()
-                }),
-            ],
-        );
+            &[series("filter sqrt P", &|k| {
+                mc.filter_variance[k][i].sqrt()
+            })],
+            &[series("ensemble std (Monte Carlo)", &|k| {
+                mc.ensemble_variance[k][i].sqrt()
+            })],
+        ) {
+            Ok(path) => out.push(path.display().to_string()),
+            Err(e) => eprintln!("figure {file} failed: {e}"),
+        }
     }
+    let mut plot = |file: &str, title: String, y: &str, s: &[Series<'_>]| match line_plot(
+        file, &title, "t [s]", y, s,
+    ) {
+        Ok(path) => out.push(path.display().to_string()),
+        Err(e) => eprintln!("figure {file} failed: {e}"),
+    };
     plot(
         "lu_covariance_ratio.svg",
         format!("Lu: ensemble variance / filter P, N = {n} (1 = consistent)"),

@@ -13,7 +13,7 @@
 
 use core::f64::consts::SQRT_2;
 
-use crate::common::{Headline, Output, Series, line_plot};
+use crate::common::{Headline, Output, Series, equal_axes_plot, line_plot};
 use estim::models::lv2::simulate::{RotatingAcceleration, SensorArray, sample_xyq};
 use estim::models::lv2::stats::{chi2_1_cdf, chi2_1_power, chi2_quantile_upper, chi2_sf};
 use estim::models::lv2::xyq::{
@@ -925,7 +925,7 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
             points: points.clone(),
         })
         .collect();
-    match line_plot(
+    match equal_axes_plot(
         "lv2_error_ellipses.svg",
         "1σ error ellipses of (x̂, ŷ), LV2 example",
         "x [m/s²]",

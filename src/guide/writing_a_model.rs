@@ -102,3 +102,95 @@
 //! differentiated automatically, on a 3-dimensional attitude-error state) and
 //! `examples/heading_wrap.rs` (a heading state across ±π with
 //! [`WrappedAngles`](crate::core::WrappedAngles)).
+//!
+//! **A missing derivative** is a compile error that names the trait to implement in its first
+//! line (each capability trait carries a `#[diagnostic::on_unimplemented]` message). Running a
+//! model with only its values through the EKF, which linearises it:
+//!
+//! ```compile_fail,E0277
+//! use estim::nalgebra::{Matrix1, Vector1};
+//! use estim::prelude::*;
+//!
+//! /// A random walk x⁺ = x + w, with values only: no Jacobian.
+//! struct Walk;
+//! impl ProcessModel<f64, estim::nalgebra::U1> for Walk {
+//!     type Input = ();
+//!     fn transition(&self, x: &Vector1<f64>, _: &(), _: f64) -> Vector1<f64> {
+//!         *x
+//!     }
+//!     fn process_noise(&self, _: &Vector1<f64>, _: &(), dt: f64) -> Matrix1<f64> {
+//!         Matrix1::new(dt)
+//!     }
+//! }
+//!
+//! let mut ekf = Ekf::new(Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0))?);
+//! // Expected: error[E0277]: `Walk` has no process Jacobian: implement
+//! // `ProcessJacobian<f64, Const<1>>` for it (F = ∂f/∂x), or use a filter that needs none (`Ukf`)
+//! ekf.predict(&Walk, &(), 0.1)?;
+//! # Ok::<(), estim::core::Error>(())
+//! ```
+//!
+//! The same model runs as it is in the UKF (`Ukf::new`), which needs only the values.
+//!
+//! **A filter over your models, as a bound.** A function generic over the filter names it
+//! with [`FilterOver`](crate::filters::FilterOver) (predicts through `P`, updates with `H`) or
+//! [`Smoothable`](crate::filters::Smoothable) (also records what the RTS smoother needs),
+//! instead of the step traits or the propagator bounds of
+//! [`GaussianFilter`](crate::filters::GaussianFilter):
+//!
+//! ```
+//! use estim::nalgebra::{Matrix1, Matrix1x2, Matrix2, Matrix2x1, U1, U2, Vector1, Vector2};
+//! use estim::prelude::*;
+//! use estim::filters::{FilterOver, Smoothable, Rts};
+//!
+//! type Motion = LinearProcess<f64, U2, U1>;
+//! type Position = LinearMeasurement<f64, U2, U1>;
+//!
+//! /// Filters the readings with any filter, recording the run for the RTS smoother; returns
+//! /// the smoothed estimates (one per reading).
+//! fn smoothed<F: Smoothable<f64, U2, U1, Motion, Position>>(
+//!     filter: &mut F,
+//!     (motion, sensor): (&Motion, &Position),
+//!     zs: &[f64],
+//! ) -> Result<Vec<Gaussian<f64, U2>>, Box<dyn std::error::Error>> {
+//!     let mut rts = Rts::new();
+//!     for (k, &z) in zs.iter().enumerate() {
+//!         if k > 0 {
+//!             rts.predict(filter, motion, &Vector1::zeros(), 1.0)?;
+//!         }
+//!         filter.update(sensor, &Vector1::new(z))?;
+//!     }
+//!     Ok(rts.smooth(filter)?)
+//! }
+//!
+//! /// Only filters: the estimate after the last reading.
+//! fn filtered<F: FilterOver<f64, U2, U1, Motion, Position>>(
+//!     filter: &mut F,
+//!     (motion, sensor): (&Motion, &Position),
+//!     zs: &[f64],
+//! ) -> Result<Vector2<f64>, estim::core::Error> {
+//!     for (k, &z) in zs.iter().enumerate() {
+//!         if k > 0 {
+//!             filter.predict(motion, &Vector1::zeros(), 1.0)?;
+//!         }
+//!         filter.update(sensor, &Vector1::new(z))?;
+//!     }
+//!     Ok(filter.state().clone())
+//! }
+//!
+//! let motion = Motion {
+//!     transition: Matrix2::new(1.0, 1.0, 0.0, 1.0),
+//!     input: Matrix2x1::zeros(),
+//!     noise: Matrix2::identity() * 1e-2,
+//! };
+//! let sensor = Position { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.25) };
+//! let prior = Gaussian::new(Vector2::zeros(), Matrix2::identity() * 10.0)?;
+//! let zs = [0.1, 1.2, 1.9, 3.1];
+//! let run = smoothed(&mut Ukf::new(prior.clone()), (&motion, &sensor), &zs)?;
+//! let last = filtered(&mut Ekf::new(prior), (&motion, &sensor), &zs)?;
+//! assert_eq!(run.len(), zs.len());
+//! // The smoother's last estimate is the filter's (nothing comes after it); on a linear model
+//! // the UKF and the EKF compute the same moments, so they agree up to rounding (1e-9).
+//! assert!((run[zs.len() - 1].mean() - last).norm() < 1e-9);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```

@@ -44,6 +44,7 @@ mod boje_circle_smoothing;
 mod boje_examples;
 mod consistency_example;
 mod figure_dir;
+mod figure_layout;
 mod firmware;
 mod flight_ins_example;
 mod heading_wrap_example;
