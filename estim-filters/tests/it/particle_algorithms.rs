@@ -25,42 +25,7 @@ use estim_filters::smoother::Rts;
 use estim_filters::{Estimator, KalmanFilter, Predict, Update};
 
 use crate::common::{normal, rng};
-
-/// x⁺ = 0.9 x + w, Q = 0.5.
-type Ar1 = NoInput<LinearProcess<f64, U1, U0>>;
-
-/// x⁺ = 0.9 x + w, Q = 0.5; z = x + v, R = 1; x₀ ~ N(0, 1).
-fn ar1() -> (Ar1, LinearMeasurement<f64, U1, U1>, Gaussian<f64, U1>) {
-    (
-        LinearProcess::without_input(Matrix1::new(0.9), Matrix1::new(0.5)),
-        LinearMeasurement {
-            observation: Matrix1::new(1.0),
-            noise: Matrix1::new(1.0),
-        },
-        Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0)).unwrap(),
-    )
-}
-
-/// T readings simulated from the model (seeded).
-fn readings(steps: usize, seed: u64) -> Vec<f64> {
-    let mut g = rng(seed);
-    let mut x = normal(&mut g);
-    (0..steps)
-        .map(|_| {
-            x = 0.9 * x + 0.5f64.sqrt() * normal(&mut g);
-            x + normal(&mut g)
-        })
-        .collect()
-}
-
-fn mean_and_variance(v: &[f64]) -> (f64, f64) {
-    let n = v.len() as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    (
-        mean,
-        v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0),
-    )
-}
+use crate::particle_common::{ar1, mean_and_variance, readings};
 
 /// The RTS smoother's means and variances at steps 0..=T (predict, then update, each step).
 fn rts(zs: &[f64]) -> (Vec<f64>, Vec<f64>) {
@@ -346,6 +311,7 @@ fn ffbsi_of_a_singular_process_noise_is_a_typed_error() {
 /// Position xn and velocity xl of a constant-velocity target: xn⁺ = xn + xl + wn,
 /// xl⁺ = xl + wl (Qn = 0.1, Ql = 0.05); z = xn + v (R = 0.5). The "nonlinear" part is linear,
 /// so the Kalman filter of the whole state is the exact answer.
+#[derive(Clone)]
 pub(crate) struct SplitCv;
 
 impl ConditionallyLinearProcess<f64, U1, U1> for SplitCv {
@@ -367,6 +333,7 @@ impl ConditionallyLinearProcess<f64, U1, U1> for SplitCv {
     }
 }
 
+#[derive(Clone)]
 pub(crate) struct SplitPosition;
 
 impl ConditionallyLinearMeasurement<f64, U1, U1, U1> for SplitPosition {
