@@ -89,6 +89,8 @@ mod auxiliary;
 mod checkpoint;
 mod chunks;
 mod ffbsi;
+#[cfg(feature = "serde")]
+mod ffbsi_checkpoint;
 mod guided;
 mod noise;
 mod own_noise;

@@ -279,6 +279,68 @@ fn ffbsi_bad_input_gives_typed_errors_and_changes_nothing() {
     assert_eq!(pf, filter);
 }
 
+/// A checkpoint of the smoother (with the filter's own) resumes bit-identically: the resumed
+/// pair records the same later steps and smooths to the same paths. A corrupt one is an
+/// error, not a panic: unnormalised or missing log-weights, a non-number particle, a cloud of
+/// another particle count, a negative Δt, a cloud claiming 2⁶³ − 1 particles.
+#[cfg(feature = "serde")]
+#[test]
+fn ffbsi_checkpoints_resume_bit_identically_and_reject_corruption() {
+    let zs = readings(6, 7);
+    let (process, sensor, _) = ar1();
+    let (mut ffbsi, mut pf) = forward(&zs[..3], 40, 3);
+    let saved = serde_json::to_value(&ffbsi).unwrap();
+    let mut resumed: Ffbsi<f64, U1> = serde_json::from_value(saved.clone()).unwrap();
+    let mut resumed_pf: ParticleFilter<f64, U1> =
+        serde_json::from_value(serde_json::to_value(&pf).unwrap()).unwrap();
+    assert_eq!(resumed, ffbsi);
+    for &z in &zs[3..] {
+        for (s, f) in [(&mut ffbsi, &mut pf), (&mut resumed, &mut resumed_pf)] {
+            s.predict(f, &process, &(), 1.0).unwrap();
+            f.update(&sensor, &Vector1::new(z)).unwrap();
+        }
+    }
+    assert_eq!(resumed, ffbsi);
+    assert_eq!(
+        resumed.smooth(&resumed_pf, &process, 30, 2).unwrap(),
+        ffbsi.smooth(&pf, &process, 30, 2).unwrap()
+    );
+    // An empty record round-trips.
+    let empty: Ffbsi<f64, U1> = Ffbsi::new();
+    let back: Ffbsi<f64, U1> =
+        serde_json::from_value(serde_json::to_value(&empty).unwrap()).unwrap();
+    assert_eq!(back, empty);
+
+    let corrupt = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut v = saved.clone();
+        edit(&mut v);
+        serde_json::from_value::<Ffbsi<f64, U1>>(v).is_err()
+    };
+    assert!(corrupt(
+        &|v| v["records"][1]["log_weights"][3] = serde_json::json!(0.5)
+    ));
+    assert!(corrupt(&|v| {
+        v["records"][2]["log_weights"].as_array_mut().unwrap().pop();
+    }));
+    assert!(corrupt(
+        &|v| v["records"][0]["particles"][0][5] = serde_json::json!(null)
+    ));
+    assert!(corrupt(&|v| v["records"][1]["dt"] = serde_json::json!(-1.0)));
+    assert!(corrupt(&|v| v["records"][1]["dt"] = serde_json::json!(null)));
+    // A later cloud of another particle count.
+    let (other, _) = forward(&zs[..1], 41, 3);
+    let other = serde_json::to_value(&other).unwrap();
+    assert!(corrupt(&|v| v["records"][2] = other["records"][0].clone()));
+    // A runtime-size cloud claiming 2⁶³ − 1 particles: a shape error, not a panic (issue 41).
+    let dynamic: ParticleFilter<f64, Dyn> = ParticleFilter::new(ar1().2.into_dyn(), 8, 1).unwrap();
+    let mut record: Ffbsi<f64, Dyn> = Ffbsi::new();
+    record.record(&dynamic, (), 1.0).unwrap();
+    let mut v = serde_json::to_value(&record).unwrap();
+    v["records"][0]["particles"][2] = serde_json::json!(i64::MAX);
+    let e = serde_json::from_value::<Ffbsi<f64, Dyn>>(v).unwrap_err();
+    assert!(e.to_string().contains("entries"), "{e}");
+}
+
 /// A constant-velocity model with noise on the velocity only filters (the sampler uses Q's
 /// PSD factor) but has no transition density: smoothing it is a typed error naming Q.
 #[test]
