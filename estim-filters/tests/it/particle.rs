@@ -14,7 +14,7 @@ use estim_filters::particle::{
 use estim_filters::{Estimator, KalmanFilter, Predict, Rollback, Update};
 
 use crate::particle_common::{
-    ar1, assert_late_reading_replays_bit_identically, mean_and_variance, readings,
+    ar1, assert_late_reading_replays_bit_identically, dyn_linear, mean_and_variance, readings,
 };
 
 /// The Kalman filter's means, variances and total log-likelihood over `zs` (predict, then
@@ -613,7 +613,7 @@ fn fusion_driver_replays_a_late_reading_bit_identically() {
 /// decision could flip on a near-tie of cumulative weights, which these seeds do not hit).
 #[test]
 fn runtime_sizes_and_f32_follow_the_static_f64_filter() {
-    use estim_core::nalgebra::{DMatrix, DVector, Dyn, Matrix1x2, Matrix2, U2, Vector2};
+    use estim_core::nalgebra::{DVector, Dyn, Matrix1x2, Matrix2, U2, Vector2};
     let f = Matrix2::new(1.0, 0.1, 0.0, 1.0);
     let q = Matrix2::new(1e-3, 0.0, 0.0, 1e-2);
     let h = Matrix1x2::new(1.0, 0.0);
@@ -625,14 +625,7 @@ fn runtime_sizes_and_f32_follow_the_static_f64_filter() {
     let prior = Gaussian::new(Vector2::new(0.0, 1.0), Matrix2::identity()).unwrap();
     let zs = [0.12, 0.18, 0.33];
     let mut fixed = ParticleFilter::new(prior.clone(), 300, 12).unwrap();
-    let dyn_process = LinearProcess::without_input(
-        DMatrix::from_column_slice(2, 2, f.as_slice()),
-        DMatrix::from_column_slice(2, 2, q.as_slice()),
-    );
-    let dyn_sensor = LinearMeasurement {
-        observation: DMatrix::from_column_slice(1, 2, h.as_slice()),
-        noise: DMatrix::from_element(1, 1, 0.1),
-    };
+    let (dyn_process, dyn_sensor) = dyn_linear(&f, &q, &h, 0.1);
     let mut dynamic: ParticleFilter<f64, Dyn> =
         ParticleFilter::new(prior.clone().into_dyn(), 300, 12).unwrap();
     let process32 = LinearProcess::without_input(f.cast::<f32>(), q.cast::<f32>());

@@ -25,7 +25,7 @@ use estim_filters::smoother::Rts;
 use estim_filters::{Estimator, KalmanFilter, Predict, Update};
 
 use crate::common::{normal, rng};
-use crate::particle_common::{ar1, mean_and_variance, readings};
+use crate::particle_common::{ar1, dyn_linear, mean_and_variance, readings};
 
 /// The RTS smoother's means and variances at steps 0..=T (predict, then update, each step).
 fn rts(zs: &[f64]) -> (Vec<f64>, Vec<f64>) {
@@ -995,14 +995,7 @@ fn runtime_sizes_follow_the_static_algorithms() {
         observation: h,
         noise: Matrix1::new(0.5),
     };
-    let dyn_process = LinearProcess::without_input(
-        DMatrix::from_column_slice(2, 2, f.as_slice()),
-        DMatrix::from_column_slice(2, 2, q.as_slice()),
-    );
-    let dyn_sensor = LinearMeasurement {
-        observation: DMatrix::from_column_slice(1, 2, h.as_slice()),
-        noise: DMatrix::from_element(1, 1, 0.5),
-    };
+    let (dyn_process, dyn_sensor) = dyn_linear(&f, &q, &h, 0.5);
     let prior = Gaussian::new(Vector2::new(0.0, 1.0), Matrix2::identity()).unwrap();
     let zs = cv_readings(5, 8);
     let mut fixed = ParticleFilter::new(prior.clone(), 200, 3).unwrap();

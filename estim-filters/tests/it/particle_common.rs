@@ -5,7 +5,9 @@
 use core::fmt::Debug;
 
 use estim_core::error::Result;
-use estim_core::nalgebra::{DefaultAllocator, Dim, Matrix1, U0, U1, Vector1};
+use estim_core::nalgebra::{
+    DMatrix, DefaultAllocator, Dim, Dyn, Matrix1, Matrix1x2, Matrix2, U0, U1, Vector1,
+};
 use estim_core::{Alloc, Gaussian, LinearMeasurement, LinearProcess, NoInput};
 use estim_filters::fusion::{FusionDriver, FusionSettings, Innovation, SensorSet, SensorSettings};
 use estim_filters::{Predict, ProcessInput, Rollback, Update};
@@ -40,6 +42,29 @@ pub(crate) fn readings(steps: usize, seed: u64) -> Vec<f64> {
             x + normal(&mut g)
         })
         .collect()
+}
+
+/// A runtime-size linear process without input.
+pub(crate) type DynProcess = NoInput<LinearProcess<f64, Dyn, U0>>;
+
+/// Runtime-size copies of a 2-state linear process x⁺ = F x + w (Q, no input) and its 1-D
+/// sensor z = H x + v (R = `r`), the same numbers in `DMatrix`es.
+pub(crate) fn dyn_linear(
+    f: &Matrix2<f64>,
+    q: &Matrix2<f64>,
+    h: &Matrix1x2<f64>,
+    r: f64,
+) -> (DynProcess, LinearMeasurement<f64, Dyn, Dyn>) {
+    (
+        LinearProcess::without_input(
+            DMatrix::from_column_slice(2, 2, f.as_slice()),
+            DMatrix::from_column_slice(2, 2, q.as_slice()),
+        ),
+        LinearMeasurement {
+            observation: DMatrix::from_column_slice(1, 2, h.as_slice()),
+            noise: DMatrix::from_element(1, 1, r),
+        },
+    )
 }
 
 /// The sample mean and the unbiased sample variance (divisor n − 1).
