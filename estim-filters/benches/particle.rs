@@ -390,28 +390,34 @@ fn check_same_algorithm() {
     let _ = PARALLEL_MIN;
 }
 
-/// Counted mode for callgrind: `PARTICLE_BENCH_STEPS=<variant>=<steps>` with variant
-/// `library` or `hand` runs that many growth-model steps at N = 1000 in [`run_counted`] and
-/// exits, e.g. `PARTICLE_BENCH_STEPS=library=50 valgrind --tool=callgrind
-/// --toggle-collect='*run_counted*' <binary> --bench`.
+/// Counted mode for callgrind: `PARTICLE_BENCH_STEPS=<variant>=<steps>[,<count>]` with
+/// variant `library` or `hand` runs that many growth-model steps at N = `count` (default
+/// 1000) in [`run_counted`] and exits, e.g. `PARTICLE_BENCH_STEPS=library=50
+/// valgrind --tool=callgrind --toggle-collect='*run_counted*' <binary> --bench`. The
+/// difference of two step counts is the per-step cost without the setup.
 fn counted() -> bool {
     let Ok(spec) = std::env::var("PARTICLE_BENCH_STEPS") else {
         return false;
     };
-    let (variant, steps) = spec.split_once('=').expect("<variant>=<steps>");
-    run_counted(variant, steps.parse().expect("a step count"));
+    let (variant, rest) = spec.split_once('=').expect("<variant>=<steps>[,<count>]");
+    let (steps, count) = rest.split_once(',').unwrap_or((rest, "1000"));
+    run_counted(
+        variant,
+        steps.parse().expect("a step count"),
+        count.parse().expect("a particle count"),
+    );
     true
 }
 
 #[inline(never)]
-fn run_counted(variant: &str, steps: usize) {
+fn run_counted(variant: &str, steps: usize, count: usize) {
     let zs = growth_readings();
     let prior = Gaussian::new(Vector1::new(0.1), Matrix1::new(2.0)).unwrap();
-    let mut pf = ParticleFilter::new(prior, 1000, SEED)
+    let mut pf = ParticleFilter::new(prior, count, SEED)
         .unwrap()
         .with_trigger(ResampleWhen::Always)
         .unwrap();
-    let mut hand = Hand::<1>::new(1000, [0.1], [[2f64.sqrt()]]);
+    let mut hand = Hand::<1>::new(count, [0.1], [[2f64.sqrt()]]);
     let sq = 10f64.sqrt();
     let half_log_2pi = 0.5 * std::f64::consts::TAU.ln();
     for k in 1..=steps {

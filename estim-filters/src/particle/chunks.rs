@@ -326,10 +326,14 @@ fn chunk_moments<T: Real, const D: usize>(
 /// Each chunk sums dᵢ = xᵢ − s and Wᵢ dᵢ dᵢᵀ about a shift s, the particle of largest
 /// weight (inside the cloud's bulk, so the correction below loses no precision); then
 /// x̂ = s + Σ Wᵢ dᵢ and P = Σ Wᵢ dᵢ dᵢᵀ − (x̂ − s)(x̂ − s)ᵀ.
+///
+/// `heaviest`, if known to the caller, is that particle (the first of the largest weight, as
+/// the scan here finds it).
 pub(crate) fn moments<T: Real, N: Dim>(
     chunks: &mut [ChunkWork<T>],
     particles: &OMatrix<T, N, Dyn>,
     weights: &[f64],
+    heaviest: Option<usize>,
     mean: &mut OVector<T, N>,
     covariance: &mut OMatrix<T, N, N>,
 ) where
@@ -338,14 +342,16 @@ pub(crate) fn moments<T: Real, N: Dim>(
     let count = weights.len();
     let n = particles.nrows();
     let particles = particles.as_slice();
-    let heaviest = weights
-        .iter()
-        .enumerate()
-        .fold(
-            (0, f64::NEG_INFINITY),
-            |(a, m), (i, &w)| if w > m { (i, w) } else { (a, m) },
-        )
-        .0;
+    let heaviest = heaviest.unwrap_or_else(|| {
+        weights
+            .iter()
+            .enumerate()
+            .fold(
+                (0, f64::NEG_INFINITY),
+                |(a, m), (i, &w)| if w > m { (i, w) } else { (a, m) },
+            )
+            .0
+    });
     let shift = &particles[heaviest * n..(heaviest + 1) * n];
     for_states(parallel(count), chunks, |c, w| {
         if w.mean.nrows() != n || w.covariance.nrows() != n {

@@ -12,15 +12,15 @@ use super::transition::{GaussianKernel, ParticleTransition, checked_log_density}
 use crate::gaussian_filter::ensure_time_step;
 
 /// One recorded filtering cloud and the transition that leaves it.
-#[derive(Clone, Debug)]
-struct Record<T: Real, N: Dim, U>
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Record<T: Real, N: Dim, U>
 where
     DefaultAllocator: Alloc<N>,
 {
-    particles: OMatrix<T, N, Dyn>,
-    log_weights: Vec<T>,
-    input: U,
-    dt: T,
+    pub(crate) particles: OMatrix<T, N, Dyn>,
+    pub(crate) log_weights: Vec<T>,
+    pub(crate) input: U,
+    pub(crate) dt: T,
 }
 
 /// The forward-filtering backward-simulation particle smoother (FFBSi; Godsill, Doucet &
@@ -80,13 +80,15 @@ where
 ///
 /// A forward-filtering backward-simulation particle smoother over a forward pass recorded
 /// with [`predict`](Self::predict) or [`record`](Self::record) (above). `U` is the
-/// process input type. Memory: one n × N cloud and N log-weights per recorded step.
-#[derive(Clone, Debug)]
+/// process input type. Memory: one n × N cloud and N log-weights per recorded step. With
+/// the `serde` feature the record is a checkpoint (serialise it with the filter; a restored
+/// smoother continues and smooths to the same bits).
+#[derive(Clone, Debug, PartialEq)]
 pub struct Ffbsi<T: Real, N: Dim, U = ()>
 where
     DefaultAllocator: Alloc<N>,
 {
-    records: Vec<Record<T, N, U>>,
+    pub(crate) records: Vec<Record<T, N, U>>,
 }
 
 impl<T: Real, N: Dim, U> Default for Ffbsi<T, N, U>
@@ -343,7 +345,7 @@ fn draw<T: Real>(log_w: &[T], norm: T, u: f64) -> usize {
 }
 
 /// `found` has `expected`'s shape (the same state dimension and particle count).
-fn check_cloud<T: Real, N: Dim>(
+pub(crate) fn check_cloud<T: Real, N: Dim>(
     expected: &OMatrix<T, N, Dyn>,
     found: &OMatrix<T, N, Dyn>,
     stage: Stage,

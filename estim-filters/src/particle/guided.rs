@@ -194,7 +194,9 @@ where
         let (n, _) = self.cloud.mean.shape_generic();
         let m = z.shape_generic().0;
         let (seed, step) = (self.seed, self.cloud.step);
-        let resample = self.when.fires(ess_of_weights(&self.cloud.weights), count);
+        let resample = self
+            .when
+            .fires(|| ess_of_weights(&self.cloud.weights), count);
         let cloud = &self.cloud;
         let work = &mut self.work;
         Work::<T, N>::ancestors_from(

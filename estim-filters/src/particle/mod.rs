@@ -89,6 +89,8 @@ mod auxiliary;
 mod checkpoint;
 mod chunks;
 mod ffbsi;
+#[cfg(feature = "serde")]
+mod ffbsi_checkpoint;
 mod guided;
 mod noise;
 mod own_noise;
@@ -370,6 +372,12 @@ where
     /// x̂ = Σ Wᵢ xᵢ and P = Σ Wᵢ (xᵢ − x̂)(xᵢ − x̂)ᵀ from the cloud (by chunks, in a fixed
     /// order).
     fn update_moments(&mut self) {
+        self.update_moments_about(None);
+    }
+
+    /// [`update_moments`](Self::update_moments) with the particle of largest weight (the first
+    /// one if tied) already known, if `heaviest` is given.
+    fn update_moments_about(&mut self, heaviest: Option<usize>) {
         let cloud = &mut self.cloud;
         let (n, _) = cloud.particles.shape_generic();
         if cloud.mean.nrows() != n.value() {
@@ -380,6 +388,7 @@ where
             &mut self.work.chunks,
             &cloud.particles,
             &cloud.weights,
+            heaviest,
             &mut cloud.mean,
             &mut cloud.covariance,
         );

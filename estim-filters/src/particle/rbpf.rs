@@ -434,7 +434,7 @@ where
         let step = state.step;
         let resample = self
             .when
-            .fires(effective_sample_size(&state.log_weights), count);
+            .fires(|| effective_sample_size(&state.log_weights), count);
         for (j, a) in work.ancestors.iter_mut().enumerate() {
             *a = j;
         }

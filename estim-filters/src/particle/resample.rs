@@ -51,12 +51,13 @@ impl ResampleWhen {
     /// The default policy, [`EssBelow(0.5)`](Self::EssBelow).
     pub const DEFAULT: Self = Self::EssBelow(0.5);
 
-    /// Whether to resample a cloud of `count` particles with effective sample size `ess`.
+    /// Whether to resample a cloud of `count` particles with effective sample size `ess()`
+    /// (computed only for [`EssBelow`](Self::EssBelow): an O(N) pass the other policies skip).
     #[inline]
-    pub(crate) fn fires(self, ess: f64, count: usize) -> bool {
+    pub(crate) fn fires(self, ess: impl FnOnce() -> f64, count: usize) -> bool {
         match self {
             Self::Always => true,
-            Self::EssBelow(fraction) => ess < fraction * count as f64,
+            Self::EssBelow(fraction) => ess() < fraction * count as f64,
             Self::Never => false,
         }
     }

@@ -121,7 +121,6 @@ where
         let (n, _) = particles.shape_generic();
         let count = particles.ncols();
         let ancestors = &self.ancestors;
-        let nn = n.value();
         let particles = particles.as_slice();
         for_chunks1(
             parallel(count),
@@ -129,20 +128,15 @@ where
             self.next.as_mut_slice(),
             n.value() * CHUNK,
             |c, w, out| {
+                let range = range(c, count);
+                let ancestors = &ancestors[range.clone()];
                 w.error = with_state(&mut w.state, n, |s| {
-                    for (k, column) in out.chunks_exact_mut(n.value()).enumerate() {
-                        let j = c * CHUNK + k;
-                        let a = ancestors[j];
-                        s.x.copy_from_slice(&particles[a * nn..(a + 1) * nn]);
-                        let rng = ParticleRng::stream(seed, step, j as u64);
-                        if let Err(e) = propagate(s, process, input, dt, rng) {
-                            return Some(e);
-                        }
-                        for (o, &y) in column.iter_mut().zip(s.y.iter()) {
-                            *o = y;
-                        }
-                    }
-                    None
+                    let chunk = Chunk {
+                        first: range.start,
+                        seed,
+                        step,
+                    };
+                    propagate_chunk(s, chunk, ancestors, particles, out, process, input, dt)
                 });
             },
         );
@@ -192,24 +186,23 @@ where
                     total_v,
                     ..
                 } = w;
+                let (innovation, rest) = sums.split_at_mut(mm);
+                let (second, noise) = rest.split_at_mut(mm * mm);
                 let mut sums = Sums {
                     m: mm,
-                    sums,
+                    innovation,
+                    second,
+                    noise,
                     total_v,
                 };
+                let first = c * CHUNK;
+                let cloud = &cloud[first * nn..(first + out.len()) * nn];
                 let error = with_state(state, n, |s| {
                     with_sensor::<T, M, _>(&mut kept[0], m, |ms| {
-                        ms.z.copy_from_slice(z);
-                        for (k, o) in out.iter_mut().enumerate() {
-                            let i = c * CHUNK + k;
-                            let (v, base) = prior(i);
-                            s.x.copy_from_slice(&cloud[i * nn..(i + 1) * nn]);
-                            match log_density::<T, N, M, H>(ms, sensor, &s.x, v, &mut sums) {
-                                Ok(log_g) => *o = base + log_g,
-                                Err(e) => return Some(e),
-                            }
-                        }
-                        None
+                        ms.z.as_mut_slice().copy_from_slice(z);
+                        weigh_chunk::<T, N, M, H, F>(
+                            s, ms, sensor, first, cloud, out, &prior, &mut sums,
+                        )
                     })
                 });
                 w.error = error;
@@ -322,6 +315,129 @@ where
     }
 }
 
+/// Which particles a chunk holds and the names of their streams: particle `first + k` draws
+/// from (seed, step, first + k).
+#[derive(Clone, Copy)]
+struct Chunk {
+    first: usize,
+    seed: u64,
+    step: u64,
+}
+
+/// Propagates one chunk: particle `ancestors[k]` of `particles` (n per particle, one after
+/// another) into the k-th n-slice of `out`. The first error in particle order, if any (`out`
+/// then partly written).
+///
+/// Not inlined on purpose: as a function of its own, its reference arguments are known not to
+/// alias one another, so what depends only on the input (e.g. a cos(ω k) term of f) is
+/// computed once per chunk rather than once per particle, as a hand-written loop gets it.
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn propagate_chunk<T: Real, N: Dim, P: ParticleProcess<T, N> + ?Sized>(
+    s: &mut StateScratch<T, N>,
+    chunk: Chunk,
+    ancestors: &[usize],
+    particles: &[T],
+    out: &mut [T],
+    process: &P,
+    input: &<P::Model as ProcessModel<T, N>>::Input,
+    dt: T,
+) -> Option<Error>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    let nn = s.x.nrows();
+    if nn == 0 {
+        return None;
+    }
+    for ((k, &a), column) in ancestors.iter().enumerate().zip(out.chunks_exact_mut(nn)) {
+        s.x.as_mut_slice()
+            .copy_from_slice(&particles[a * nn..(a + 1) * nn]);
+        let rng = ParticleRng::stream(chunk.seed, chunk.step, (chunk.first + k) as u64);
+        if let Err(e) = propagate(s, process, input, dt, rng) {
+            return Some(e);
+        }
+        column.copy_from_slice(s.y.as_slice());
+    }
+    None
+}
+
+/// y ← y + L e for L n × n column-major: column by column, yᵣ ← Lᵣⱼ eⱼ + yᵣ, the operations
+/// (and so the bits) of nalgebra's `gemv(1, L, e, 1)` without its generic shape checks.
+#[inline(always)]
+fn add_product<T: Real>(y: &mut [T], l: &[T], e: &[T]) {
+    let n = y.len();
+    if n == 0 {
+        return;
+    }
+    for (column, &ej) in l.chunks_exact(n).zip(e) {
+        for (yr, &lr) in y.iter_mut().zip(column) {
+            *yr = lr * ej + *yr;
+        }
+    }
+}
+
+/// Solves L x = b in place for L m × m lower triangular, column-major, with a nonzero
+/// diagonal: the operations (and so the bits) of nalgebra's `solve_lower_triangular_mut`
+/// (xᵢ = bᵢ / Lᵢᵢ, then bᵣ ← −xᵢ Lᵣᵢ + bᵣ below) without its generic shape checks. Stops at a
+/// zero diagonal entry, as nalgebra's does.
+#[inline(always)]
+fn solve_lower_in_place<T: Real>(l: &[T], b: &mut [T]) {
+    let m = b.len();
+    for i in 0..m {
+        let column = &l[i * m..(i + 1) * m];
+        let diag = column[i];
+        if diag == T::zero() {
+            return;
+        }
+        let coeff = b[i] / diag;
+        b[i] = coeff;
+        for (br, &lr) in b[i + 1..].iter_mut().zip(&column[i + 1..]) {
+            *br = -coeff * lr + *br;
+        }
+    }
+}
+
+/// Weighs one chunk: `out[k] = baseₖ + log p(z | xₖ)` for the particles of `cloud` (n per
+/// particle, one after another; particle index `first + k`), with (vₖ, baseₖ) =
+/// `prior(first + k)`, vₖ added to `sums`. The first error in particle order, if any.
+///
+/// Not inlined on purpose (see [`propagate_chunk`]).
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn weigh_chunk<T, N, M, H, F>(
+    s: &mut StateScratch<T, N>,
+    ms: &mut SensorScratch<T, M>,
+    sensor: &H,
+    first: usize,
+    cloud: &[T],
+    out: &mut [T],
+    prior: &F,
+    sums: &mut Sums<'_, T>,
+) -> Option<Error>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: ParticleMeasurement<T, N, M> + ?Sized,
+    F: Fn(usize) -> (T, T),
+    DefaultAllocator: Alloc<N, M>,
+{
+    let nn = s.x.nrows();
+    if nn == 0 {
+        return None;
+    }
+    for ((k, o), x) in out.iter_mut().enumerate().zip(cloud.chunks_exact(nn)) {
+        let (v, base) = prior(first + k);
+        s.x.as_mut_slice().copy_from_slice(x);
+        match log_density::<T, N, M, H>(ms, sensor, &s.x, v, sums) {
+            Ok(log_g) => *o = base + log_g,
+            Err(e) => return Some(e),
+        }
+    }
+    None
+}
+
 /// Moves particle `s.x` with stream `rng` into `s.y`.
 #[inline(always)]
 fn propagate<T: Real, N: Dim, P: ParticleProcess<T, N> + ?Sized>(
@@ -362,7 +478,7 @@ where
         };
         if y.nrows() == x.nrows() {
             fill_normals(normals, &mut rng);
-            y.gemv(T::one(), factor, normals, T::one());
+            add_product(y.as_mut_slice(), factor.as_slice(), normals.as_slice());
         }
     }
     if y.nrows() != x.nrows() {
@@ -457,7 +573,9 @@ where
 /// [`ChunkWork::sums`]), and Σ vᵢ.
 struct Sums<'a, T: Real> {
     m: usize,
-    sums: &'a mut [T],
+    innovation: &'a mut [T],
+    second: &'a mut [T],
+    noise: &'a mut [T],
     total_v: &'a mut T,
 }
 
@@ -517,7 +635,7 @@ where
                 }
             };
             ms.solved.copy_from(&ms.r);
-            factor.solve_lower_triangular_mut(&mut ms.solved);
+            solve_lower_in_place(factor.as_slice(), ms.solved.as_mut_slice());
             -ms.solved.norm_squared() / estim_core::scalar::real(2.0) - *half_log_det
         }
     };
@@ -531,8 +649,8 @@ where
     }
     if v > T::zero() {
         let m = sums.m;
-        let (innovation, rest) = sums.sums.split_at_mut(m);
-        let (second, noise) = rest.split_at_mut(m * m);
+        let (innovation, second, noise) =
+            (&mut *sums.innovation, &mut *sums.second, &mut *sums.noise);
         for (a, &r) in innovation.iter_mut().zip(ms.r.iter()) {
             *a += v * r;
         }
@@ -596,8 +714,8 @@ where
     {
         ensure_time_step(dt)?;
         let count = self.count();
-        let ess = ess_of_weights(&self.cloud.weights);
-        let resample = self.when.fires(ess, count);
+        let weights = &self.cloud.weights;
+        let resample = self.when.fires(|| ess_of_weights(weights), count);
         let step = self.cloud.step;
         let work = &mut self.work;
         Work::<T, N>::ancestors_from(
@@ -616,7 +734,8 @@ where
             self.cloud.set_uniform();
         }
         self.cloud.step = step.wrapping_add(1);
-        self.update_moments();
+        // Equal weights after resampling: the first particle is the first of the largest.
+        self.update_moments_about(resample.then_some(0));
         Ok(())
     }
 

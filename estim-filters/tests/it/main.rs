@@ -47,6 +47,7 @@ mod noise_id_likelihood;
 mod noise_policy;
 mod particle;
 mod particle_algorithms;
+mod particle_common;
 mod particle_parallel;
 mod rbpf_contract;
 mod rls;

@@ -5,47 +5,17 @@
 //! Every test is seeded, so each runs the same numbers in CI; each statistical bound is a
 //! z-test whose false-failure rate (for a fresh seed) is stated beside it.
 
-use estim_core::nalgebra::{Matrix1, U0, U1, Vector1};
-use estim_core::{
-    Error, Gaussian, LinearMeasurement, LinearProcess, MeasurementModel, NoInput, Quantity,
-};
+use estim_core::nalgebra::{Matrix1, U1, Vector1};
+use estim_core::{Error, Gaussian, LinearMeasurement, LinearProcess, MeasurementModel, Quantity};
 use estim_filters::particle::{
     MeasurementLikelihood, NonGaussian, ParticleFilter, ParticleRng, ResampleWhen, Resampling,
     resample,
 };
 use estim_filters::{Estimator, KalmanFilter, Predict, Rollback, Update};
 
-use crate::common::{normal, rng};
-
-/// x⁺ = 0.9 x + w, Q = 0.5.
-type Ar1 = NoInput<LinearProcess<f64, U1, U0>>;
-
-/// The model's position sensor.
-type Sensor = LinearMeasurement<f64, U1, U1>;
-
-/// x⁺ = 0.9 x + w, Q = 0.5; z = x + v, R = 1; x₀ ~ N(0, 1).
-fn ar1() -> (Ar1, Sensor, Gaussian<f64, U1>) {
-    (
-        LinearProcess::without_input(Matrix1::new(0.9), Matrix1::new(0.5)),
-        LinearMeasurement {
-            observation: Matrix1::new(1.0),
-            noise: Matrix1::new(1.0),
-        },
-        Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0)).unwrap(),
-    )
-}
-
-/// T readings simulated from the model (seeded).
-fn readings(steps: usize, seed: u64) -> Vec<f64> {
-    let mut g = rng(seed);
-    let mut x = normal(&mut g);
-    (0..steps)
-        .map(|_| {
-            x = 0.9 * x + 0.5f64.sqrt() * normal(&mut g);
-            x + normal(&mut g)
-        })
-        .collect()
-}
+use crate::particle_common::{
+    ar1, assert_late_reading_replays_bit_identically, dyn_linear, mean_and_variance, readings,
+};
 
 /// The Kalman filter's means, variances and total log-likelihood over `zs` (predict, then
 /// update, each step).
@@ -73,15 +43,6 @@ fn particle(zs: &[f64], pf: &mut ParticleFilter<f64, U1>) -> (Vec<f64>, Vec<f64>
         vars.push(pf.covariance()[(0, 0)]);
     }
     (means, vars, pf.log_likelihood())
-}
-
-fn mean_and_variance(v: &[f64]) -> (f64, f64) {
-    let n = v.len() as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    (
-        mean,
-        v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0),
-    )
 }
 
 /// The particle means and variances converge to the Kalman filter's like N^-1/2.
@@ -640,54 +601,9 @@ fn checkpoints_resume_bit_identically_and_reject_corrupt_input() {
 /// fusing in time order.
 #[test]
 fn fusion_driver_replays_a_late_reading_bit_identically() {
-    use estim_core::error::Result;
-    use estim_filters::fusion::{
-        FusionDriver, FusionSettings, Innovation, SensorSet, SensorSettings,
-    };
-
-    struct One(Sensor);
-    impl<F: Update<f64, U1, U1, Sensor>> SensorSet<f64, U1, F> for One {
-        type Reading = Vector1<f64>;
-        fn count(&self) -> usize {
-            1
-        }
-        fn sensor(&self, _: &Vector1<f64>) -> usize {
-            0
-        }
-        fn dimension(&self, _: usize) -> usize {
-            1
-        }
-        fn update(&self, f: &mut F, z: &Vector1<f64>) -> Result<Innovation<f64>> {
-            f.update(&self.0, z).map(|r| Innovation::of(&r))
-        }
-    }
     let (process, sensor, prior) = ar1();
     let pf = ParticleFilter::new(prior, 200, 6).unwrap();
-    let settings = FusionSettings {
-        max_step: 0.02,
-        ..FusionSettings::default()
-    };
-    let driver = || {
-        FusionDriver::new(
-            pf.clone(),
-            process.clone(),
-            (),
-            One(sensor.clone()),
-            0.0,
-            settings,
-            SensorSettings::default(),
-        )
-        .unwrap()
-    };
-    let mut ordered = driver();
-    ordered.fuse(0.05, Vector1::new(0.3)).unwrap();
-    ordered.fuse(0.10, Vector1::new(-0.2)).unwrap();
-    let mut late = driver();
-    late.fuse(0.10, Vector1::new(-0.2)).unwrap();
-    let fused = late.fuse(0.05, Vector1::new(0.3)).unwrap();
-    assert_eq!(fused.replayed, 1);
-    assert_eq!(late.filter(), ordered.filter());
-    assert_ne!(late.filter(), &pf);
+    assert_late_reading_replays_bit_identically(pf, process, sensor);
 }
 
 /// Runtime sizes and f32: a 2-state filter with `Dyn` dimensions follows the static one (the
@@ -697,7 +613,7 @@ fn fusion_driver_replays_a_late_reading_bit_identically() {
 /// decision could flip on a near-tie of cumulative weights, which these seeds do not hit).
 #[test]
 fn runtime_sizes_and_f32_follow_the_static_f64_filter() {
-    use estim_core::nalgebra::{DMatrix, DVector, Dyn, Matrix1x2, Matrix2, U2, Vector2};
+    use estim_core::nalgebra::{DVector, Dyn, Matrix1x2, Matrix2, U2, Vector2};
     let f = Matrix2::new(1.0, 0.1, 0.0, 1.0);
     let q = Matrix2::new(1e-3, 0.0, 0.0, 1e-2);
     let h = Matrix1x2::new(1.0, 0.0);
@@ -709,14 +625,7 @@ fn runtime_sizes_and_f32_follow_the_static_f64_filter() {
     let prior = Gaussian::new(Vector2::new(0.0, 1.0), Matrix2::identity()).unwrap();
     let zs = [0.12, 0.18, 0.33];
     let mut fixed = ParticleFilter::new(prior.clone(), 300, 12).unwrap();
-    let dyn_process = LinearProcess::without_input(
-        DMatrix::from_column_slice(2, 2, f.as_slice()),
-        DMatrix::from_column_slice(2, 2, q.as_slice()),
-    );
-    let dyn_sensor = LinearMeasurement {
-        observation: DMatrix::from_column_slice(1, 2, h.as_slice()),
-        noise: DMatrix::from_element(1, 1, 0.1),
-    };
+    let (dyn_process, dyn_sensor) = dyn_linear(&f, &q, &h, 0.1);
     let mut dynamic: ParticleFilter<f64, Dyn> =
         ParticleFilter::new(prior.clone().into_dyn(), 300, 12).unwrap();
     let process32 = LinearProcess::without_input(f.cast::<f32>(), q.cast::<f32>());

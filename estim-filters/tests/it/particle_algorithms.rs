@@ -25,42 +25,7 @@ use estim_filters::smoother::Rts;
 use estim_filters::{Estimator, KalmanFilter, Predict, Update};
 
 use crate::common::{normal, rng};
-
-/// x⁺ = 0.9 x + w, Q = 0.5.
-type Ar1 = NoInput<LinearProcess<f64, U1, U0>>;
-
-/// x⁺ = 0.9 x + w, Q = 0.5; z = x + v, R = 1; x₀ ~ N(0, 1).
-fn ar1() -> (Ar1, LinearMeasurement<f64, U1, U1>, Gaussian<f64, U1>) {
-    (
-        LinearProcess::without_input(Matrix1::new(0.9), Matrix1::new(0.5)),
-        LinearMeasurement {
-            observation: Matrix1::new(1.0),
-            noise: Matrix1::new(1.0),
-        },
-        Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0)).unwrap(),
-    )
-}
-
-/// T readings simulated from the model (seeded).
-fn readings(steps: usize, seed: u64) -> Vec<f64> {
-    let mut g = rng(seed);
-    let mut x = normal(&mut g);
-    (0..steps)
-        .map(|_| {
-            x = 0.9 * x + 0.5f64.sqrt() * normal(&mut g);
-            x + normal(&mut g)
-        })
-        .collect()
-}
-
-fn mean_and_variance(v: &[f64]) -> (f64, f64) {
-    let n = v.len() as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    (
-        mean,
-        v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0),
-    )
-}
+use crate::particle_common::{ar1, dyn_linear, mean_and_variance, readings};
 
 /// The RTS smoother's means and variances at steps 0..=T (predict, then update, each step).
 fn rts(zs: &[f64]) -> (Vec<f64>, Vec<f64>) {
@@ -314,6 +279,68 @@ fn ffbsi_bad_input_gives_typed_errors_and_changes_nothing() {
     assert_eq!(pf, filter);
 }
 
+/// A checkpoint of the smoother (with the filter's own) resumes bit-identically: the resumed
+/// pair records the same later steps and smooths to the same paths. A corrupt one is an
+/// error, not a panic: unnormalised or missing log-weights, a non-number particle, a cloud of
+/// another particle count, a negative Δt, a cloud claiming 2⁶³ − 1 particles.
+#[cfg(feature = "serde")]
+#[test]
+fn ffbsi_checkpoints_resume_bit_identically_and_reject_corruption() {
+    let zs = readings(6, 7);
+    let (process, sensor, _) = ar1();
+    let (mut ffbsi, mut pf) = forward(&zs[..3], 40, 3);
+    let saved = serde_json::to_value(&ffbsi).unwrap();
+    let mut resumed: Ffbsi<f64, U1> = serde_json::from_value(saved.clone()).unwrap();
+    let mut resumed_pf: ParticleFilter<f64, U1> =
+        serde_json::from_value(serde_json::to_value(&pf).unwrap()).unwrap();
+    assert_eq!(resumed, ffbsi);
+    for &z in &zs[3..] {
+        for (s, f) in [(&mut ffbsi, &mut pf), (&mut resumed, &mut resumed_pf)] {
+            s.predict(f, &process, &(), 1.0).unwrap();
+            f.update(&sensor, &Vector1::new(z)).unwrap();
+        }
+    }
+    assert_eq!(resumed, ffbsi);
+    assert_eq!(
+        resumed.smooth(&resumed_pf, &process, 30, 2).unwrap(),
+        ffbsi.smooth(&pf, &process, 30, 2).unwrap()
+    );
+    // An empty record round-trips.
+    let empty: Ffbsi<f64, U1> = Ffbsi::new();
+    let back: Ffbsi<f64, U1> =
+        serde_json::from_value(serde_json::to_value(&empty).unwrap()).unwrap();
+    assert_eq!(back, empty);
+
+    let corrupt = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut v = saved.clone();
+        edit(&mut v);
+        serde_json::from_value::<Ffbsi<f64, U1>>(v).is_err()
+    };
+    assert!(corrupt(
+        &|v| v["records"][1]["log_weights"][3] = serde_json::json!(0.5)
+    ));
+    assert!(corrupt(&|v| {
+        v["records"][2]["log_weights"].as_array_mut().unwrap().pop();
+    }));
+    assert!(corrupt(
+        &|v| v["records"][0]["particles"][0][5] = serde_json::json!(null)
+    ));
+    assert!(corrupt(&|v| v["records"][1]["dt"] = serde_json::json!(-1.0)));
+    assert!(corrupt(&|v| v["records"][1]["dt"] = serde_json::json!(null)));
+    // A later cloud of another particle count.
+    let (other, _) = forward(&zs[..1], 41, 3);
+    let other = serde_json::to_value(&other).unwrap();
+    assert!(corrupt(&|v| v["records"][2] = other["records"][0].clone()));
+    // A runtime-size cloud claiming 2⁶³ − 1 particles: a shape error, not a panic (issue 41).
+    let dynamic: ParticleFilter<f64, Dyn> = ParticleFilter::new(ar1().2.into_dyn(), 8, 1).unwrap();
+    let mut record: Ffbsi<f64, Dyn> = Ffbsi::new();
+    record.record(&dynamic, (), 1.0).unwrap();
+    let mut v = serde_json::to_value(&record).unwrap();
+    v["records"][0]["particles"][2] = serde_json::json!(i64::MAX);
+    let e = serde_json::from_value::<Ffbsi<f64, Dyn>>(v).unwrap_err();
+    assert!(e.to_string().contains("entries"), "{e}");
+}
+
 /// A constant-velocity model with noise on the velocity only filters (the sampler uses Q's
 /// PSD factor) but has no transition density: smoothing it is a typed error naming Q.
 #[test]
@@ -346,6 +373,7 @@ fn ffbsi_of_a_singular_process_noise_is_a_typed_error() {
 /// Position xn and velocity xl of a constant-velocity target: xn⁺ = xn + xl + wn,
 /// xl⁺ = xl + wl (Qn = 0.1, Ql = 0.05); z = xn + v (R = 0.5). The "nonlinear" part is linear,
 /// so the Kalman filter of the whole state is the exact answer.
+#[derive(Clone)]
 pub(crate) struct SplitCv;
 
 impl ConditionallyLinearProcess<f64, U1, U1> for SplitCv {
@@ -367,6 +395,7 @@ impl ConditionallyLinearProcess<f64, U1, U1> for SplitCv {
     }
 }
 
+#[derive(Clone)]
 pub(crate) struct SplitPosition;
 
 impl ConditionallyLinearMeasurement<f64, U1, U1, U1> for SplitPosition {
@@ -966,14 +995,7 @@ fn runtime_sizes_follow_the_static_algorithms() {
         observation: h,
         noise: Matrix1::new(0.5),
     };
-    let dyn_process = LinearProcess::without_input(
-        DMatrix::from_column_slice(2, 2, f.as_slice()),
-        DMatrix::from_column_slice(2, 2, q.as_slice()),
-    );
-    let dyn_sensor = LinearMeasurement {
-        observation: DMatrix::from_column_slice(1, 2, h.as_slice()),
-        noise: DMatrix::from_element(1, 1, 0.5),
-    };
+    let (dyn_process, dyn_sensor) = dyn_linear(&f, &q, &h, 0.5);
     let prior = Gaussian::new(Vector2::new(0.0, 1.0), Matrix2::identity()).unwrap();
     let zs = cv_readings(5, 8);
     let mut fixed = ParticleFilter::new(prior.clone(), 200, 3).unwrap();

@@ -8,12 +8,12 @@
 use estim_core::error::Result;
 use estim_core::nalgebra::{Matrix1, Matrix2, U1, U2, Vector1, Vector2};
 use estim_core::{Error, Gaussian, Parameter, Quantity};
-use estim_filters::fusion::{FusionDriver, FusionSettings, Innovation, SensorSet, SensorSettings};
 use estim_filters::particle::{RaoBlackwellised, ResampleWhen, Resampling};
 use estim_filters::smoother::filter_sequence;
 use estim_filters::{Estimator, Predict, ProcessInput, Rollback, Update, UpdateReport};
 
 use crate::particle_algorithms::{SplitCv, SplitPosition, cv_readings};
+use crate::particle_common::assert_late_reading_replays_bit_identically;
 
 /// The joint state is (position, velocity): the process names its input there, as the step
 /// traits ask of a model that is not a `ProcessModel`.
@@ -215,48 +215,7 @@ fn update_report_is_the_mixture_predictive() {
 /// in time order.
 #[test]
 fn fusion_driver_replays_a_late_reading_bit_identically() {
-    struct One;
-    impl<F: Update<f64, U2, U1, SplitPosition>> SensorSet<f64, U2, F> for One {
-        type Reading = Vector1<f64>;
-        fn count(&self) -> usize {
-            1
-        }
-        fn sensor(&self, _: &Vector1<f64>) -> usize {
-            0
-        }
-        fn dimension(&self, _: usize) -> usize {
-            1
-        }
-        fn update(&self, f: &mut F, z: &Vector1<f64>) -> Result<Innovation<f64>> {
-            f.update(&SplitPosition, z).map(|r| Innovation::of(&r))
-        }
-    }
-    let start = rbpf(100, 6);
-    let settings = FusionSettings {
-        max_step: 0.02,
-        ..FusionSettings::default()
-    };
-    let driver = || {
-        FusionDriver::new(
-            start.clone(),
-            SplitCv,
-            (),
-            One,
-            0.0,
-            settings,
-            SensorSettings::default(),
-        )
-        .unwrap()
-    };
-    let mut ordered = driver();
-    ordered.fuse(0.05, Vector1::new(0.3)).unwrap();
-    ordered.fuse(0.10, Vector1::new(-0.2)).unwrap();
-    let mut late = driver();
-    late.fuse(0.10, Vector1::new(-0.2)).unwrap();
-    let fused = late.fuse(0.05, Vector1::new(0.3)).unwrap();
-    assert_eq!(fused.replayed, 1);
-    assert_eq!(late.filter(), ordered.filter());
-    assert_ne!(late.filter(), &start);
+    assert_late_reading_replays_bit_identically(rbpf(100, 6), SplitCv, SplitPosition);
 }
 
 /// `filter_sequence` runs the filter (update, record, predict; a missing reading skips the
