@@ -4,7 +4,7 @@ use estim_core::kernel::{self, CholeskyScratch};
 use estim_core::nalgebra::{DVector, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Error, Gaussian, Parameter, Quantity, Real, Stage, error::Result};
 
-use super::mixture::{self, RunningMoments, mixture_into};
+use super::mixture::{self, mixture_into};
 use crate::report::UpdateReport;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
 
@@ -314,27 +314,16 @@ where
     {
         let mut report = UpdateReport::zeros(z.shape_generic().0);
         let mut updated = self.components.clone();
-        let mut moments = RunningMoments::<T, M>::new(z.shape_generic().0);
         let mut weights = self.weights.clone();
         let mut log_likelihoods = self.weights.clone();
-        let mut applied = false;
-        for ((f, &w), l) in updated
-            .iter_mut()
-            .zip(self.weights.iter())
-            .zip(log_likelihoods.iter_mut())
-        {
-            if w == T::zero() {
-                *l = -(T::one() / T::zero());
-                continue;
-            }
-            f.update_into(model, z, &mut report)?;
-            *l = report.log_likelihood;
-            applied |= report.applied();
-            moments.add(w, &report.innovation, &report.innovation_covariance);
-        }
-        moments.finish();
-        let log_likelihood = mixture::bayes_in_logs(&mut weights, &mut log_likelihoods)?;
-        moments.into_report(log_likelihood, applied, &mut report)?;
+        let applied = mixture::update_weighted::<T, M>(
+            z.shape_generic().0,
+            &self.weights,
+            &mut weights,
+            &mut log_likelihoods,
+            &mut report,
+            |i, report| updated[i].update_into(model, z, report),
+        )?;
         if applied {
             self.components = updated;
             self.weights = weights;
