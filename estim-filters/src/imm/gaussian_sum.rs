@@ -38,7 +38,8 @@ fn vector<T: Real>(values: Vec<T>) -> DVector<T> {
 /// rule); with mixture noise the number of components grows as Lᵏ and merging is the
 /// approximation (measured in `tests/it/gaussian_sum.rs` against the enumeration).
 /// Every step is atomic: on an error every component and weight is as before. It implements
-/// the step traits and [`Rollback`] (a clone of every component and weight).
+/// the step traits and [`Rollback`] (a clone of every component and weight); with the `serde`
+/// feature it checkpoints (its components, weights and bound) and resumes bit for bit.
 ///
 /// ```
 /// use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Vector1, Vector2};
@@ -64,9 +65,9 @@ pub struct GaussianSum<T: Real, N: Dim, F>
 where
     DefaultAllocator: Alloc<N>,
 {
-    components: Vec<F>,
-    weights: DVector<T>,
-    max_components: usize,
+    pub(super) components: Vec<F>,
+    pub(super) weights: DVector<T>,
+    pub(super) max_components: usize,
     state: OVector<T, N>,
     covariance: OMatrix<T, N, N>,
 }
@@ -147,7 +148,7 @@ where
         self.max_components
     }
 
-    fn combine(&mut self) {
+    pub(super) fn combine(&mut self) {
         let mut spread = self.state.clone();
         let parts = (self.weights.iter().zip(&self.components))
             .map(|(&w, f)| (w, f.state(), f.covariance()));
