@@ -428,7 +428,8 @@ fn a_checkpointed_smoother_resumes_bit_for_bit() {
     }
     // Edits that would make the record inconsistent are refused on the way in.
     let json: serde_json::Value = serde_json::from_str(&saved).unwrap();
-    let edits: [(&str, fn(&mut serde_json::Value)); 4] = [
+    type Edit = (&'static str, fn(&mut serde_json::Value));
+    let edits: [Edit; 4] = [
         ("a pair removed", |v| {
             v["records"][0]["pairs"][1] = serde_json::Value::Null
         }),
