@@ -1,8 +1,9 @@
 //! Checkpoints (feature `serde`): every single-Gaussian filter of the family serialises what
 //! its steps carry and its settings, and resumes bit-identically (the particle filters and
-//! the IMM have checkpoints of their own; GPB2 has none yet). A [`GaussianFilter`] writes its estimate,
-//! propagator, state space and update settings; a [`SquareRootFilter`] its state and factor
-//! S (not P, so nothing is refactorised), propagator and gate; an [`Iekf`] and a
+//! the IMM, its smoother and the Gaussian sum have checkpoints of their own; GPB2 has none
+//! yet). A [`GaussianFilter`] writes its estimate, propagator, state space and update
+//! settings; a [`SquareRootFilter`] its state and factor S (not P, so nothing is
+//! refactorised), propagator and gate; an [`Iekf`] and a
 //! [`FadingMemoryRls`] their EKF's checkpoint and their own settings.
 //!
 //! What is written: the state x̂ and covariance P exactly as they are (every `f64` and `f32`

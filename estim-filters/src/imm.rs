@@ -102,7 +102,7 @@ pub use smoother::{ImmSmoother, PredictCrossModes, Prediction, SmoothedModes};
 use crate::report::UpdateReport;
 use crate::snapshot::copy_matrix;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
-use mixture::{RunningMoments, mixture_into};
+use mixture::mixture_into;
 
 /// The interacting multiple model estimator over the mode filters `F` (see the [module
 /// docs](self)).
@@ -548,29 +548,20 @@ where
         F: UpdateModes<T, N, M, H>,
         DefaultAllocator: Alloc<N, M>,
     {
-        let mut moments = RunningMoments::<T, M>::new(z.shape_generic().0);
-        let mut applied = false;
-        for j in 0..self.modes.count() {
-            if self.probabilities[j] == T::zero() {
-                // Not updated (see the module docs); ℓⱼ = −∞ stands for "no evidence": μⱼ
-                // stays 0 whatever it is, and a NaN it might give is never seen.
-                self.work.log_weights[j] = -(T::one() / T::zero());
-                continue;
-            }
-            self.modes.update_mode(j, model, z, report)?;
-            self.work.log_weights[j] = report.log_likelihood;
-            applied |= report.applied();
-            moments.add(
-                self.probabilities[j],
-                &report.innovation,
-                &report.innovation_covariance,
-            );
-        }
-        moments.finish();
-        self.work.predicted.copy_from(&self.probabilities);
-        let log_likelihood =
-            mixture::bayes_in_logs(&mut self.work.predicted, &mut self.work.log_weights)?;
-        moments.into_report(log_likelihood, applied, report)?;
+        let Self {
+            modes,
+            probabilities,
+            work,
+            ..
+        } = self;
+        let applied = mixture::update_weighted::<T, M>(
+            z.shape_generic().0,
+            probabilities,
+            &mut work.predicted,
+            &mut work.log_weights,
+            report,
+            |j, report| modes.update_mode(j, model, z, report),
+        )?;
         if applied {
             core::mem::swap(&mut self.probabilities, &mut self.work.predicted);
             self.combine();

@@ -4,7 +4,7 @@ use estim_core::kernel::{self, CholeskyScratch};
 use estim_core::nalgebra::{DVector, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Error, Gaussian, Parameter, Quantity, Real, Stage, error::Result};
 
-use super::mixture::{self, RunningMoments, mixture_into};
+use super::mixture::{self, mixture_into};
 use crate::report::UpdateReport;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
 
@@ -38,7 +38,8 @@ fn vector<T: Real>(values: Vec<T>) -> DVector<T> {
 /// rule); with mixture noise the number of components grows as Lᵏ and merging is the
 /// approximation (measured in `tests/it/gaussian_sum.rs` against the enumeration).
 /// Every step is atomic: on an error every component and weight is as before. It implements
-/// the step traits and [`Rollback`] (a clone of every component and weight).
+/// the step traits and [`Rollback`] (a clone of every component and weight); with the `serde`
+/// feature it checkpoints (its components, weights and bound) and resumes bit for bit.
 ///
 /// ```
 /// use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Vector1, Vector2};
@@ -64,9 +65,9 @@ pub struct GaussianSum<T: Real, N: Dim, F>
 where
     DefaultAllocator: Alloc<N>,
 {
-    components: Vec<F>,
-    weights: DVector<T>,
-    max_components: usize,
+    pub(super) components: Vec<F>,
+    pub(super) weights: DVector<T>,
+    pub(super) max_components: usize,
     state: OVector<T, N>,
     covariance: OMatrix<T, N, N>,
 }
@@ -147,7 +148,7 @@ where
         self.max_components
     }
 
-    fn combine(&mut self) {
+    pub(super) fn combine(&mut self) {
         let mut spread = self.state.clone();
         let parts = (self.weights.iter().zip(&self.components))
             .map(|(&w, f)| (w, f.state(), f.covariance()));
@@ -314,27 +315,16 @@ where
     {
         let mut report = UpdateReport::zeros(z.shape_generic().0);
         let mut updated = self.components.clone();
-        let mut moments = RunningMoments::<T, M>::new(z.shape_generic().0);
         let mut weights = self.weights.clone();
         let mut log_likelihoods = self.weights.clone();
-        let mut applied = false;
-        for ((f, &w), l) in updated
-            .iter_mut()
-            .zip(self.weights.iter())
-            .zip(log_likelihoods.iter_mut())
-        {
-            if w == T::zero() {
-                *l = -(T::one() / T::zero());
-                continue;
-            }
-            f.update_into(model, z, &mut report)?;
-            *l = report.log_likelihood;
-            applied |= report.applied();
-            moments.add(w, &report.innovation, &report.innovation_covariance);
-        }
-        moments.finish();
-        let log_likelihood = mixture::bayes_in_logs(&mut weights, &mut log_likelihoods)?;
-        moments.into_report(log_likelihood, applied, &mut report)?;
+        let applied = mixture::update_weighted::<T, M>(
+            z.shape_generic().0,
+            &self.weights,
+            &mut weights,
+            &mut log_likelihoods,
+            &mut report,
+            |i, report| updated[i].update_into(model, z, report),
+        )?;
         if applied {
             self.components = updated;
             self.weights = weights;

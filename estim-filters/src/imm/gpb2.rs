@@ -50,7 +50,7 @@ use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVe
 use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 
 use super::ModeModels;
-use super::mixture::{self, RunningMoments, mixture_into};
+use super::mixture::{self, mixture_into};
 use crate::report::UpdateReport;
 use crate::snapshot::copy_matrix;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
@@ -256,26 +256,20 @@ where
         DefaultAllocator: Alloc<N, M>,
     {
         let mut updated = self.components.clone();
-        let mut moments = RunningMoments::<T, M>::new(z.shape_generic().0);
         let k = updated.len();
-        let mut weights = DVector::from_iterator(k, updated.iter().map(|c| c.weight));
-        let mut log_likelihoods = weights.clone();
-        let mut applied = false;
-        for (c, l) in updated.iter_mut().zip(log_likelihoods.iter_mut()) {
-            if c.weight == T::zero() {
-                // No weight left (an underflow at an earlier update): not updated, as in
-                // the IMM, so it cannot fail the step; its weight stays 0.
-                *l = -(T::one() / T::zero());
-                continue;
-            }
-            c.filter.update_into(model, z, report)?;
-            *l = report.log_likelihood;
-            applied |= report.applied();
-            moments.add(c.weight, &report.innovation, &report.innovation_covariance);
-        }
-        moments.finish();
-        let log_likelihood = mixture::bayes_in_logs(&mut weights, &mut log_likelihoods)?;
-        moments.into_report(log_likelihood, applied, report)?;
+        let prior = DVector::from_iterator(k, updated.iter().map(|c| c.weight));
+        let mut weights = prior.clone();
+        let mut log_likelihoods = prior.clone();
+        // A component with no weight left (an underflow at an earlier update) is not
+        // updated, as in the IMM, so it cannot fail the step; its weight stays 0.
+        let applied = mixture::update_weighted::<T, M>(
+            z.shape_generic().0,
+            &prior,
+            &mut weights,
+            &mut log_likelihoods,
+            report,
+            |i, report| updated[i].filter.update_into(model, z, report),
+        )?;
         if applied {
             for (c, w) in updated.iter_mut().zip(weights.iter()) {
                 c.weight = *w;

@@ -137,6 +137,44 @@ pub(crate) fn bayes_in_logs<T: Real>(
     Ok(max + sum.ln())
 }
 
+/// The update of a set of weighted hypotheses (the IMM's modes, GPB2's and the Gaussian
+/// sum's components), shared by the three: `update(i, report)` updates hypothesis i with the
+/// measurement (skipped where `prior[i] = 0`: its ℓᵢ is −∞, so its weight stays 0 and a NaN
+/// it might give is never seen), then the posterior weights by [`bayes_in_logs`] into
+/// `posterior` and the mixture's report (see [`RunningMoments::into_report`]) into `report`.
+/// `rows` is the measurement's size; `log_likelihoods` is a buffer of the prior's length. Returns whether any hypothesis
+/// applied the update; on an error the caller puts the hypotheses back (`posterior` is then
+/// unspecified).
+pub(crate) fn update_weighted<T: Real, M: Dim>(
+    rows: M,
+    prior: &DVector<T>,
+    posterior: &mut DVector<T>,
+    log_likelihoods: &mut DVector<T>,
+    report: &mut UpdateReport<T, M>,
+    mut update: impl FnMut(usize, &mut UpdateReport<T, M>) -> Result<()>,
+) -> Result<bool>
+where
+    DefaultAllocator: Alloc<M>,
+{
+    let mut moments = RunningMoments::<T, M>::new(rows);
+    let mut applied = false;
+    for (i, &w) in prior.iter().enumerate() {
+        if w == T::zero() {
+            log_likelihoods[i] = -(T::one() / T::zero());
+            continue;
+        }
+        update(i, report)?;
+        log_likelihoods[i] = report.log_likelihood;
+        applied |= report.applied();
+        moments.add(w, &report.innovation, &report.innovation_covariance);
+    }
+    moments.finish();
+    posterior.copy_from(prior);
+    let log_likelihood = bayes_in_logs(posterior, log_likelihoods)?;
+    moments.into_report(log_likelihood, applied, report)?;
+    Ok(applied)
+}
+
 /// The moments of the Gaussian mixture Σᵢ wᵢ N(xᵢ, Pᵢ) (weights summing to 1), into `mean`
 /// and `covariance`:
 ///

@@ -56,6 +56,9 @@
 //! it for most of the run). Both are exact for one mode (the RTS smoother, bit for bit) and
 //! for Π = I (the static bank: μ is the final one and each mode its own RTS smoother).
 //!
+//! With the `serde` feature the smoother checkpoints its record (and the IMM its own state),
+//! so a long forward pass can stop and resume: the resumed pair smooths to the same bits.
+//!
 //! The states are combined with + and − (the IMM's mixing is), so the modes' state spaces
 //! are taken as Euclidean. A mode with μˢᵢ(k) = 0 keeps its filtered estimate (its weight in
 //! every mixture is 0).
@@ -242,16 +245,16 @@ vec_cross_modes!([P]; Vec<P>; [P; K], const K);
 /// What one recorded prediction leaves for the backward pass: the filtered μ(k), the mode
 /// estimates, Π, and the m² pair predictions (row-major, `None` where πᵢⱼ μᵢ = 0).
 #[derive(Clone, Debug)]
-struct Record<T: Real, N: Dim>
+pub(super) struct Record<T: Real, N: Dim>
 where
     DefaultAllocator: Alloc<N>,
 {
-    transition: DMatrix<T>,
-    probabilities: DVector<T>,
-    modes: Vec<Gaussian<T, N>>,
-    pairs: Vec<Option<Prediction<T, N>>>,
+    pub(super) transition: DMatrix<T>,
+    pub(super) probabilities: DVector<T>,
+    pub(super) modes: Vec<Gaussian<T, N>>,
+    pub(super) pairs: Vec<Option<Prediction<T, N>>>,
     /// The IMM's own prediction of each mode (from its mixed start).
-    predicted: Vec<Gaussian<T, N>>,
+    pub(super) predicted: Vec<Gaussian<T, N>>,
 }
 
 /// The smoothed mixture at one time: the combined Gaussian, the mode probabilities μˢ and
@@ -283,13 +286,14 @@ pub struct ImmSmoother<T: Real, N: Dim>
 where
     DefaultAllocator: Alloc<N>,
 {
-    records: Vec<Record<T, N>>,
-    method: Method,
+    pub(super) records: Vec<Record<T, N>>,
+    pub(super) method: Method,
 }
 
 /// How the backward pass weighs and conditions the pairs of modes (see the [module
 /// docs](self)).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum Method {
     /// Each pair (i, j) weighted by the future data's likelihood Eᵢⱼ, and smoothed towards
     /// xₖ₊₁ given the pair and all data (the default).

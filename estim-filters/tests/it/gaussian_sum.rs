@@ -202,3 +202,42 @@ fn bad_input_is_a_typed_error_and_a_failed_step_changes_nothing() {
     let b = Update::update(&mut gsf, &position(0.5), &Vector1::new(2.0)).unwrap();
     assert_eq!(a, b);
 }
+
+/// A Gaussian sum checkpointed after mixture-noise predictions and merges, resumed from
+/// JSON, continues to the same bits as the original; a checkpoint whose weights no longer
+/// sum to 1, or that holds more components than its bound, is refused.
+#[cfg(feature = "serde")]
+#[test]
+fn a_checkpoint_resumes_bit_for_bit() {
+    type Sum =
+        GaussianSum<f64, estim_core::nalgebra::U2, KalmanFilter<f64, estim_core::nalgebra::U2>>;
+    let [quiet, loud] = models();
+    let noise = [(0.8, quiet), (0.2, loud)];
+    let sensor = position(0.5);
+    let zs = manoeuvre(41, 12);
+    let mut gsf: Sum = GaussianSum::new(vec![(1.0, KalmanFilter::new(prior()))], 3).unwrap();
+    let step = |gsf: &mut Sum, z: f64| {
+        gsf.predict_mixture(&noise, &u0(), DT).unwrap();
+        gsf.update(&sensor, &Vector1::new(z)).unwrap();
+    };
+    for z in &zs[..6] {
+        step(&mut gsf, *z);
+    }
+    let saved = serde_json::to_string(&gsf).unwrap();
+    let mut resumed: Sum = serde_json::from_str(&saved).unwrap();
+    assert_eq!(resumed.components().len(), 3);
+    for z in &zs[6..] {
+        step(&mut gsf, *z);
+        step(&mut resumed, *z);
+        assert_bitwise_eq(resumed.state(), gsf.state(), "resumed mean");
+        assert_bitwise_eq(resumed.covariance(), gsf.covariance(), "resumed covariance");
+        assert_bitwise_eq(resumed.weights(), gsf.weights(), "resumed weights");
+    }
+    let json: serde_json::Value = serde_json::from_str(&saved).unwrap();
+    let mut bad_weights = json.clone();
+    bad_weights["weights"][0][0] = 0.99.into();
+    assert!(serde_json::from_value::<Sum>(bad_weights).is_err());
+    let mut over_bound = json;
+    over_bound["max_components"] = 2.into();
+    assert!(serde_json::from_value::<Sum>(over_bound).is_err());
+}

@@ -552,21 +552,32 @@ fn bad_transition_matrices_and_probabilities_are_typed_errors() {
             ..
         })
     ));
-    // Modes of different runtime sizes (and no map between them).
+    // Modes of different runtime sizes (and no map between them): the IMM, GPB2 and the
+    // Gaussian sum all refuse them.
     let small = Gaussian::new(DVector::zeros(2), DMatrix::identity(2, 2)).unwrap();
     let large = Gaussian::new(DVector::zeros(3), DMatrix::identity(3, 3)).unwrap();
-    assert!(matches!(
-        Imm::new(
-            vec![Ekf::new(small), Ekf::new(large)],
-            two_by_two(0.1, 0.1),
-            half.clone()
-        ),
-        Err(Error::DimensionMismatch {
-            quantity: Quantity::Mean,
-            expected_rows: 2,
-            found_rows: 3,
-            ..
-        })
+    let mixed = vec![Ekf::new(small), Ekf::new(large)];
+    let sizes = |result: Result<(), Error>| {
+        matches!(
+            result,
+            Err(Error::DimensionMismatch {
+                quantity: Quantity::Mean,
+                expected_rows: 2,
+                found_rows: 3,
+                ..
+            })
+        )
+    };
+    let pi = two_by_two(0.1, 0.1);
+    assert!(sizes(
+        Imm::new(mixed.clone(), pi.clone(), half.clone()).map(drop)
+    ));
+    assert!(sizes(
+        estim_filters::imm::Gpb2::new(mixed.clone(), pi, half.clone()).map(drop)
+    ));
+    let weighted = mixed.into_iter().map(|f| (0.5, f)).collect();
+    assert!(sizes(
+        estim_filters::imm::GaussianSum::new(weighted, 2).map(drop)
     ));
     let no_modes: Vec<Ekf<f64, U2>> = Vec::new();
     assert!(Imm::new(no_modes, DMatrix::zeros(0, 0), DVector::zeros(0)).is_err());

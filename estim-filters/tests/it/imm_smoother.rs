@@ -370,3 +370,82 @@ fn a_failed_prediction_records_nothing_and_a_mismatched_imm_is_an_error() {
         }
     ));
 }
+
+/// A smoother checkpointed mid-run beside its IMM, resumed from JSON, records the rest of the
+/// run and smooths it to the same bits as the original; a checkpoint edited into an
+/// inconsistent record (a pair removed, a mode estimate dropped, a non-finite entry) is the
+/// deserialiser's error, not a panic at `smooth`.
+#[cfg(feature = "serde")]
+#[test]
+fn a_checkpointed_smoother_resumes_bit_for_bit() {
+    type Modes = (
+        KalmanFilter<f64, estim_core::nalgebra::U2>,
+        Ukf<f64, estim_core::nalgebra::U2>,
+    );
+    type Smoother = ImmSmoother<f64, estim_core::nalgebra::U2>;
+    let pi = two_by_two(0.1, 0.2);
+    let [quiet, loud] = models();
+    let models = (quiet, loud);
+    let sensor = position(0.5);
+    let zs = manoeuvre(17, 12);
+    let mut imm = Imm::new(
+        (KalmanFilter::new(prior()), Ukf::new(prior())),
+        pi,
+        DVector::from_element(2, 0.5),
+    )
+    .unwrap();
+    let mut smoother = ImmSmoother::new();
+    let step = |imm: &mut Imm<f64, _, Modes>, smoother: &mut Smoother, z: f64| {
+        smoother.predict(imm, &models, &u0(), DT).unwrap();
+        imm.update_modes(&sensor, &Vector1::new(z)).unwrap();
+    };
+    for z in &zs[..6] {
+        step(&mut imm, &mut smoother, *z);
+    }
+    let saved = serde_json::to_string(&smoother).unwrap();
+    let mut resumed: Smoother = serde_json::from_str(&saved).unwrap();
+    let mut resumed_imm: Imm<f64, _, Modes> =
+        serde_json::from_str(&serde_json::to_string(&imm).unwrap()).unwrap();
+    assert_eq!(resumed.len(), 6);
+    for z in &zs[6..] {
+        step(&mut imm, &mut smoother, *z);
+        step(&mut resumed_imm, &mut resumed, *z);
+    }
+    let (a, b) = (
+        smoother.smooth(&imm).unwrap(),
+        resumed.smooth(&resumed_imm).unwrap(),
+    );
+    assert_eq!(a.len(), zs.len() + 1);
+    for (a, b) in a.iter().zip(&b) {
+        assert_bitwise_eq(a.estimate.mean(), b.estimate.mean(), "smoothed mean");
+        assert_bitwise_eq(
+            a.estimate.covariance(),
+            b.estimate.covariance(),
+            "covariance",
+        );
+        assert_bitwise_eq(&a.probabilities, &b.probabilities, "smoothed μ");
+        assert_eq!(a, b);
+    }
+    // Edits that would make the record inconsistent are refused on the way in.
+    let json: serde_json::Value = serde_json::from_str(&saved).unwrap();
+    type Edit = (&'static str, fn(&mut serde_json::Value));
+    let edits: [Edit; 4] = [
+        ("a pair removed", |v| {
+            v["records"][0]["pairs"][1] = serde_json::Value::Null
+        }),
+        ("a mode estimate dropped", |v| {
+            v["records"][2]["modes"].as_array_mut().unwrap().pop();
+        }),
+        ("μ not summing to 1", |v| {
+            v["records"][1]["probabilities"][0][0] = 0.9.into()
+        }),
+        ("another state size", |v| {
+            v["records"][3]["predicted"][0]["mean"] = serde_json::json!([1.0, 2.0, 3.0]);
+        }),
+    ];
+    for (what, edit) in edits {
+        let mut v = json.clone();
+        edit(&mut v);
+        assert!(serde_json::from_value::<Smoother>(v).is_err(), "{what}");
+    }
+}

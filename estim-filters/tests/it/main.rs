@@ -35,6 +35,7 @@ mod gating;
 mod gaussian_sum;
 mod iekf;
 mod imm;
+mod imm_consistency;
 mod imm_smoother;
 mod multirate;
 mod nees;
