@@ -655,6 +655,23 @@ fn load(example: &str, settings: &str, files: &[PathBuf]) -> Result<Vec<ShardFil
     Ok(loaded.into_iter().map(|(_, f)| f).collect())
 }
 
+/// For an example that cannot be sharded: refuses `--shard`, `--out`, `--merge` and `--stats`
+/// on the command line (with `why`), rather than ignoring them and running whole in every task
+/// of a job array.
+pub fn refuse_flags(example: &str, why: &str) -> Result<(), ShardError> {
+    refuse(example, why, parse(std::env::args().skip(1))?)
+}
+
+/// [`refuse_flags`] of parsed flags.
+pub fn refuse(example: &str, why: &str, args: Args) -> Result<(), ShardError> {
+    if args.mode == Mode::Whole && args.stats.is_none() {
+        return Ok(());
+    }
+    Err(ShardError::new(format!(
+        "{example} does not take --shard/--merge/--stats: {why}"
+    )))
+}
+
 /// The settings string of an example whose only experiment-changing flag is `--quick`.
 pub fn settings(quick: bool) -> &'static str {
     if quick { "--quick" } else { "full" }

@@ -240,3 +240,33 @@ fn a_hand_looped_example_merges_to_its_whole_run_bit_for_bit() {
         let _ = std::fs::remove_file(f);
     }
 }
+
+#[test]
+fn an_example_without_shards_refuses_the_flags_instead_of_running_whole() {
+    use crate::sharding::refuse;
+    assert!(
+        refuse(
+            "boje_rate",
+            "one stream",
+            parse(["--quick", "--json"]).unwrap()
+        )
+        .is_ok()
+    );
+    for args in [
+        &["--shard", "0/2", "--out", "f"][..],
+        &["--merge", "a", "b"],
+        &["--stats", "s"],
+    ] {
+        let message = refuse(
+            "boje_rate",
+            "one stream",
+            parse(args.iter().copied()).unwrap(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            message.contains("boje_rate does not take --shard/--merge/--stats: one stream"),
+            "{args:?}: {message}"
+        );
+    }
+}
