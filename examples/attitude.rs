@@ -30,7 +30,11 @@
 //! ½ θ² g ≈ 0.05 m/s² is as large as its noise, which no linearisation (nor the α = 10⁻³
 //! UKF) sees.
 //!
-//! `cargo run --release --features autodiff --example attitude [-- --json] [-- --quick]`
+//! `--shard I/N --out FILE` runs shard I of N of each filter's runs and writes their records to
+//! FILE; `--merge FILE...` merges the N files and prints what one process prints, bit for bit;
+//! `--stats FILE` writes the sums over runs exactly (`estim_reproductions::sharding`).
+//!
+//! `cargo run --release --features autodiff --example attitude [-- --json] [-- --quick] [-- --shard I/N --out FILE | --merge FILE...] [-- --stats FILE]`
 
 use estim::core::autodiff::{
     AdScalar, AutoDiff, AutoDiffMeasurement, AutoDiffProcess, rotation_exp, rotation_matrix,
@@ -42,6 +46,8 @@ use estim::prelude::*;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
+
+use estim_reproductions::sharding::{self, Session};
 
 // The root tests include this file as a module and bring their own `crate::common`.
 #[cfg(not(test))]
@@ -148,13 +154,14 @@ fn true_rate(t: f64) -> Vector3<f64> {
     Vector3::new(0.3 * (0.5 * t).sin(), 0.2 * (0.3 * t).cos(), 0.5)
 }
 
-/// One run of `steps` gyro steps: pushes the NEES at each update.
+/// One run of `steps` gyro steps: pushes the NEES and the squared attitude error at each
+/// update.
 fn run_one<F>(
     mut filter: F,
     steps: usize,
     rng: &mut StdRng,
     nees_out: &mut Vec<f64>,
-    errors: &mut f64,
+    errors: &mut Vec<f64>,
 ) -> Result<f64, Box<dyn std::error::Error>>
 where
     F: Predict<f64, U3, AutoDiff<GyroError>> + Update<f64, U3, U6, AutoDiff<GravityAndField>>,
@@ -184,7 +191,7 @@ where
             let p = *filter.covariance();
             filter.reset(Gaussian::new(x, p)?);
             let e = so3_log(&(reference.quaternion().inverse() * truth));
-            *errors += e.norm_squared();
+            errors.push(e.norm_squared());
             nees_out.push(nees(&e, filter.covariance())?);
         }
         worst_norm = worst_norm.max((reference.quaternion().as_ref().norm() - 1.0).abs());
@@ -199,50 +206,95 @@ pub fn monte_carlo(
     seconds: f64,
     seed: u64,
 ) -> Result<Summary, Box<dyn std::error::Error>> {
+    Ok(sharding::whole(monte_carlo_in(
+        filter,
+        runs,
+        seconds,
+        seed,
+        &Session::whole(),
+    )?)?)
+}
+
+/// Run `run` of the Monte Carlo of `filter` (`steps` gyro steps): its worst |‖q_ref‖ − 1|,
+/// then the NEES at each update, then the squared attitude error at each update.
+fn run_record(
+    filter: Filter,
+    run: usize,
+    steps: usize,
+    seed: u64,
+) -> Result<Vec<f64>, Box<dyn std::error::Error>> {
+    let updates = steps / SENSOR_EVERY;
+    let mut rng = StdRng::seed_from_u64(seed.wrapping_add(run as u64));
+    let prior = Gaussian::new(
+        Vector3::zeros(),
+        Matrix3::identity() * (PRIOR_SIGMA * PRIOR_SIGMA),
+    )?;
+    let space = AttitudeError::at(0);
+    let mut record = vec![0.0];
+    record.reserve(2 * updates);
+    let mut errors = Vec::with_capacity(updates);
+    record[0] = match filter {
+        Filter::Ekf => run_one(
+            Ekf::new(prior).with_state_space(space),
+            steps,
+            &mut rng,
+            &mut record,
+            &mut errors,
+        )?,
+        Filter::Ukf => run_one(
+            Ukf::new(prior).with_state_space(space),
+            steps,
+            &mut rng,
+            &mut record,
+            &mut errors,
+        )?,
+    };
+    record.extend(errors);
+    Ok(record)
+}
+
+/// [`monte_carlo`] in a sharding session (`--shard`/`--merge`): the runs' records folded in
+/// run order, `None` in a shard.
+pub fn monte_carlo_in(
+    filter: Filter,
+    runs: usize,
+    seconds: f64,
+    seed: u64,
+    session: &Session,
+) -> Result<Option<Summary>, Box<dyn std::error::Error>> {
     let steps = (seconds / DT).round() as usize;
     let updates = steps / SENSOR_EVERY;
+    let key = format!("{filter:?}");
+    let Some(records) = session.records(&key, runs, |run| run_record(filter, run, steps, seed))?
+    else {
+        return Ok(None);
+    };
     let mut sums = vec![0.0; updates];
     let (mut errors, mut worst_norm) = (0.0, 0.0f64);
-    for run in 0..runs {
-        let mut rng = StdRng::seed_from_u64(seed.wrapping_add(run as u64));
-        let prior = Gaussian::new(
-            Vector3::zeros(),
-            Matrix3::identity() * (PRIOR_SIGMA * PRIOR_SIGMA),
-        )?;
-        let space = AttitudeError::at(0);
-        let mut values = Vec::with_capacity(updates);
-        let w = match filter {
-            Filter::Ekf => run_one(
-                Ekf::new(prior).with_state_space(space),
-                steps,
-                &mut rng,
-                &mut values,
-                &mut errors,
-            )?,
-            Filter::Ukf => run_one(
-                Ukf::new(prior).with_state_space(space),
-                steps,
-                &mut rng,
-                &mut values,
-                &mut errors,
-            )?,
-        };
-        worst_norm = worst_norm.max(w);
-        for (s, v) in sums.iter_mut().zip(&values) {
+    for record in &records {
+        worst_norm = worst_norm.max(record[0]);
+        let (values, squared) = record[1..].split_at(updates);
+        for (s, v) in sums.iter_mut().zip(values) {
             *s += v;
         }
+        for e in squared {
+            errors += e;
+        }
     }
+    let mut flat = vec![errors, worst_norm];
+    flat.extend_from_slice(&sums);
+    session.summary(&key, &flat);
     let band = ChiSquareBand::two_sided(3, runs, 0.99)?;
     let average_nees: Vec<f64> = sums.iter().map(|s| s / runs as f64).collect();
     let outside = average_nees.iter().filter(|a| !band.contains(**a)).count();
-    Ok(Summary {
+    Ok(Some(Summary {
         outside_band: outside as f64 / updates as f64,
         overall_nees: average_nees.iter().sum::<f64>() / updates as f64,
         rms_error: (errors / (runs * updates) as f64).sqrt(),
         average_nees,
         band,
         worst_norm_error: worst_norm,
-    })
+    }))
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -251,10 +303,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     } else {
         (100, 20.0)
     };
+    let session = Session::from_args(
+        "attitude",
+        sharding::settings(crate::common::quick_requested()),
+    )?;
+    let filters = [(Filter::Ekf, "EKF (AD Jacobians)"), (Filter::Ukf, "UKF")];
+    let mut results = Vec::new();
+    for (filter, label) in filters {
+        if let Some(s) = monte_carlo_in(filter, runs, seconds, 0xa7, &session)? {
+            results.push((filter, label, s));
+        }
+    }
+    session.finish()?;
+    if results.len() < filters.len() {
+        return Ok(());
+    }
     let mut json = serde_json::Map::new();
     let mut summaries = Vec::new();
-    for (filter, label) in [(Filter::Ekf, "EKF (AD Jacobians)"), (Filter::Ukf, "UKF")] {
-        let s = monte_carlo(filter, runs, seconds, 0xa7)?;
+    for (filter, label, s) in results {
         println!(
             "{label:20} average NEES {:.3} (χ²₃: 3), updates outside the 99% band {:4.1}%, RMS error {:.4} rad, worst |‖q‖ − 1| {:.1e}",
             s.overall_nees,

@@ -11,8 +11,13 @@
 
 use estim_reproductions::boje_circle;
 use estim_reproductions::common;
+use estim_reproductions::sharding;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    sharding::refuse_flags(
+        "boje_circle",
+        "not ported yet (its per-step sums over runs would need shard files of ~200 MB to merge bit for bit)",
+    )?;
     let output = boje_circle::run(common::quick_requested())?;
     if common::json_requested() {
         println!("{}", output.json);

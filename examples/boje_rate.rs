@@ -7,8 +7,13 @@
 
 use estim_reproductions::boje_rate;
 use estim_reproductions::common;
+use estim_reproductions::sharding;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    sharding::refuse_flags(
+        "boje_rate",
+        "its runs share one random stream and it sums over every (run, step), so a shard cannot give the whole run's bits",
+    )?;
     let output = boje_rate::run(common::quick_requested())?;
     if common::json_requested() {
         println!("{}", output.json);

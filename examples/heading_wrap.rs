@@ -21,7 +21,11 @@
 //! (200 runs, 1000 steps) gives the average NEES at each step against its 99 % χ² band, and
 //! the worst heading error; a figure shows both filters' average NEES.
 //!
-//! `cargo run --release --example heading_wrap [-- --json] [-- --quick]`
+//! `--shard I/N --out FILE` runs shard I of N of each filter's runs and writes their records to
+//! FILE; `--merge FILE...` merges the N files and prints what one process prints, bit for bit;
+//! `--stats FILE` writes the sums over runs exactly (`estim_reproductions::sharding`).
+//!
+//! `cargo run --release --example heading_wrap [-- --json] [-- --quick] [-- --shard I/N --out FILE | --merge FILE...] [-- --stats FILE]`
 
 use estim::core::WrappedAngles;
 use estim::filters::consistency::{ChiSquareBand, nees};
@@ -30,6 +34,8 @@ use estim::prelude::*;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
+
+use estim_reproductions::sharding::{self, Session};
 
 // The root tests include this file as a module and bring their own `crate::common`.
 #[cfg(not(test))]
@@ -213,63 +219,103 @@ pub fn monte_carlo(
     steps: usize,
     seed: u64,
 ) -> Result<Summary, Box<dyn std::error::Error>> {
+    Ok(sharding::whole(monte_carlo_in(
+        variant,
+        runs,
+        steps,
+        seed,
+        &Session::whole(),
+    )?)?)
+}
+
+/// Run `run` of the Monte Carlo of `variant`: its worst |heading error|, its headings out of
+/// range, then its NEES at each step.
+fn run_record(
+    variant: Variant,
+    run: usize,
+    steps: usize,
+    seed: u64,
+) -> Result<Vec<f64>, Box<dyn std::error::Error>> {
+    let prior_sigma = Vector3::new(1.0, 1.0, 0.1);
+    let mut rng = StdRng::seed_from_u64(seed.wrapping_add(run as u64));
+    // Truth from the prior; the filter starts at the prior mean (the circle's start,
+    // heading 2.5 rad, half a second before the first crossing).
+    let mean = Vector3::new(0.0, 0.0, 2.5);
+    let mut truth = mean
+        + prior_sigma.component_mul(&Vector3::new(
+            normal(&mut rng),
+            normal(&mut rng),
+            normal(&mut rng),
+        ));
+    truth[2] = wrap_angle(truth[2]);
+    let prior = Gaussian::new(mean, Matrix3::from_diagonal(&prior_sigma.map(|s| s * s)))?;
+    let mut record = vec![0.0; 2];
+    record.reserve(steps);
+    let cubature = Unscented::cubature();
+    let (w, o) = match variant {
+        Variant::PlainUkf => run_one(
+            Ukf::with_propagator(prior, cubature),
+            truth,
+            steps,
+            &mut rng,
+            &mut record,
+        ),
+        Variant::WrappedUkf => run_one(
+            Ukf::with_propagator(prior, cubature).with_state_space(WrappedAngles::new([2])),
+            truth,
+            steps,
+            &mut rng,
+            &mut record,
+        ),
+        Variant::WrappedEkf => run_one(
+            Ekf::new(prior).with_state_space(WrappedAngles::new([2])),
+            truth,
+            steps,
+            &mut rng,
+            &mut record,
+        ),
+    };
+    record[0] = w;
+    record[1] = o as f64;
+    Ok(record)
+}
+
+/// [`monte_carlo`] in a sharding session (`--shard`/`--merge`): the runs' records folded in
+/// run order, `None` in a shard.
+pub fn monte_carlo_in(
+    variant: Variant,
+    runs: usize,
+    steps: usize,
+    seed: u64,
+    session: &Session,
+) -> Result<Option<Summary>, Box<dyn std::error::Error>> {
+    let key = format!("{variant:?}");
+    let Some(records) = session.records(&key, runs, |run| run_record(variant, run, steps, seed))?
+    else {
+        return Ok(None);
+    };
     let mut sums = vec![0.0; steps];
     let (mut worst, mut out_of_range) = (0.0f64, 0);
-    let prior_sigma = Vector3::new(1.0, 1.0, 0.1);
-    for run in 0..runs {
-        let mut rng = StdRng::seed_from_u64(seed.wrapping_add(run as u64));
-        // Truth from the prior; the filter starts at the prior mean (the circle's start,
-        // heading 2.5 rad, half a second before the first crossing).
-        let mean = Vector3::new(0.0, 0.0, 2.5);
-        let mut truth = mean
-            + prior_sigma.component_mul(&Vector3::new(
-                normal(&mut rng),
-                normal(&mut rng),
-                normal(&mut rng),
-            ));
-        truth[2] = wrap_angle(truth[2]);
-        let prior = Gaussian::new(mean, Matrix3::from_diagonal(&prior_sigma.map(|s| s * s)))?;
-        let mut nees_values = Vec::with_capacity(steps);
-        let cubature = Unscented::cubature();
-        let (w, o) = match variant {
-            Variant::PlainUkf => run_one(
-                Ukf::with_propagator(prior, cubature),
-                truth,
-                steps,
-                &mut rng,
-                &mut nees_values,
-            ),
-            Variant::WrappedUkf => run_one(
-                Ukf::with_propagator(prior, cubature).with_state_space(WrappedAngles::new([2])),
-                truth,
-                steps,
-                &mut rng,
-                &mut nees_values,
-            ),
-            Variant::WrappedEkf => run_one(
-                Ekf::new(prior).with_state_space(WrappedAngles::new([2])),
-                truth,
-                steps,
-                &mut rng,
-                &mut nees_values,
-            ),
-        };
-        worst = worst.max(w);
-        out_of_range += o;
-        for (s, v) in sums.iter_mut().zip(&nees_values) {
+    for record in &records {
+        worst = worst.max(record[0]);
+        out_of_range += record[1] as usize;
+        for (s, v) in sums.iter_mut().zip(&record[2..]) {
             *s += v;
         }
     }
+    let mut flat = vec![worst, out_of_range as f64];
+    flat.extend_from_slice(&sums);
+    session.summary(&key, &flat);
     let band = ChiSquareBand::two_sided(3, runs, 0.99)?;
     let average_nees: Vec<f64> = sums.iter().map(|s| s / runs as f64).collect();
     let outside = average_nees.iter().filter(|a| !band.contains(**a)).count();
-    Ok(Summary {
+    Ok(Some(Summary {
         outside_band: outside as f64 / steps as f64,
         average_nees,
         band,
         worst_heading_error: worst,
         out_of_range,
-    })
+    }))
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -278,14 +324,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     } else {
         (200, 1000)
     };
-    let mut json = serde_json::Map::new();
-    let mut summaries = Vec::new();
-    for (variant, label) in [
+    let session = Session::from_args(
+        "heading_wrap",
+        sharding::settings(crate::common::quick_requested()),
+    )?;
+    let variants = [
         (Variant::PlainUkf, "UKF, plain vector state"),
         (Variant::WrappedUkf, "UKF, wrapped heading (⊞)"),
         (Variant::WrappedEkf, "EKF, wrapped heading (⊞)"),
-    ] {
-        let s = monte_carlo(variant, runs, steps, 0x4ead)?;
+    ];
+    let mut results = Vec::new();
+    for (variant, label) in variants {
+        if let Some(s) = monte_carlo_in(variant, runs, steps, 0x4ead, &session)? {
+            results.push((variant, label, s));
+        }
+    }
+    session.finish()?;
+    if results.len() < variants.len() {
+        return Ok(());
+    }
+    let mut json = serde_json::Map::new();
+    let mut summaries = Vec::new();
+    for (variant, label, s) in results {
         println!(
             "{label:28} steps outside the 99% NEES band: {:5.1}%   worst |heading error| {:.3} rad   headings out of (−π, π]: {}",
             100.0 * s.outside_band,

@@ -13,8 +13,13 @@
 
 use estim_reproductions::common;
 use estim_reproductions::lv2_fusion;
+use estim_reproductions::sharding;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    sharding::refuse_flags(
+        "lv2_fusion",
+        "its readings share one random stream and it keeps every reading's chi-square, so a shard cannot give the whole run's bits",
+    )?;
     let output = lv2_fusion::run(common::quick_requested())?;
     if common::json_requested() {
         println!("{}", output.json);

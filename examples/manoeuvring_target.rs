@@ -56,7 +56,11 @@
 //! bound, every calibration bin within its binomial bound, and each single-mode filter
 //! outside).
 //!
-//! `cargo run --release --example manoeuvring_target [-- --json] [-- --quick]`
+//! `--shard I/N --out FILE` runs shard I of N of its runs and writes their records to FILE;
+//! `--merge FILE...` merges the N files and prints what one process prints, bit for bit;
+//! `--stats FILE` writes the sums over runs exactly (`estim_reproductions::sharding`).
+//!
+//! `cargo run --release --example manoeuvring_target [-- --json] [-- --quick] [-- --shard I/N --out FILE | --merge FILE...] [-- --stats FILE]`
 
 use estim::filters::consistency::{ChiSquareBand, nees};
 use estim::filters::imm::{Imm, ImmSmoother};
@@ -65,6 +69,8 @@ use estim::prelude::*;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
+
+use estim_reproductions::sharding::{self, Session};
 
 // The root tests include this file as a module and bring their own `crate::common`.
 #[cfg(not(test))]
@@ -230,18 +236,29 @@ impl Track {
         }
     }
 
-    fn add(
-        &mut self,
+    /// Writes filter `filter`'s squared position error and NEES at time `k` into a run's
+    /// record (`run_record`).
+    fn record(
+        record: &mut [f64],
+        filter: usize,
         k: usize,
         estimate: &Vector5<f64>,
         covariance: &Matrix5<f64>,
         truth: &Vector5<f64>,
     ) {
         let e = estimate - truth;
-        self.squared_error[k] += e[0] * e[0] + e[1] * e[1];
+        record[2 * filter * STEPS + k] = e[0] * e[0] + e[1] * e[1];
         let e4 = Vector4::new(e[0], e[1], e[2], e[3]);
         let p4 = covariance.fixed_view::<4, 4>(0, 0).into_owned();
-        self.nees[k] += nees(&e4, &p4).unwrap_or(f64::INFINITY);
+        record[(2 * filter + 1) * STEPS + k] = nees(&e4, &p4).unwrap_or(f64::INFINITY);
+    }
+
+    /// Adds one run's squared errors and NEES (its record's part for this filter).
+    fn add(&mut self, part: &[f64]) {
+        for k in 0..STEPS {
+            self.squared_error[k] += part[k];
+            self.nees[k] += part[STEPS + k];
+        }
     }
 
     /// The RMSE of the position at each time.
@@ -323,6 +340,20 @@ fn simulate(rng: &mut StdRng, prior: &Gaussian<f64, U5>) -> (Vec<Vector5<f64>>, 
 
 /// The Monte Carlo: `runs` seeded runs of every filter on the same data.
 pub fn monte_carlo(runs: usize, seed: u64) -> Result<Summary, Box<dyn std::error::Error>> {
+    Ok(sharding::whole(monte_carlo_in(
+        runs,
+        seed,
+        &Session::whole(),
+    )?)?)
+}
+
+/// The length of one run's record (`run_record`): per filter the squared position error and
+/// the NEES at each time, the IMM's and the smoother's CT probability at each time, the
+/// smoother's Kim fallbacks and clippings.
+const RECORD: usize = 10 * STEPS + 2;
+
+/// Run `run` of the Monte Carlo (seed `seed + run`): its record (layout at [`RECORD`]).
+fn run_record(run: usize, seed: u64) -> Result<Vec<f64>, Box<dyn std::error::Error>> {
     let sensor = radar();
     let single_cv = constant_velocity(0.25, 1e-6);
     let single_ct = ConstantTurn {
@@ -331,47 +362,91 @@ pub fn monte_carlo(runs: usize, seed: u64) -> Result<Summary, Box<dyn std::error
     };
     let models = imm_models();
     let u = ();
+    let prior_mean = Vector5::new(0.0, 0.0, SPEED, 0.0, 0.0);
+    let prior_variances = Vector5::new(25.0, 25.0, 4.0, 4.0, 0.02f64.powi(2));
+    let mut record = vec![0.0; RECORD];
+    let mut rng = StdRng::seed_from_u64(seed.wrapping_add(run as u64));
+    // The truth's (p, v) is drawn from the prior the filters start from.
+    let prior = Gaussian::new(prior_mean, Matrix5::from_diagonal(&prior_variances))?;
+    let (truth, measurements) = simulate(&mut rng, &prior);
+    let mut kf = KalmanFilter::new(prior.clone());
+    let mut ekf = Ekf::new(prior.clone());
+    let modes = (KalmanFilter::new(prior.clone()), Ekf::new(prior.clone()));
+    let mut imm = Imm::new(modes, transition(), DVector::from_vec(vec![0.9, 0.1]))?;
+    let mut smoother = ImmSmoother::new();
+    for (k, z) in measurements.iter().enumerate() {
+        kf.predict(&single_cv, &u, DT)?;
+        kf.update(&sensor, z)?;
+        ekf.predict(&single_ct, &u, DT)?;
+        ekf.update(&sensor, z)?;
+        smoother.predict(&mut imm, &models, &u, DT)?;
+        imm.update_modes(&sensor, z)?;
+        let x = &truth[k + 1];
+        Track::record(&mut record, 0, k, kf.state(), kf.covariance(), x);
+        Track::record(&mut record, 1, k, ekf.state(), ekf.covariance(), x);
+        Track::record(&mut record, 2, k, imm.state(), imm.covariance(), x);
+        record[8 * STEPS + k] = imm.probabilities()[1];
+    }
+    let smoothed = smoother.smooth(&imm)?;
+    let (mut kim_fallbacks, mut clipped) = (0, 0);
+    for (k, s) in smoothed.iter().skip(1).enumerate() {
+        let x = &truth[k + 1];
+        Track::record(
+            &mut record,
+            3,
+            k,
+            s.estimate.mean(),
+            s.estimate.covariance(),
+            x,
+        );
+        record[9 * STEPS + k] = s.probabilities[1];
+        kim_fallbacks += s.kim_fallbacks;
+        clipped += s.clipped;
+    }
+    record[10 * STEPS] = kim_fallbacks as f64;
+    record[10 * STEPS + 1] = clipped as f64;
+    Ok(record)
+}
+
+/// [`monte_carlo`] in a sharding session (`--shard`/`--merge`): the runs' records summed in
+/// run order, `None` in a shard.
+pub fn monte_carlo_in(
+    runs: usize,
+    seed: u64,
+    session: &Session,
+) -> Result<Option<Summary>, Box<dyn std::error::Error>> {
+    let Some(records) = session.records("runs", runs, |run| run_record(run, seed))? else {
+        return Ok(None);
+    };
     let mut tracks = [Track::new(), Track::new(), Track::new(), Track::new()];
     let mut mode_probability = Vec::with_capacity(runs * STEPS);
     let (mut filtered_p, mut smoothed_p) = (vec![0.0; STEPS], vec![0.0; STEPS]);
     let (mut kim_fallbacks, mut clipped) = (0, 0);
-    let prior_mean = Vector5::new(0.0, 0.0, SPEED, 0.0, 0.0);
-    let prior_variances = Vector5::new(25.0, 25.0, 4.0, 4.0, 0.02f64.powi(2));
-    for run in 0..runs {
-        let mut rng = StdRng::seed_from_u64(seed.wrapping_add(run as u64));
-        // The truth's (p, v) is drawn from the prior the filters start from.
-        let prior = Gaussian::new(prior_mean, Matrix5::from_diagonal(&prior_variances))?;
-        let (truth, measurements) = simulate(&mut rng, &prior);
-        let mut kf = KalmanFilter::new(prior.clone());
-        let mut ekf = Ekf::new(prior.clone());
-        let modes = (KalmanFilter::new(prior.clone()), Ekf::new(prior.clone()));
-        let mut imm = Imm::new(modes, transition(), DVector::from_vec(vec![0.9, 0.1]))?;
-        let mut smoother = ImmSmoother::new();
-        for (k, z) in measurements.iter().enumerate() {
-            kf.predict(&single_cv, &u, DT)?;
-            kf.update(&sensor, z)?;
-            ekf.predict(&single_ct, &u, DT)?;
-            ekf.update(&sensor, z)?;
-            smoother.predict(&mut imm, &models, &u, DT)?;
-            imm.update_modes(&sensor, z)?;
-            let x = &truth[k + 1];
-            tracks[0].add(k, kf.state(), kf.covariance(), x);
-            tracks[1].add(k, ekf.state(), ekf.covariance(), x);
-            tracks[2].add(k, imm.state(), imm.covariance(), x);
-            let p = imm.probabilities()[1];
+    for record in &records {
+        for (i, track) in tracks.iter_mut().enumerate() {
+            track.add(&record[2 * i * STEPS..2 * (i + 1) * STEPS]);
+        }
+        for k in 0..STEPS {
+            let p = record[8 * STEPS + k];
             mode_probability.push((p, true_turn_rate(k + 1) != 0.0));
             filtered_p[k] += p;
+            smoothed_p[k] += record[9 * STEPS + k];
         }
-        let smoothed = smoother.smooth(&imm)?;
-        for (k, s) in smoothed.iter().skip(1).enumerate() {
-            tracks[3].add(k, s.estimate.mean(), s.estimate.covariance(), &truth[k + 1]);
-            smoothed_p[k] += s.probabilities[1];
-            kim_fallbacks += s.kim_fallbacks;
-            clipped += s.clipped;
-        }
+        kim_fallbacks += record[10 * STEPS] as usize;
+        clipped += record[10 * STEPS + 1] as usize;
     }
+    let mut flat = Vec::new();
+    for t in &tracks {
+        flat.extend_from_slice(&t.squared_error);
+        flat.extend_from_slice(&t.nees);
+    }
+    flat.extend(mode_probability.iter().map(|(p, _)| *p));
+    flat.extend_from_slice(&filtered_p);
+    flat.extend_from_slice(&smoothed_p);
+    flat.extend([kim_fallbacks as f64, clipped as f64]);
+    session.summary("runs", &flat);
     let average = |v: Vec<f64>| v.into_iter().map(|p| p / runs as f64).collect();
-    Ok(Summary {
+    Ok(Some(Summary {
         runs,
         tracks,
         mode_probability,
@@ -379,7 +454,7 @@ pub fn monte_carlo(runs: usize, seed: u64) -> Result<Summary, Box<dyn std::error
         band: ChiSquareBand::two_sided(4, runs, 0.99)?,
         kim_fallbacks,
         clipped,
-    })
+    }))
 }
 
 /// The fractions of steps whose average NEES is below and above the band.
@@ -439,7 +514,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     } else {
         200
     };
-    let summary = monte_carlo(runs, 0x1aa5)?;
+    let session = Session::from_args(
+        "manoeuvring_target",
+        sharding::settings(crate::common::quick_requested()),
+    )?;
+    let summary = monte_carlo_in(runs, 0x1aa5, &session)?;
+    session.finish()?;
+    let Some(summary) = summary else {
+        return Ok(());
+    };
     let mut json = serde_json::Map::new();
     println!(
         "{runs} runs × {STEPS} steps; 99% band for one step's average NEES (4 dof): [{:.2}, {:.2}]",

@@ -27,7 +27,12 @@
 //! sigma points at ±√2·15 m reach the true side. Reported: each filter's final position error
 //! over 50 runs (`--quick` 10), 60 steps each.
 //!
-//! `cargo run --release --example particle_growth [-- --json] [-- --quick]`
+//! `--shard I/N --out FILE` runs shard I of N of both Monte Carlos' runs and writes their
+//! records to FILE; `--merge FILE...` merges the N files and prints what one process prints,
+//! bit for bit (the figure's single run is run by the merge); `--stats FILE` writes the sums
+//! over runs and the final errors exactly (`estim_reproductions::sharding`).
+//!
+//! `cargo run --release --example particle_growth [-- --json] [-- --quick] [-- --shard I/N --out FILE | --merge FILE...] [-- --stats FILE]`
 
 use estim::filters::particle::ParticleFilter;
 use estim::nalgebra::{Matrix1, Matrix2, Matrix2x1, U1, U2, Vector1, Vector2};
@@ -35,6 +40,8 @@ use estim::prelude::*;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
+
+use estim_reproductions::sharding::{self, Session};
 
 // The root tests include this file as a module and bring their own `crate::common`.
 #[cfg(not(test))]
@@ -207,28 +214,66 @@ pub struct GrowthSummary {
 }
 
 /// The growth-model Monte Carlo (runs seeded `seed + run`).
-pub fn growth_comparison(runs: usize, steps: usize, seed: u64) -> Result<GrowthSummary, Error> {
+pub fn growth_comparison(
+    runs: usize,
+    steps: usize,
+    seed: u64,
+) -> Result<GrowthSummary, Box<dyn std::error::Error>> {
+    Ok(sharding::whole(growth_comparison_in(
+        runs,
+        steps,
+        seed,
+        &Session::whole(),
+    )?)?)
+}
+
+/// Run `run` of the growth-model Monte Carlo: per method (in [`METHODS`] order) the sum over
+/// the steps of the squared error, then per method the refused updates.
+fn growth_run(run: usize, steps: usize, seed: u64) -> Result<Vec<f64>, Error> {
+    let mut rng = StdRng::seed_from_u64(seed.wrapping_add(run as u64));
+    let (truth, zs) = simulate(steps, &mut rng);
+    let mut record = vec![0.0; 2 * METHODS.len()];
+    for (m, &method) in METHODS.iter().enumerate() {
+        let t = track(method, &zs, seed ^ (run as u64) << 20, false)?;
+        record[m] = t
+            .means
+            .iter()
+            .zip(&truth)
+            .map(|(e, x)| (e - x) * (e - x))
+            .sum::<f64>();
+        record[METHODS.len() + m] = t.refused as f64;
+    }
+    Ok(record)
+}
+
+/// [`growth_comparison`] in a sharding session (`--shard`/`--merge`): the runs' records
+/// summed in run order, `None` in a shard.
+pub fn growth_comparison_in(
+    runs: usize,
+    steps: usize,
+    seed: u64,
+    session: &Session,
+) -> Result<Option<GrowthSummary>, Box<dyn std::error::Error>> {
+    let Some(records) = session.records("growth", runs, |run| Ok(growth_run(run, steps, seed)?))?
+    else {
+        return Ok(None);
+    };
     let mut sq = [0.0; 4];
     let mut refused = [0; 4];
-    for run in 0..runs {
-        let mut rng = StdRng::seed_from_u64(seed.wrapping_add(run as u64));
-        let (truth, zs) = simulate(steps, &mut rng);
-        for (m, &method) in METHODS.iter().enumerate() {
-            let t = track(method, &zs, seed ^ (run as u64) << 20, false)?;
-            sq[m] += t
-                .means
-                .iter()
-                .zip(&truth)
-                .map(|(e, x)| (e - x) * (e - x))
-                .sum::<f64>();
-            refused[m] += t.refused;
+    for record in &records {
+        for m in 0..METHODS.len() {
+            sq[m] += record[m];
+            refused[m] += record[METHODS.len() + m] as usize;
         }
     }
+    let mut flat = sq.to_vec();
+    flat.extend(refused.map(|r| r as f64));
+    session.summary("growth", &flat);
     let n = (runs * steps) as f64;
-    Ok(GrowthSummary {
+    Ok(Some(GrowthSummary {
         rmse: sq.map(|s| (s / n).sqrt()),
         refused,
-    })
+    }))
 }
 
 /// The weight of the cloud on each side of zero: min(P(x < 0), P(x > 0)), 0.5 when the two
@@ -296,43 +341,76 @@ impl MeasurementJacobian<f64, U2, U1> for Range {
 
 /// The final position errors of the EKF, the UKF and the bootstrap particle filter over
 /// `runs` runs of `steps` steps.
-pub fn localisation(runs: usize, steps: usize, seed: u64) -> Result<[Vec<f64>; 3], Error> {
+pub fn localisation(
+    runs: usize,
+    steps: usize,
+    seed: u64,
+) -> Result<[Vec<f64>; 3], Box<dyn std::error::Error>> {
+    Ok(sharding::whole(localisation_in(
+        runs,
+        steps,
+        seed,
+        &Session::whole(),
+    )?)?)
+}
+
+/// Run `run` of the localisation: the final position errors of the EKF, the UKF and the
+/// bootstrap particle filter.
+fn localisation_run(run: usize, steps: usize, seed: u64) -> Result<Vec<f64>, Error> {
     let start = Vector2::new(5.0, 12.0);
     let told = Gaussian::new(Vector2::new(5.0, -12.0), Matrix2::identity() * 225.0)?;
     let u = Vector2::from(MOTION);
     let beacons = BEACONS.map(Range);
-    let mut errors = [Vec::new(), Vec::new(), Vec::new()];
-    for run in 0..runs {
-        let mut rng = StdRng::seed_from_u64(seed.wrapping_add(run as u64));
-        let mut ekf = Ekf::new(told.clone());
-        let mut ukf = Ukf::with_propagator(told.clone(), Unscented::cubature());
-        let mut pf = ParticleFilter::new(
-            told.clone(),
-            LOCALISATION_PARTICLES,
-            seed ^ (run as u64) << 20,
-        )?;
-        let mut x = start;
-        for _ in 0..steps {
-            x += u + Vector2::new(normal(&mut rng), normal(&mut rng)) * ODOMETRY_SIGMA;
-            ekf.predict(&Odometry, &u, 1.0)?;
-            ukf.predict(&Odometry, &u, 1.0)?;
-            pf.predict(&Odometry, &u, 1.0)?;
-            for b in &beacons {
-                let z = b.measure(&x) + Vector1::new(RANGE_SIGMA * normal(&mut rng));
-                // A refused update (typed error) leaves the filter as it was.
-                let _ = ekf.update(b, &z);
-                let _ = ukf.update(b, &z);
-                pf.update(b, &z)?;
-            }
-        }
-        for (e, f) in errors
-            .iter_mut()
-            .zip([ekf.state(), ukf.state(), pf.state()])
-        {
-            e.push((f - x).norm());
+    let mut rng = StdRng::seed_from_u64(seed.wrapping_add(run as u64));
+    let mut ekf = Ekf::new(told.clone());
+    let mut ukf = Ukf::with_propagator(told.clone(), Unscented::cubature());
+    let mut pf = ParticleFilter::new(
+        told.clone(),
+        LOCALISATION_PARTICLES,
+        seed ^ (run as u64) << 20,
+    )?;
+    let mut x = start;
+    for _ in 0..steps {
+        x += u + Vector2::new(normal(&mut rng), normal(&mut rng)) * ODOMETRY_SIGMA;
+        ekf.predict(&Odometry, &u, 1.0)?;
+        ukf.predict(&Odometry, &u, 1.0)?;
+        pf.predict(&Odometry, &u, 1.0)?;
+        for b in &beacons {
+            let z = b.measure(&x) + Vector1::new(RANGE_SIGMA * normal(&mut rng));
+            // A refused update (typed error) leaves the filter as it was.
+            let _ = ekf.update(b, &z);
+            let _ = ukf.update(b, &z);
+            pf.update(b, &z)?;
         }
     }
-    Ok(errors)
+    Ok([ekf.state(), ukf.state(), pf.state()]
+        .iter()
+        .map(|f| (*f - x).norm())
+        .collect())
+}
+
+/// [`localisation`] in a sharding session (`--shard`/`--merge`): the runs' errors in run
+/// order, `None` in a shard.
+pub fn localisation_in(
+    runs: usize,
+    steps: usize,
+    seed: u64,
+    session: &Session,
+) -> Result<Option<[Vec<f64>; 3]>, Box<dyn std::error::Error>> {
+    let records = session.records("localisation", runs, |run| {
+        Ok(localisation_run(run, steps, seed)?)
+    })?;
+    let Some(records) = records else {
+        return Ok(None);
+    };
+    let mut errors = [Vec::new(), Vec::new(), Vec::new()];
+    for record in &records {
+        for (e, d) in errors.iter_mut().zip(record) {
+            e.push(*d);
+        }
+    }
+    session.summary("localisation", &errors.concat());
+    Ok(Some(errors))
 }
 
 fn median(v: &[f64]) -> f64 {
@@ -417,7 +495,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let quick = crate::common::quick_requested();
     let (runs, steps) = if quick { (40, 50) } else { (200, 50) };
     let seed = 0x1993;
-    let g = growth_comparison(runs, steps, seed)?;
+    let session = Session::from_args("particle_growth", sharding::settings(quick))?;
+    let (lruns, lsteps) = if quick { (10, 60) } else { (50, 60) };
+    let g = growth_comparison_in(runs, steps, seed, &session)?;
+    let errors = localisation_in(lruns, lsteps, seed, &session)?;
+    session.finish()?;
+    let (Some(g), Some(errors)) = (g, errors) else {
+        return Ok(());
+    };
     println!("Growth model, {runs} runs × {steps} steps, {PARTICLES} particles:");
     println!("{:<28} {:>8} {:>16}", "filter", "RMSE", "refused updates");
     let mut json = serde_json::Map::new();
@@ -435,8 +520,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let (step, score) = figure(seed, steps)?;
     println!("most bimodal step of run 0: {step} (mass on the smaller side {score:.2})");
-    let (lruns, lsteps) = if quick { (10, 60) } else { (50, 60) };
-    let errors = localisation(lruns, lsteps, seed)?;
     println!(
         "Range-only localisation, started at the mirror image 24 m away, {lruns} runs × {lsteps} steps:"
     );

@@ -10,6 +10,7 @@
 //! `cargo run --release --example lee_huang [-- --json] [-- --quick]`
 
 use crate::common::{Headline, Output, Series, line_plot};
+use crate::sharding::Session;
 use estim::core::{Error, Gaussian, Parameter};
 use estim::filters::{Ekf, Estimator, KalmanFilter, Predict, Update};
 use estim::models::lee_huang::{
@@ -233,6 +234,9 @@ impl ErrorHistory {
     }
 }
 
+/// The terms one run adds per filter and recorded time ([`Accumulator::terms`]).
+const TERMS: usize = 10;
+
 #[derive(Default)]
 struct Accumulator {
     p2: Vec<f64>,
@@ -261,19 +265,36 @@ impl Accumulator {
         }
     }
 
-    fn add(&mut self, i: usize, est: &Vector6<f64>, p: &Matrix6<f64>, truth: &Vector6<f64>) {
+    /// One run's terms at one recorded time, in the order [`add`](Self::add) sums them.
+    fn terms(est: &Vector6<f64>, p: &Matrix6<f64>, truth: &Vector6<f64>) -> [f64; TERMS] {
         let e = est - truth;
         let ep = Vector2::new(e[0], e[1]);
-        self.p2[i] += ep.norm_squared();
-        self.v2[i] += e[2] * e[2] + e[3] * e[3];
         let eth = wrap_angle(e[4]);
-        self.th2[i] += eth * eth;
-        self.w2[i] += e[5] * e[5];
-        self.pm[i] += ep;
-        self.sp[i] += p[(0, 0)] + p[(1, 1)];
-        self.sv[i] += p[(2, 2)] + p[(3, 3)];
-        self.sth[i] += p[(4, 4)];
-        self.sw[i] += p[(5, 5)];
+        [
+            ep.norm_squared(),
+            e[2] * e[2] + e[3] * e[3],
+            eth * eth,
+            e[5] * e[5],
+            ep[0],
+            ep[1],
+            p[(0, 0)] + p[(1, 1)],
+            p[(2, 2)] + p[(3, 3)],
+            p[(4, 4)],
+            p[(5, 5)],
+        ]
+    }
+
+    /// Adds one run's [`terms`](Self::terms) at recorded time `i`.
+    fn add(&mut self, i: usize, t: &[f64]) {
+        self.p2[i] += t[0];
+        self.v2[i] += t[1];
+        self.th2[i] += t[2];
+        self.w2[i] += t[3];
+        self.pm[i] += Vector2::new(t[4], t[5]);
+        self.sp[i] += t[6];
+        self.sv[i] += t[7];
+        self.sth[i] += t[8];
+        self.sw[i] += t[9];
     }
 
     fn finish(self, time: Vec<f64>, runs: usize) -> ErrorHistory {
@@ -377,59 +398,136 @@ pub struct SectionIvResult {
 /// and the CKF followed each cycle by the OTE).
 pub fn run_section_iv(config: &SectionIvConfig) -> Result<SectionIvResult, Error> {
     config.validate()?;
+    let records = (0..config.seeds)
+        .map(|run| section_iv_run(config, run))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(section_iv_result(config, &records))
+}
+
+/// [`run_section_iv`] as `session` says (`crate::sharding`): every seed's record summed in
+/// seed order, `None` in a shard. `key` names the configuration in the shard files.
+pub fn run_section_iv_in(
+    config: &SectionIvConfig,
+    key: &str,
+    session: &Session,
+) -> Result<Option<SectionIvResult>, Box<dyn std::error::Error>> {
+    config.validate()?;
+    let records = session.records(key, config.seeds, |run| Ok(section_iv_run(config, run)?))?;
+    Ok(records.map(|r| {
+        let result = section_iv_result(config, &r);
+        let mut stats = Vec::new();
+        for h in [&result.ckf, &result.ckf_ote] {
+            for v in [
+                &h.position_rms,
+                &h.velocity_rms,
+                &h.attitude_rms,
+                &h.rate_rms,
+                &h.position_sigma,
+                &h.velocity_sigma,
+                &h.attitude_sigma,
+                &h.rate_sigma,
+            ] {
+                stats.extend_from_slice(v);
+            }
+            stats.extend(h.position_mean.iter().flat_map(|m| [m[0], m[1]]));
+        }
+        stats.extend(
+            result
+                .ote_final_gain
+                .iter()
+                .chain(&result.ote_final_covariance),
+        );
+        session.summary(key, &stats);
+        result
+    }))
+}
+
+/// The recorded steps of `config`.
+fn recorded_steps(config: &SectionIvConfig) -> Vec<usize> {
+    (0..=config.steps())
+        .filter(|k| k % config.record_every == 0)
+        .collect()
+}
+
+/// Run (seed index) `run` of one configuration: per recorded time the CKF's and then the
+/// CKF + OTE's [`Accumulator::terms`], then the OTE's last gain and covariance (column-major).
+fn section_iv_run(config: &SectionIvConfig, run: usize) -> Result<Vec<f64>, Error> {
     let steps = config.steps();
     let sensors = config.sensors();
     let measurement = AttitudeMeasurement {
         variance: config.attitude_std * config.attitude_std,
     };
-    let recorded: Vec<usize> = (0..=steps)
-        .filter(|k| k % config.record_every == 0)
-        .collect();
+    let recorded = recorded_steps(config);
+    let mut record = Vec::with_capacity(2 * TERMS * recorded.len() + 8);
+    let mut ote_gain = Matrix2::zeros();
+    let mut ote_cov = Matrix2::zeros();
+    let sim = simulate(&config.scenario, &sensors, config.first_seed + run as u64)?;
+    let mut ckf = Ckf::new(config)?;
+    let mut ckf_ote = Ckf::new(config)?;
+    let mut ote = OwnShipTrajectoryEstimator::new(&config.ote)?;
+    let mut slot = 0;
+    for k in 0..=steps {
+        if k > 0 {
+            let u = &sim.samples[k - 1].inputs;
+            let z = sim.samples[k].attitude;
+            for f in [&mut ckf, &mut ckf_ote] {
+                f.predict(u, config.dt)?;
+                f.update(&measurement, z)?;
+            }
+            let step = ote.correct(&mut ckf_ote)?;
+            ote_gain = step.gain;
+            ote_cov = step.covariance;
+        }
+        if slot < recorded.len() && recorded[slot] == k {
+            let truth = &sim.truth[k];
+            record.extend(Accumulator::terms(ckf.state(), ckf.covariance(), truth));
+            record.extend(Accumulator::terms(
+                ckf_ote.state(),
+                ckf_ote.covariance(),
+                truth,
+            ));
+            slot += 1;
+        }
+    }
+    record.extend(ote_gain.iter().chain(ote_cov.iter()));
+    Ok(record)
+}
+
+/// One configuration's result from its runs' records, summed in run order; the OTE's gain and
+/// covariance are run 0's.
+fn section_iv_result(config: &SectionIvConfig, records: &[Vec<f64>]) -> SectionIvResult {
+    let recorded = recorded_steps(config);
     let time: Vec<f64> = recorded.iter().map(|&k| k as f64 * config.dt).collect();
     let mut acc_ckf = Accumulator::new(recorded.len());
     let mut acc_ote = Accumulator::new(recorded.len());
-    let mut ote_gain = Matrix2::zeros();
-    let mut ote_cov = Matrix2::zeros();
-
-    for run in 0..config.seeds {
-        let sim = simulate(&config.scenario, &sensors, config.first_seed + run as u64)?;
-        let mut ckf = Ckf::new(config)?;
-        let mut ckf_ote = Ckf::new(config)?;
-        let mut ote = OwnShipTrajectoryEstimator::new(&config.ote)?;
-        let mut slot = 0;
-        for k in 0..=steps {
-            if k > 0 {
-                let u = &sim.samples[k - 1].inputs;
-                let z = sim.samples[k].attitude;
-                for f in [&mut ckf, &mut ckf_ote] {
-                    f.predict(u, config.dt)?;
-                    f.update(&measurement, z)?;
-                }
-                let step = ote.correct(&mut ckf_ote)?;
-                if run == 0 {
-                    ote_gain = step.gain;
-                    ote_cov = step.covariance;
-                }
-            }
-            if slot < recorded.len() && recorded[slot] == k {
-                acc_ckf.add(slot, ckf.state(), ckf.covariance(), &sim.truth[k]);
-                acc_ote.add(slot, ckf_ote.state(), ckf_ote.covariance(), &sim.truth[k]);
-                slot += 1;
-            }
+    for record in records {
+        for (slot, terms) in record
+            .chunks_exact(2 * TERMS)
+            .take(recorded.len())
+            .enumerate()
+        {
+            acc_ckf.add(slot, &terms[..TERMS]);
+            acc_ote.add(slot, &terms[TERMS..]);
         }
     }
-
+    let last = |from: usize| {
+        records.first().map_or_else(Matrix2::zeros, |r| {
+            let n = 2 * TERMS * recorded.len() + from;
+            Matrix2::from_column_slice(&r[n..n + 4])
+        })
+    };
+    let (ote_gain, ote_cov) = (last(0), last(4));
     let b = Vector2::new(config.input_bias.x, config.input_bias.y);
     let rb = rotation(config.scenario.initial_state[4]) * b;
     let bias_drift = time.iter().map(|t| rb * (0.5 * t * t)).collect();
-    Ok(SectionIvResult {
+    SectionIvResult {
         config: config.clone(),
         ckf: acc_ckf.finish(time.clone(), config.seeds),
         ckf_ote: acc_ote.finish(time, config.seeds),
         ote_final_gain: ote_gain,
         ote_final_covariance: ote_cov,
         bias_drift,
-    })
+    }
 }
 
 /// Settings of the whole Lee & Huang experiment.
@@ -549,10 +647,47 @@ pub struct LeeHuangResult {
 pub fn run_experiment(config: &LeeHuangConfig) -> Result<LeeHuangResult, Error> {
     let paper = run_section_iv(&config.paper)?;
     let radial = run_section_iv(&config.radial)?;
+    let variants = config
+        .variants
+        .iter()
+        .map(run_section_iv)
+        .collect::<Result<Vec<_>, _>>()?;
+    experiment_result(config, paper, radial, variants)
+}
+
+/// [`run_experiment`] as `session` says (`crate::sharding`): whole, one shard of every
+/// configuration's seeds (`None`), or their merge.
+pub fn run_experiment_in(
+    config: &LeeHuangConfig,
+    session: &Session,
+) -> Result<Option<LeeHuangResult>, Box<dyn std::error::Error>> {
+    let paper = run_section_iv_in(&config.paper, "paper", session)?;
+    let radial = run_section_iv_in(&config.radial, "radial", session)?;
+    let variants = config
+        .variants
+        .iter()
+        .enumerate()
+        .map(|(i, v)| run_section_iv_in(v, &format!("variant {i}"), session))
+        .collect::<Result<Vec<_>, _>>()?;
+    // Every configuration runs (its shard) before a shard stops here.
+    let (Some(paper), Some(radial), Some(variants)) = (
+        paper,
+        radial,
+        variants.into_iter().collect::<Option<Vec<_>>>(),
+    ) else {
+        return Ok(None);
+    };
+    Ok(Some(experiment_result(config, paper, radial, variants)?))
+}
+
+fn experiment_result(
+    config: &LeeHuangConfig,
+    paper: SectionIvResult,
+    radial: SectionIvResult,
+    results: Vec<SectionIvResult>,
+) -> Result<LeeHuangResult, Error> {
     let mut variants = vec![VariantSummary::of(&paper), VariantSummary::of(&radial)];
-    for v in &config.variants {
-        variants.push(VariantSummary::of(&run_section_iv(v)?));
-    }
+    variants.extend(results.iter().map(VariantSummary::of));
     Ok(LeeHuangResult {
         paper,
         radial,
@@ -826,12 +961,22 @@ fn figures(r: &LeeHuangResult) -> Vec<String> {
 
 /// Runs the experiment (quick or full), prints its tables, writes its figures.
 pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
+    Ok(crate::sharding::whole(run_in(quick, &Session::whole())?)?)
+}
+
+/// The example body as `session` says (whole, one shard: `None`, or the merge of the shards).
+pub fn run_in(
+    quick: bool,
+    session: &Session,
+) -> Result<Option<Output>, Box<dyn std::error::Error>> {
     let config = if quick {
         LeeHuangConfig::quick()
     } else {
         LeeHuangConfig::full()
     };
-    let r = run_experiment(&config)?;
+    let Some(r) = run_experiment_in(&config, session)? else {
+        return Ok(None);
+    };
     let n = r.paper.config.seeds;
     let t_end = r.paper.config.duration;
 
@@ -909,5 +1054,5 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
         json
     };
     let headlines = headlines(&r);
-    Ok(Output { json, headlines })
+    Ok(Some(Output { json, headlines }))
 }

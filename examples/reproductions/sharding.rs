@@ -20,9 +20,16 @@
 //! An example body takes a [`Session`] and calls [`Session::run`] (or
 //! [`run_with`](Session::run_with)) where it would call `MonteCarlo::run`: it gets `Some`
 //! statistics in a whole run or a merge and `None` in a shard, where it skips what uses them.
+//!
+//! An example that loops over its runs by hand, with statistics of its own, calls
+//! [`Session::records`] instead: each run gives a record (a flat `Vec<f64>`, stored bit for
+//! bit), shard I of N runs the contiguous runs [`shard_runs`], and the merge hands back every
+//! run's record in run order, so that the example's own sums over runs see the same numbers
+//! in the same order as one process. [`Session::summary`] puts its results in `--stats`.
 
 use std::cell::RefCell;
 use std::fmt;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use estim::filters::ValidationError;
@@ -190,6 +197,16 @@ struct Experiment {
     extra: Option<serde_json::Value>,
 }
 
+/// One hand-looped experiment of a shard file ([`Session::records`]): runs `first ..
+/// first + bits.len()` of `runs`, each run's record as the bits of its `f64`s.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct Records {
+    key: String,
+    runs: usize,
+    first: usize,
+    bits: Vec<Vec<u64>>,
+}
+
 /// A shard file: the shards of every experiment of one example's run.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 struct ShardFile {
@@ -199,6 +216,19 @@ struct ShardFile {
     index: usize,
     count: usize,
     experiments: Vec<Experiment>,
+    /// The hand-looped experiments (absent in files of runner-only examples).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    records: Vec<Records>,
+}
+
+/// The runs of shard `index` of `count` of `runs` runs: `index·runs/count ..
+/// (index+1)·runs/count`, contiguous, so the shards in index order are the runs in order.
+pub fn shard_runs(index: usize, count: usize, runs: usize) -> Range<usize> {
+    index * runs / count..(index + 1) * runs / count
+}
+
+fn to_bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
 }
 
 /// One process's part of an example's Monte Carlo experiments: whole, one shard, or the merge
@@ -213,6 +243,10 @@ pub struct Session {
     loaded: Vec<ShardFile>,
     /// Whole and merge: each experiment's statistics, for `--stats`.
     stats: RefCell<Vec<(String, EnsembleStats)>>,
+    /// Shard mode: the hand-looped experiments run so far; merge mode: their keys.
+    records: RefCell<Vec<Records>>,
+    /// Whole and merge: the hand-looped experiments' results ([`Session::summary`]), as bits.
+    summaries: RefCell<Vec<(String, Vec<u64>)>>,
 }
 
 impl Session {
@@ -228,6 +262,8 @@ impl Session {
             written: RefCell::new(Vec::new()),
             loaded: Vec::new(),
             stats: RefCell::new(Vec::new()),
+            records: RefCell::new(Vec::new()),
+            summaries: RefCell::new(Vec::new()),
         }
     }
 
@@ -251,6 +287,8 @@ impl Session {
             written: RefCell::new(Vec::new()),
             loaded,
             stats: RefCell::new(Vec::new()),
+            records: RefCell::new(Vec::new()),
+            summaries: RefCell::new(Vec::new()),
         })
     }
 
@@ -321,6 +359,94 @@ impl Session {
         Ok(Some(stats))
     }
 
+    /// The hand-looped experiment `key` (unique within the example) of `runs` runs, `run(i)`
+    /// giving run i's record: every run's record in run order in a whole run; in a shard, the
+    /// records of its runs ([`shard_runs`]) are kept for [`finish`](Self::finish) and the
+    /// result is `None`; in a merge, the shard files' records of every run, in run order, bit
+    /// for bit (`run` is not called). Errors: `run`'s, and shards of another run count or
+    /// with runs missing.
+    pub fn records(
+        &self,
+        key: &str,
+        runs: usize,
+        mut run: impl FnMut(usize) -> Result<Vec<f64>, Box<dyn std::error::Error>>,
+    ) -> Result<Option<Vec<Vec<f64>>>, Box<dyn std::error::Error>> {
+        if self.records.borrow().iter().any(|r| r.key == key) {
+            return Err(ShardError::new(format!("experiment '{key}' run twice")).into());
+        }
+        let merged = match &self.args.mode {
+            Mode::Whole => return (0..runs).map(run).collect::<Result<_, _>>().map(Some),
+            Mode::Shard { index, count, .. } => {
+                let range = shard_runs(*index, *count, runs);
+                let first = range.start;
+                let bits = range
+                    .map(|i| run(i).map(|r| to_bits(&r)))
+                    .collect::<Result<_, _>>()?;
+                self.records.borrow_mut().push(Records {
+                    key: key.to_string(),
+                    runs,
+                    first,
+                    bits,
+                });
+                return Ok(None);
+            }
+            Mode::Merge { .. } => {
+                let mut merged = Vec::with_capacity(runs);
+                for f in &self.loaded {
+                    let r = f.records.iter().find(|r| r.key == key).ok_or_else(|| {
+                        ShardError::new(format!(
+                            "shard {} of {} has no experiment '{key}' (written by another \
+                             version of the example?)",
+                            f.index, f.example
+                        ))
+                    })?;
+                    if r.runs != runs || r.first != merged.len() {
+                        return Err(ShardError::new(format!(
+                            "shard {} of experiment '{key}' holds runs {}..{} of {}, this \
+                             merge expects runs from {} of {runs}",
+                            f.index,
+                            r.first,
+                            r.first + r.bits.len(),
+                            r.runs,
+                            merged.len()
+                        ))
+                        .into());
+                    }
+                    merged.extend(
+                        r.bits
+                            .iter()
+                            .map(|b| b.iter().map(|x| f64::from_bits(*x)).collect::<Vec<_>>()),
+                    );
+                }
+                if merged.len() != runs {
+                    return Err(ShardError::new(format!(
+                        "the shards of experiment '{key}' hold {} of its {runs} runs",
+                        merged.len()
+                    ))
+                    .into());
+                }
+                merged
+            }
+        };
+        self.records.borrow_mut().push(Records {
+            key: key.to_string(),
+            runs,
+            first: 0,
+            bits: Vec::new(),
+        });
+        Ok(Some(merged))
+    }
+
+    /// The results of the hand-looped experiment `key`, for `--stats` (written as the bits
+    /// of each `f64`, exact, infinities and NaNs too); nothing in a shard.
+    pub fn summary(&self, key: &str, values: &[f64]) {
+        if !matches!(self.args.mode, Mode::Shard { .. }) {
+            self.summaries
+                .borrow_mut()
+                .push((key.to_string(), to_bits(values)));
+        }
+    }
+
     /// What the example keeps of experiment `key` beside the runner's statistics (values
     /// collected per run, say), after [`run`](Self::run): `Some([value])` in a whole run;
     /// in a shard, `value` is stored with the shard and the result is `None`; in a merge,
@@ -372,8 +498,10 @@ impl Session {
         match &self.args.mode {
             Mode::Shard { index, count, out } => {
                 let experiments = self.written.borrow().clone();
-                let runs: usize = experiments.iter().map(|e| e.shard.runs()).sum();
-                let n = experiments.len();
+                let records = self.records.borrow().clone();
+                let runs: usize = experiments.iter().map(|e| e.shard.runs()).sum::<usize>()
+                    + records.iter().map(|r| r.bits.len()).sum::<usize>();
+                let n = experiments.len() + records.len();
                 let file = ShardFile {
                     format: FORMAT.to_string(),
                     example: self.example.clone(),
@@ -381,6 +509,7 @@ impl Session {
                     index: *index,
                     count: *count,
                     experiments,
+                    records,
                 };
                 write_json(out, &file)?;
                 println!(
@@ -402,11 +531,28 @@ impl Session {
                         e.key, self.example
                     )));
                 }
+                let done = self.records.borrow();
+                if let Some(f) = self.loaded.first()
+                    && let Some(r) = f
+                        .records
+                        .iter()
+                        .find(|r| done.iter().all(|d| d.key != r.key))
+                {
+                    return Err(ShardError::new(format!(
+                        "the shard files hold experiment '{}', which this run of {} does not have",
+                        r.key, self.example
+                    )));
+                }
             }
             Mode::Whole => {}
         }
         if let Some(path) = &self.args.stats {
-            write_json(path, &*self.stats.borrow())?;
+            let summaries = self.summaries.borrow();
+            if summaries.is_empty() {
+                write_json(path, &*self.stats.borrow())?;
+            } else {
+                write_json(path, &(&*self.stats.borrow(), &*summaries))?;
+            }
         }
         Ok(())
     }
@@ -507,6 +653,23 @@ fn load(example: &str, settings: &str, files: &[PathBuf]) -> Result<Vec<ShardFil
     }
     loaded.sort_by_key(|(_, f)| f.index);
     Ok(loaded.into_iter().map(|(_, f)| f).collect())
+}
+
+/// For an example that cannot be sharded: refuses `--shard`, `--out`, `--merge` and `--stats`
+/// on the command line (with `why`), rather than ignoring them and running whole in every task
+/// of a job array.
+pub fn refuse_flags(example: &str, why: &str) -> Result<(), ShardError> {
+    refuse(example, why, parse(std::env::args().skip(1))?)
+}
+
+/// [`refuse_flags`] of parsed flags.
+pub fn refuse(example: &str, why: &str, args: Args) -> Result<(), ShardError> {
+    if args.mode == Mode::Whole && args.stats.is_none() {
+        return Ok(());
+    }
+    Err(ShardError::new(format!(
+        "{example} does not take --shard/--merge/--stats: {why}"
+    )))
 }
 
 /// The settings string of an example whose only experiment-changing flag is `--quick`.

@@ -1,5 +1,6 @@
 //! The examples' `--shard I/N --out FILE` / `--merge FILE...` flags (`sharding`): parsing, and
-//! shard files through a session on a tiny Monte Carlo (one slot, 40 runs: milliseconds).
+//! shard files through a session on a tiny Monte Carlo (one slot, 40 runs: milliseconds), and
+//! through a hand-looped example's per-run records (`Session::records`).
 
 use std::path::PathBuf;
 
@@ -189,5 +190,83 @@ fn shards_written_and_merged_equal_the_whole_run_and_bad_files_are_refused() {
         .chain([&whole_stats, &merged_stats, &corrupt, &other])
     {
         let _ = std::fs::remove_file(f);
+    }
+}
+
+/// The shard files and `--stats` of a hand-looped example (`Session::records`): the example's
+/// session of `args` over `runs` runs (7 runs of 150 steps: tens of milliseconds).
+fn manoeuvring(args: &[&str], runs: usize) -> Result<Option<String>, String> {
+    let args = parse(args.iter().copied()).map_err(|e| e.to_string())?;
+    let s = Session::new("manoeuvring_target", "--quick", args).map_err(|e| e.to_string())?;
+    let summary =
+        crate::manoeuvring_target::monte_carlo_in(runs, 0x1aa5, &s).map_err(|e| e.to_string())?;
+    s.finish().map_err(|e| e.to_string())?;
+    Ok(summary.map(|s| format!("{s:?}")))
+}
+
+#[test]
+fn a_hand_looped_example_merges_to_its_whole_run_bit_for_bit() {
+    let files: Vec<PathBuf> = (0..3).map(|i| temp(&format!("mt{i}.json"))).collect();
+    let names: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
+    let (whole_stats, merged_stats) = (temp("mt-whole.json"), temp("mt-merged.json"));
+    let whole = manoeuvring(&["--stats", &whole_stats.display().to_string()], 7)
+        .unwrap()
+        .unwrap();
+    // 7 runs in 3 shards: runs 0-1, 2-3, 4-6 (uneven, as `shard_runs` splits them).
+    for (i, name) in names.iter().enumerate() {
+        let shard = manoeuvring(&["--shard", &format!("{i}/3"), "--out", name], 7).unwrap();
+        assert_eq!(shard, None);
+    }
+    let stats = merged_stats.display().to_string();
+    let merged = manoeuvring(
+        &[
+            "--merge", &names[1], &names[2], &names[0], "--stats", &stats,
+        ],
+        7,
+    )
+    .unwrap()
+    .unwrap();
+    // Bit for bit: the summary's Debug prints every f64 exactly, and the --stats files (the
+    // bits of every sum over runs) are the same bytes.
+    assert_eq!(merged, whole);
+    assert_eq!(
+        std::fs::read(&merged_stats).unwrap(),
+        std::fs::read(&whole_stats).unwrap()
+    );
+    // The same files merged into a Monte Carlo of another size are refused, with the reason.
+    let size = manoeuvring(&["--merge", &names[0], &names[1], &names[2]], 8).unwrap_err();
+    assert!(size.contains("holds runs 0..2 of 7"), "{size}");
+    for f in files.iter().chain([&whole_stats, &merged_stats]) {
+        let _ = std::fs::remove_file(f);
+    }
+}
+
+#[test]
+fn an_example_without_shards_refuses_the_flags_instead_of_running_whole() {
+    use crate::sharding::refuse;
+    assert!(
+        refuse(
+            "boje_rate",
+            "one stream",
+            parse(["--quick", "--json"]).unwrap()
+        )
+        .is_ok()
+    );
+    for args in [
+        &["--shard", "0/2", "--out", "f"][..],
+        &["--merge", "a", "b"],
+        &["--stats", "s"],
+    ] {
+        let message = refuse(
+            "boje_rate",
+            "one stream",
+            parse(args.iter().copied()).unwrap(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            message.contains("boje_rate does not take --shard/--merge/--stats: one stream"),
+            "{args:?}: {message}"
+        );
     }
 }
