@@ -201,12 +201,9 @@ impl<'a, P, U, T: Copy, S> Transition<'a, P, U, T, S> {
     }
 }
 
-impl<P, U, T, N, S> VectorFunction<T, N, N> for Transition<'_, P, U, T, S>
+impl<T: Real, N: Dim, P: ProcessModel<T, N, Input = U>, U, S: StateSpace<T, N>>
+    VectorFunction<T, N, N> for Transition<'_, P, U, T, S>
 where
-    T: Real,
-    N: Dim,
-    P: ProcessModel<T, N, Input = U>,
-    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     const VECTOR_SPACES: VectorSpaces = VectorSpaces::of_space(S::VECTOR);
@@ -241,12 +238,9 @@ where
 
 /// The model's [`InPlace`] at this step's input and Δt (reached only when the model has one),
 /// with the state space's ⊟ as the residual.
-impl<P, U, T, N, S> InPlace<T, N, N> for Transition<'_, P, U, T, S>
+impl<T: Real, N: Dim, P: ProcessModel<T, N, Input = U>, U, S: StateSpace<T, N>> InPlace<T, N, N>
+    for Transition<'_, P, U, T, S>
 where
-    T: Real,
-    N: Dim,
-    P: ProcessModel<T, N, Input = U>,
-    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     #[inline(always)]
@@ -286,12 +280,9 @@ where
     }
 }
 
-impl<P, U, T, N, S> Differentiable<T, N, N> for Transition<'_, P, U, T, S>
+impl<T: Real, N: Dim, P: ProcessJacobian<T, N, Input = U>, U, S: StateSpace<T, N>>
+    Differentiable<T, N, N> for Transition<'_, P, U, T, S>
 where
-    T: Real,
-    N: Dim,
-    P: ProcessJacobian<T, N, Input = U>,
-    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     #[inline(always)]
@@ -300,12 +291,9 @@ where
     }
 }
 
-impl<P, U, T, N, S> TwiceDifferentiable<T, N, N> for Transition<'_, P, U, T, S>
+impl<T: Real, N: Dim, P: ProcessHessian<T, N, Input = U>, U, S: StateSpace<T, N>>
+    TwiceDifferentiable<T, N, N> for Transition<'_, P, U, T, S>
 where
-    T: Real,
-    N: Dim,
-    P: ProcessHessian<T, N, Input = U>,
-    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     #[inline(always)]
@@ -353,13 +341,9 @@ impl<'a, H, S> Observation<'a, H, S> {
     }
 }
 
-impl<H, T, N, M, S> VectorFunction<T, N, M> for Observation<'_, H, S>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>, S: StateSpace<T, N>>
+    VectorFunction<T, N, M> for Observation<'_, H, S>
 where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    H: MeasurementModel<T, N, M>,
-    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N, M>,
 {
     // The output ⊞ stays +: the state space decides.
@@ -387,13 +371,9 @@ where
     }
 }
 
-impl<H, T, N, M, S> Differentiable<T, N, M> for Observation<'_, H, S>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementJacobian<T, N, M>, S: StateSpace<T, N>>
+    Differentiable<T, N, M> for Observation<'_, H, S>
 where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    S: StateSpace<T, N>,
-    H: MeasurementJacobian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     #[inline(always)]
@@ -402,13 +382,9 @@ where
     }
 }
 
-impl<H, T, N, M, S> TwiceDifferentiable<T, N, M> for Observation<'_, H, S>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementHessian<T, N, M>, S: StateSpace<T, N>>
+    TwiceDifferentiable<T, N, M> for Observation<'_, H, S>
 where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    S: StateSpace<T, N>,
-    H: MeasurementHessian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     #[inline(always)]
@@ -417,23 +393,16 @@ where
     }
 }
 
-impl<P, U, T, N, S> AffineFunction<T, N, N> for Transition<'_, P, U, T, S>
+impl<T: Real, N: Dim, P: LinearProcessModel<T, N, Input = U>, U, S: StateSpace<T, N>>
+    AffineFunction<T, N, N> for Transition<'_, P, U, T, S>
 where
-    T: Real,
-    N: Dim,
-    P: LinearProcessModel<T, N, Input = U>,
-    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
 }
 
-impl<H, T, N, M, S> AffineFunction<T, N, M> for Observation<'_, H, S>
+impl<T: Real, N: Dim, M: Dim, H: LinearMeasurementModel<T, N, M>, S: StateSpace<T, N>>
+    AffineFunction<T, N, M> for Observation<'_, H, S>
 where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    S: StateSpace<T, N>,
-    H: LinearMeasurementModel<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
 }
