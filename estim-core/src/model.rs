@@ -321,27 +321,27 @@ where
 /// assert_eq!(h.eval(&Vector2::new(1.0, 2.0)), Vector1::new(3.0));
 /// ```
 #[derive(Debug)]
-pub struct Observation<'a, H, S = Euclidean> {
+pub struct Observation<'a, H: ?Sized, S = Euclidean> {
     // By reference, as in `Transition`.
     space: &'a S,
     model: &'a H,
 }
 
-impl<'a, H> Observation<'a, H> {
+impl<'a, H: ?Sized> Observation<'a, H> {
     /// The map x ↦ h(x) on ℝⁿ.
     pub fn new(model: &'a H) -> Self {
         Self::on(&Euclidean, model)
     }
 }
 
-impl<'a, H, S> Observation<'a, H, S> {
+impl<'a, H: ?Sized, S> Observation<'a, H, S> {
     /// The map x ↦ h(x) on the state space `space`.
     pub fn on(space: &'a S, model: &'a H) -> Self {
         Self { space, model }
     }
 }
 
-impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>, S: StateSpace<T, N>>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M> + ?Sized, S: StateSpace<T, N>>
     VectorFunction<T, N, M> for Observation<'_, H, S>
 where
     DefaultAllocator: Alloc<N, M>,
