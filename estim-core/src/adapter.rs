@@ -34,16 +34,18 @@ use crate::scalar::Real;
 #[derive(Clone, Debug, PartialEq)]
 pub struct NoInput<P>(pub P);
 
+/// The zero-length input vector of the wrapped model.
+type Empty<T> = OVector<T, U0>;
+
 /// The zero-length input the wrapped model is called with.
 #[inline(always)]
-fn none<T: Real>() -> OVector<T, U0> {
-    OVector::<T, U0>::zeros()
+fn none<T: Real>() -> Empty<T> {
+    Empty::zeros()
 }
 
-impl<T: Real, N: Dim, P> ProcessModel<T, N> for NoInput<P>
+impl<T: Real, N: Dim, P: ProcessModel<T, N, Input = Empty<T>>> ProcessModel<T, N> for NoInput<P>
 where
     DefaultAllocator: Alloc<N>,
-    P: ProcessModel<T, N, Input = OVector<T, U0>>,
 {
     type Input = ();
 
@@ -62,10 +64,9 @@ where
 }
 
 /// The model's [`InPlace`] with the zero-length input (reached only when it has one).
-impl<T: Real, N: Dim, P> InPlace<T, N, N, ()> for NoInput<P>
+impl<T: Real, N: Dim, P: ProcessModel<T, N, Input = Empty<T>>> InPlace<T, N, N, ()> for NoInput<P>
 where
     DefaultAllocator: Alloc<N>,
-    P: ProcessModel<T, N, Input = OVector<T, U0>>,
 {
     fn value_into(&self, x: &OVector<T, N>, _: &(), dt: T, out: &mut OVector<T, N>) {
         crate::in_place::transition_into(&self.0, x, &none(), dt, out);
@@ -99,20 +100,19 @@ where
     }
 }
 
-impl<T: Real, N: Dim, P> ProcessJacobian<T, N> for NoInput<P>
+impl<T: Real, N: Dim, P: ProcessJacobian<T, N, Input = Empty<T>>> ProcessJacobian<T, N>
+    for NoInput<P>
 where
     DefaultAllocator: Alloc<N>,
-    P: ProcessJacobian<T, N, Input = OVector<T, U0>>,
 {
     fn transition_jacobian(&self, x: &OVector<T, N>, _: &(), dt: T) -> OMatrix<T, N, N> {
         self.0.transition_jacobian(x, &none(), dt)
     }
 }
 
-impl<T: Real, N: Dim, P> ProcessHessian<T, N> for NoInput<P>
+impl<T: Real, N: Dim, P: ProcessHessian<T, N, Input = Empty<T>>> ProcessHessian<T, N> for NoInput<P>
 where
     DefaultAllocator: Alloc<N>,
-    P: ProcessHessian<T, N, Input = OVector<T, U0>>,
 {
     fn transition_hessian(
         &self,
@@ -128,7 +128,7 @@ where
 impl<T: Real, N: Dim, P> LinearProcessModel<T, N> for NoInput<P>
 where
     DefaultAllocator: Alloc<N>,
-    P: LinearProcessModel<T, N> + ProcessJacobian<T, N, Input = OVector<T, U0>>,
+    P: LinearProcessModel<T, N> + ProcessJacobian<T, N, Input = Empty<T>>,
 {
 }
 
@@ -198,10 +198,10 @@ where
     }
 }
 
-impl<T: Real, N: Dim, M: Dim, H> MeasurementModel<T, N, M> for Offset<H, T, M>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>> MeasurementModel<T, N, M>
+    for Offset<H, T, M>
 where
     DefaultAllocator: Alloc<N, M>,
-    H: MeasurementModel<T, N, M>,
 {
     fn measure(&self, x: &OVector<T, N>) -> OVector<T, M> {
         self.model.measure(x) + &self.offset
@@ -222,10 +222,9 @@ where
 }
 
 /// The model's [`InPlace`] with the value shifted by d (reached only when it has one).
-impl<T: Real, N: Dim, M: Dim, H> InPlace<T, N, M> for Offset<H, T, M>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>> InPlace<T, N, M> for Offset<H, T, M>
 where
     DefaultAllocator: Alloc<N, M>,
-    H: MeasurementModel<T, N, M>,
 {
     fn value_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OVector<T, M>) {
         crate::in_place::measure_into(&self.model, x, out);
@@ -258,29 +257,29 @@ where
     }
 }
 
-impl<T: Real, N: Dim, M: Dim, H> MeasurementJacobian<T, N, M> for Offset<H, T, M>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementJacobian<T, N, M>> MeasurementJacobian<T, N, M>
+    for Offset<H, T, M>
 where
     DefaultAllocator: Alloc<N, M>,
-    H: MeasurementJacobian<T, N, M>,
 {
     fn measurement_jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
         self.model.measurement_jacobian(x)
     }
 }
 
-impl<T: Real, N: Dim, M: Dim, H> MeasurementHessian<T, N, M> for Offset<H, T, M>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementHessian<T, N, M>> MeasurementHessian<T, N, M>
+    for Offset<H, T, M>
 where
     DefaultAllocator: Alloc<N, M>,
-    H: MeasurementHessian<T, N, M>,
 {
     fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.measurement_hessian(x, k)
     }
 }
 
-impl<T: Real, N: Dim, M: Dim, H> LinearMeasurementModel<T, N, M> for Offset<H, T, M>
+impl<T: Real, N: Dim, M: Dim, H: LinearMeasurementModel<T, N, M>> LinearMeasurementModel<T, N, M>
+    for Offset<H, T, M>
 where
     DefaultAllocator: Alloc<N, M>,
-    H: LinearMeasurementModel<T, N, M>,
 {
 }

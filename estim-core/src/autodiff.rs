@@ -226,11 +226,8 @@ where
     fn apply<D: AdScalar<T>>(&self, x: &OVector<D, N>) -> OVector<D, M>;
 }
 
-struct ProcessAt<'a, P, U, T> {
-    model: &'a P,
-    input: &'a U,
-    dt: T,
-}
+/// f(·, u, Δt) of a process at a fixed input and step.
+struct ProcessAt<'a, P, U, T>(&'a P, &'a U, T);
 
 impl<T: AdReal, N: Dim, P: AutoDiffProcess<T, N>> GenericMap<T, N, N>
     for ProcessAt<'_, P, P::Input, T>
@@ -239,7 +236,7 @@ where
 {
     #[inline(always)]
     fn apply<D: AdScalar<T>>(&self, x: &OVector<D, N>) -> OVector<D, N> {
-        self.model.transition(x, self.input, self.dt)
+        self.0.transition(x, self.1, self.2)
     }
 }
 
@@ -351,30 +348,17 @@ where
     m
 }
 
-/// An owned Hessian from the cache: `Some` if `into` wrote one.
-fn owned_hessian<T: AdReal, N: Dim>(
-    x: &OVector<T, N>,
-    into: impl FnOnce(&mut OMatrix<T, N, N>) -> bool,
-) -> Option<OMatrix<T, N, N>>
-where
-    DefaultAllocator: Alloc<N>,
-{
-    let n = x.shape_generic().0;
-    let mut out = OMatrix::zeros_generic(n, n);
-    into(&mut out).then_some(out)
-}
-
 impl<G> AutoDiff<G> {
-    /// Hₖ into `out` from the cache, computing all m Hessians at `x` when the key differs.
-    fn cached_hessian_into<T, N, M, F>(
+    /// Hₖ at `x` (`None` when it is exactly zero) from the cache, computing all m Hessians at
+    /// `x` when the key differs.
+    fn cached_hessian<T, N, M, F>(
         &self,
         f: &F,
         kind: Kind,
         key: impl FnOnce(&mut Vec<f64>),
         x: &OVector<T, N>,
         k: usize,
-        out: &mut OMatrix<T, N, N>,
-    ) -> bool
+    ) -> Option<OMatrix<T, N, N>>
     where
         T: AdReal,
         N: Dim,
@@ -382,102 +366,75 @@ impl<G> AutoDiff<G> {
         F: GenericMap<T, N, M>,
         DefaultAllocator: Alloc<N, M>,
     {
-        self.cache.hessian_into(
-            kind,
-            |buf| {
-                buf.extend(x.iter().map(|v| v.widen()));
-                key(buf);
-            },
-            x.nrows(),
-            |values| all_hessians(f, x, values),
-            k,
-            |values| {
-                let n = x.shape_generic().0;
-                if out.shape() != (n.value(), n.value()) {
-                    *out = OMatrix::zeros_generic(n, n);
-                }
-                // Slices, not nalgebra's strided iterator: this copy runs once per request.
-                for (o, v) in out.as_mut_slice().iter_mut().zip(values) {
-                    *o = T::narrow(*v);
-                }
-            },
-        )
+        let n = x.shape_generic().0;
+        let mut out = OMatrix::zeros_generic(n, n);
+        let fill_key = |buf: &mut Vec<f64>| {
+            buf.extend(x.iter().map(|v| v.widen()));
+            key(buf);
+        };
+        let all = |values: &mut Vec<f64>| all_hessians(f, x, values);
+        // Slices, not nalgebra's strided iterator: this copy runs once per request.
+        let write = |values: &[f64]| {
+            for (o, v) in out.as_mut_slice().iter_mut().zip(values) {
+                *o = T::narrow(*v);
+            }
+        };
+        let written = self
+            .cache
+            .hessian_into(kind, fill_key, x.nrows(), all, k, write);
+        written.then_some(out)
     }
 }
 
-impl<T, N, P> ProcessModel<T, N> for AutoDiff<P>
+impl<T: AdReal, N: Dim, P: AutoDiffProcess<T, N>> ProcessModel<T, N> for AutoDiff<P>
 where
-    T: AdReal,
-    N: Dim,
-    P: AutoDiffProcess<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     type Input = P::Input;
 
     #[inline(always)]
-    fn transition(&self, x: &OVector<T, N>, u: &Self::Input, dt: T) -> OVector<T, N> {
+    fn transition(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OVector<T, N> {
         self.model.transition(x, u, dt)
     }
 
     #[inline(always)]
-    fn process_noise(&self, x: &OVector<T, N>, u: &Self::Input, dt: T) -> OMatrix<T, N, N> {
+    fn process_noise(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OMatrix<T, N, N> {
         self.model.process_noise(x, u, dt)
     }
 }
 
-impl<T, N, P> ProcessJacobian<T, N> for AutoDiff<P>
+impl<T: AdReal, N: Dim, P: AutoDiffProcess<T, N>> ProcessJacobian<T, N> for AutoDiff<P>
 where
-    T: AdReal,
-    N: Dim,
-    P: AutoDiffProcess<T, N>,
     DefaultAllocator: Alloc<N>,
 {
-    fn transition_jacobian(&self, x: &OVector<T, N>, u: &Self::Input, dt: T) -> OMatrix<T, N, N> {
-        let f = ProcessAt {
-            model: &self.model,
-            input: u,
-            dt,
-        };
-        jacobian(&f, x)
+    fn transition_jacobian(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OMatrix<T, N, N> {
+        jacobian(&ProcessAt(&self.model, u, dt), x)
     }
 }
 
-impl<T, N, P> ProcessHessian<T, N> for AutoDiff<P>
+impl<T: AdReal, N: Dim, P: AutoDiffProcess<T, N, Input: InputKey>> ProcessHessian<T, N>
+    for AutoDiff<P>
 where
-    T: AdReal,
-    N: Dim,
-    P: AutoDiffProcess<T, N>,
-    P::Input: InputKey,
     DefaultAllocator: Alloc<N>,
 {
     fn transition_hessian(
         &self,
         x: &OVector<T, N>,
-        u: &Self::Input,
+        u: &P::Input,
         dt: T,
         k: usize,
     ) -> Option<OMatrix<T, N, N>> {
-        let f = ProcessAt {
-            model: &self.model,
-            input: u,
-            dt,
-        };
         let key = |buf: &mut Vec<f64>| {
             buf.push(dt.widen());
             u.push_key(buf);
         };
-        owned_hessian(x, |out| {
-            self.cached_hessian_into(&f, Kind::Process, key, x, k, out)
-        })
+        self.cached_hessian(&ProcessAt(&self.model, u, dt), Kind::Process, key, x, k)
     }
 }
 
-impl<T, N, M, H> MeasurementModel<T, N, M> for AutoDiff<H>
+impl<T: AdReal, N: Dim, M: Dim, H: AutoDiffMeasurement<T, N, M>> MeasurementModel<T, N, M>
+    for AutoDiff<H>
 where
-    T: AdReal,
-    N: Dim,
-    M: Dim,
-    H: AutoDiffMeasurement<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     #[inline(always)]
@@ -496,12 +453,9 @@ where
     }
 }
 
-impl<T, N, M, H> MeasurementJacobian<T, N, M> for AutoDiff<H>
+impl<T: AdReal, N: Dim, M: Dim, H: AutoDiffMeasurement<T, N, M>> MeasurementJacobian<T, N, M>
+    for AutoDiff<H>
 where
-    T: AdReal,
-    N: Dim,
-    M: Dim,
-    H: AutoDiffMeasurement<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     fn measurement_jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
@@ -509,28 +463,20 @@ where
     }
 }
 
-impl<T, N, M, H> MeasurementHessian<T, N, M> for AutoDiff<H>
+impl<T: AdReal, N: Dim, M: Dim, H: AutoDiffMeasurement<T, N, M>> MeasurementHessian<T, N, M>
+    for AutoDiff<H>
 where
-    T: AdReal,
-    N: Dim,
-    M: Dim,
-    H: AutoDiffMeasurement<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         let h = MeasurementAt(&self.model);
-        owned_hessian(x, |out| {
-            self.cached_hessian_into(&h, Kind::Measurement, |_| {}, x, k, out)
-        })
+        self.cached_hessian(&h, Kind::Measurement, |_| {}, x, k)
     }
 }
 
-impl<T, N, M, G> VectorFunction<T, N, M> for AutoDiff<G>
+impl<T: AdReal, N: Dim, M: Dim, G: AutoDiffFunction<T, N, M>> VectorFunction<T, N, M>
+    for AutoDiff<G>
 where
-    T: AdReal,
-    N: Dim,
-    M: Dim,
-    G: AutoDiffFunction<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     #[inline(always)]
@@ -539,12 +485,9 @@ where
     }
 }
 
-impl<T, N, M, G> Differentiable<T, N, M> for AutoDiff<G>
+impl<T: AdReal, N: Dim, M: Dim, G: AutoDiffFunction<T, N, M>> Differentiable<T, N, M>
+    for AutoDiff<G>
 where
-    T: AdReal,
-    N: Dim,
-    M: Dim,
-    G: AutoDiffFunction<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
@@ -552,18 +495,12 @@ where
     }
 }
 
-impl<T, N, M, G> TwiceDifferentiable<T, N, M> for AutoDiff<G>
+impl<T: AdReal, N: Dim, M: Dim, G: AutoDiffFunction<T, N, M>> TwiceDifferentiable<T, N, M>
+    for AutoDiff<G>
 where
-    T: AdReal,
-    N: Dim,
-    M: Dim,
-    G: AutoDiffFunction<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
-        let g = FunctionAt(&self.model);
-        owned_hessian(x, |out| {
-            self.cached_hessian_into(&g, Kind::Function, |_| {}, x, k, out)
-        })
+        self.cached_hessian(&FunctionAt(&self.model), Kind::Function, |_| {}, x, k)
     }
 }

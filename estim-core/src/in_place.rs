@@ -67,7 +67,7 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
 use crate::function::{Differentiable, TwiceDifferentiable, VectorFunction};
-use crate::model::{MeasurementModel, ProcessModel};
+use crate::model::{MeasurementModel, Observation, ProcessModel};
 use crate::scalar::Real;
 
 /// Opt-in: a model (or function) whose outputs are written into buffers the caller owns, so
@@ -225,7 +225,7 @@ pub fn process_noise_into<T, N, P>(
     }
 }
 
-/// h(x) into `out`.
+/// h(x) into `out`: [`eval_into`] of the model's [`Observation`].
 #[inline(always)]
 pub fn measure_into<T, N, M, H>(model: &H, x: &OVector<T, N>, out: &mut OVector<T, M>)
 where
@@ -235,10 +235,7 @@ where
     H: MeasurementModel<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    match model.in_place() {
-        Some(m) => m.value_into(x, &(), T::zero(), out),
-        None => *out = model.measure(x),
-    }
+    eval_into(&Observation::new(model), x, out);
 }
 
 /// R(x) into `out`.
@@ -257,7 +254,8 @@ where
     }
 }
 
-/// The residual a ⊖ b of two measurements into `out`.
+/// The residual a ⊖ b of two measurements into `out`: [`difference_into`] of the model's
+/// [`Observation`].
 #[inline(always)]
 pub fn residual_into<T, N, M, H>(
     model: &H,
@@ -271,8 +269,5 @@ pub fn residual_into<T, N, M, H>(
     H: MeasurementModel<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    match model.in_place() {
-        Some(m) => m.residual_into(a, b, out),
-        None => *out = model.residual(a, b),
-    }
+    difference_into(&Observation::new(model), a, b, out);
 }

@@ -233,12 +233,9 @@ impl<'a, P, U, T: Copy, S> Transition<'a, P, U, T, S> {
     }
 }
 
-impl<P, U, T, N, S> VectorFunction<T, N, N> for Transition<'_, P, U, T, S>
+impl<T: Real, N: Dim, P: ProcessModel<T, N, Input = U>, U, S: StateSpace<T, N>>
+    VectorFunction<T, N, N> for Transition<'_, P, U, T, S>
 where
-    T: Real,
-    N: Dim,
-    P: ProcessModel<T, N, Input = U>,
-    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     const VECTOR_SPACES: VectorSpaces = VectorSpaces::of_space(S::VECTOR);
@@ -273,12 +270,9 @@ where
 
 /// The model's [`InPlace`] at this step's input and Δt (reached only when the model has one),
 /// with the state space's ⊟ as the residual.
-impl<P, U, T, N, S> InPlace<T, N, N> for Transition<'_, P, U, T, S>
+impl<T: Real, N: Dim, P: ProcessModel<T, N, Input = U>, U, S: StateSpace<T, N>> InPlace<T, N, N>
+    for Transition<'_, P, U, T, S>
 where
-    T: Real,
-    N: Dim,
-    P: ProcessModel<T, N, Input = U>,
-    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     #[inline(always)]
@@ -318,12 +312,9 @@ where
     }
 }
 
-impl<P, U, T, N, S> Differentiable<T, N, N> for Transition<'_, P, U, T, S>
+impl<T: Real, N: Dim, P: ProcessJacobian<T, N, Input = U>, U, S: StateSpace<T, N>>
+    Differentiable<T, N, N> for Transition<'_, P, U, T, S>
 where
-    T: Real,
-    N: Dim,
-    P: ProcessJacobian<T, N, Input = U>,
-    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     #[inline(always)]
@@ -332,12 +323,9 @@ where
     }
 }
 
-impl<P, U, T, N, S> TwiceDifferentiable<T, N, N> for Transition<'_, P, U, T, S>
+impl<T: Real, N: Dim, P: ProcessHessian<T, N, Input = U>, U, S: StateSpace<T, N>>
+    TwiceDifferentiable<T, N, N> for Transition<'_, P, U, T, S>
 where
-    T: Real,
-    N: Dim,
-    P: ProcessHessian<T, N, Input = U>,
-    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
     #[inline(always)]
@@ -365,33 +353,29 @@ where
 /// assert_eq!(h.eval(&Vector2::new(1.0, 2.0)), Vector1::new(3.0));
 /// ```
 #[derive(Debug)]
-pub struct Observation<'a, H, S = Euclidean> {
+pub struct Observation<'a, H: ?Sized, S = Euclidean> {
     // By reference, as in `Transition`.
     space: &'a S,
     model: &'a H,
 }
 
-impl<'a, H> Observation<'a, H> {
+impl<'a, H: ?Sized> Observation<'a, H> {
     /// The map x ↦ h(x) on ℝⁿ.
     pub fn new(model: &'a H) -> Self {
         Self::on(&Euclidean, model)
     }
 }
 
-impl<'a, H, S> Observation<'a, H, S> {
+impl<'a, H: ?Sized, S> Observation<'a, H, S> {
     /// The map x ↦ h(x) on the state space `space`.
     pub fn on(space: &'a S, model: &'a H) -> Self {
         Self { space, model }
     }
 }
 
-impl<H, T, N, M, S> VectorFunction<T, N, M> for Observation<'_, H, S>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M> + ?Sized, S: StateSpace<T, N>>
+    VectorFunction<T, N, M> for Observation<'_, H, S>
 where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    H: MeasurementModel<T, N, M>,
-    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N, M>,
 {
     // The output ⊞ stays +: the state space decides.
@@ -419,13 +403,9 @@ where
     }
 }
 
-impl<H, T, N, M, S> Differentiable<T, N, M> for Observation<'_, H, S>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementJacobian<T, N, M>, S: StateSpace<T, N>>
+    Differentiable<T, N, M> for Observation<'_, H, S>
 where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    S: StateSpace<T, N>,
-    H: MeasurementJacobian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     #[inline(always)]
@@ -434,13 +414,9 @@ where
     }
 }
 
-impl<H, T, N, M, S> TwiceDifferentiable<T, N, M> for Observation<'_, H, S>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementHessian<T, N, M>, S: StateSpace<T, N>>
+    TwiceDifferentiable<T, N, M> for Observation<'_, H, S>
 where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    S: StateSpace<T, N>,
-    H: MeasurementHessian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     #[inline(always)]
@@ -449,23 +425,16 @@ where
     }
 }
 
-impl<P, U, T, N, S> AffineFunction<T, N, N> for Transition<'_, P, U, T, S>
+impl<T: Real, N: Dim, P: LinearProcessModel<T, N, Input = U>, U, S: StateSpace<T, N>>
+    AffineFunction<T, N, N> for Transition<'_, P, U, T, S>
 where
-    T: Real,
-    N: Dim,
-    P: LinearProcessModel<T, N, Input = U>,
-    S: StateSpace<T, N>,
     DefaultAllocator: Alloc<N>,
 {
 }
 
-impl<H, T, N, M, S> AffineFunction<T, N, M> for Observation<'_, H, S>
+impl<T: Real, N: Dim, M: Dim, H: LinearMeasurementModel<T, N, M>, S: StateSpace<T, N>>
+    AffineFunction<T, N, M> for Observation<'_, H, S>
 where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    S: StateSpace<T, N>,
-    H: LinearMeasurementModel<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
 }

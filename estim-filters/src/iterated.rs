@@ -569,12 +569,9 @@ where
     }
 }
 
-impl<H, T, N, M> MeasurementModel<T, N, M> for Linearization<'_, H, T, N, M>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>> MeasurementModel<T, N, M>
+    for Linearization<'_, H, T, N, M>
 where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    H: MeasurementModel<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     /// h(xᵢ) + Hᵢ (x − xᵢ); at x = xᵢ, h(xᵢ) itself.
@@ -595,12 +592,9 @@ where
     }
 }
 
-impl<H, T, N, M> MeasurementJacobian<T, N, M> for Linearization<'_, H, T, N, M>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>> MeasurementJacobian<T, N, M>
+    for Linearization<'_, H, T, N, M>
 where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    H: MeasurementModel<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     fn measurement_jacobian(&self, _: &OVector<T, N>) -> OMatrix<T, M, N> {

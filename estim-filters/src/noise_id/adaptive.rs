@@ -337,9 +337,9 @@ where
     noise: &'a OMatrix<T, M, M>,
 }
 
-impl<H, T: Real, N: Dim, M: Dim> MeasurementModel<T, N, M> for WithNoise<'_, H, T, M>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>> MeasurementModel<T, N, M>
+    for WithNoise<'_, H, T, M>
 where
-    H: MeasurementModel<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     fn measure(&self, x: &OVector<T, N>) -> OVector<T, M> {
@@ -360,9 +360,9 @@ where
 }
 
 /// The inner model's [`InPlace`] with the given noise (reached only when it has one).
-impl<H, T: Real, N: Dim, M: Dim> InPlace<T, N, M> for WithNoise<'_, H, T, M>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>> InPlace<T, N, M>
+    for WithNoise<'_, H, T, M>
 where
-    H: MeasurementModel<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     fn value_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OVector<T, M>) {
@@ -399,9 +399,9 @@ where
     }
 }
 
-impl<H, T: Real, N: Dim, M: Dim> MeasurementJacobian<T, N, M> for WithNoise<'_, H, T, M>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementJacobian<T, N, M>> MeasurementJacobian<T, N, M>
+    for WithNoise<'_, H, T, M>
 where
-    H: MeasurementJacobian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     fn measurement_jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
@@ -409,9 +409,9 @@ where
     }
 }
 
-impl<H, T: Real, N: Dim, M: Dim> MeasurementHessian<T, N, M> for WithNoise<'_, H, T, M>
+impl<T: Real, N: Dim, M: Dim, H: MeasurementHessian<T, N, M>> MeasurementHessian<T, N, M>
+    for WithNoise<'_, H, T, M>
 where
-    H: MeasurementHessian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
     fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
@@ -419,9 +419,9 @@ where
     }
 }
 
-impl<H, T: Real, N: Dim, M: Dim> LinearMeasurementModel<T, N, M> for WithNoise<'_, H, T, M>
+impl<T: Real, N: Dim, M: Dim, H: LinearMeasurementModel<T, N, M>> LinearMeasurementModel<T, N, M>
+    for WithNoise<'_, H, T, M>
 where
-    H: LinearMeasurementModel<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
 }
