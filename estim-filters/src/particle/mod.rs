@@ -60,7 +60,9 @@
 //! `Sync` (the bound holds with and without the feature, so code compiles either way). After
 //! the first step (which sizes the runtime-size buffers and factorises Q and R), steps with a
 //! fixed particle count allocate nothing, for static and runtime (`Dyn`) sizes alike, as
-//! long as the model's `_into` methods do not allocate.
+//! long as the model's `_into` methods do not allocate. (The Rao-Blackwellised filter
+//! allocates nothing at static sizes; at runtime sizes its per-particle Kalman steps allocate
+//! the matrices the conditionally linear model returns.)
 //!
 //! ```
 //! use estim_core::nalgebra::{Matrix1, Vector1};

@@ -89,7 +89,10 @@ pub struct Noise {
 pub const OUTLIER_SPAN: f64 = 50.0;
 
 impl Default for Noise {
-    /// The settings, none fitted to a log:
+    /// The settings, none fitted by an optimiser to a log. In fairness: σ_g and τ_g were
+    /// picked after looking at this run's range residuals against its ground truth (and agree
+    /// with the data README's spread of 0.8–1.8 m), and the particle roughening and count were
+    /// set after a first full run on the Plaza log; another recording may want other values:
     ///
     /// - odometry: 5 cm of distance and 0.6° of heading error per √m driven (a wheeled robot
     ///   on pavement and grass; 1 % to 5 % of distance over tens of metres), q_ψ 1e-6 rad²/s;
