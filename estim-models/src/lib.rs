@@ -30,14 +30,33 @@
 //! The papers' experiments (runs, headline tables, figures) are not in this crate: each is an
 //! example of the `estim` package, `examples/<name>.rs`, whose body is
 //! `examples/reproductions/<name>.rs`; `cargo run --release --example papers` runs them all.
+//!
+//! ## Without std
+//!
+//! With default features off (no `std`) the crate is `#![no_std]` and needs no allocator:
+//! [`nav`] (the INS, its sensors, the static alignment, normal gravity, the origin's radii and
+//! earth rate), [`motion`], [`sensors`], [`augment`] and [`limits`] build for a bare-metal
+//! target (`.ci/firmware` checks `thumbv7em-none-eabihf`), their f64 functions through
+//! `num_traits::Float` (libm). What needs `std`:
+//!
+//! - `nav::Origin::ned` (geodetic → NED): the `map_3d` crate calls std's float functions;
+//! - `motion::van_loan`: its 2n × 2n exponential is a runtime-sized matrix (the closed forms
+//!   `continuous_white_noise` and `discrete_white_noise` stay);
+//! - the four papers [`boje`], [`lee_huang`], [`lu`] and [`lv2`]: their simulators draw from
+//!   rand's `StdRng`, their runs and reports are `Vec`s, and lv2's χ² test is statrs.
+#![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
 pub mod augment;
+#[cfg(feature = "std")]
 pub mod boje;
+#[cfg(feature = "std")]
 pub mod lee_huang;
 pub mod limits;
+#[cfg(feature = "std")]
 pub mod lu;
+#[cfg(feature = "std")]
 pub mod lv2;
 pub mod motion;
 pub mod nav;
