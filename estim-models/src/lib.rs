@@ -30,6 +30,27 @@
 //! The papers' experiments (runs, headline tables, figures) are not in this crate: each is an
 //! example of the `estim` package, `examples/<name>.rs`, whose body is
 //! `examples/reproductions/<name>.rs`; `cargo run --release --example papers` runs them all.
+//!
+//! ## Without std
+//!
+//! With default features off (no `std`) the crate is `#![no_std]` and needs no allocator:
+//! [`nav`] (the INS, its sensors, the static alignment, normal gravity, the origin's radii and
+//! earth rate), [`motion`], [`sensors`], [`augment`], [`limits`] and the papers' models and
+//! filters build for a bare-metal target (`.ci/firmware` checks `thumbv7em-none-eabihf`), their
+//! f64 functions through `num_traits::Float` (libm), the papers' filters on estim-filters
+//! without std. What needs `std`:
+//!
+//! - `nav::Origin::ned` (geodetic → NED): the `map_3d` crate calls std's float functions;
+//! - `motion::van_loan`: its 2n × 2n exponential is a runtime-sized matrix (the closed forms
+//!   `continuous_white_noise` and `discrete_white_noise` stay);
+//! - the papers' simulators, which draw from rand's `StdRng` and return `Vec`s
+//!   (`boje::circle`, `lee_huang::simulation`, `lu::simulation`, `lv2::simulate`), and their
+//!   recorded runs, which are `Vec`s (`boje::rate::iterate_riccati`, `lu::analysis`, and
+//!   `lu::covariance_history`, `lu::run_realization` with their records);
+//! - lv2's general model (`Fusion`, `RedundantAxes` and the rest of its fusion): its axis
+//!   sets are `Vec`s and its χ² screening is statrs (`lv2::stats`); its three-axis closed
+//!   forms (`lv2::xyq`) and `FusionError` stay.
+#![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 

@@ -8,6 +8,9 @@
 //! most per million steps. Runs are bounded by [`MAX_RUNS`] = 10⁶.
 
 use estim_core::{Error, Parameter};
+// f64's float functions without std (libm); with std the inherent methods are used.
+#[cfg(not(feature = "std"))]
+use num_traits::Float as _;
 
 /// The largest number of steps (or iterations) a simulator, runner or recursion accepts.
 pub const MAX_STEPS: usize = 10_000_000;

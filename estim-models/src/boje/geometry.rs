@@ -9,6 +9,9 @@ use estim_core::checks::ensure_finite;
 use estim_core::error::Result;
 use estim_core::nalgebra::{Matrix4, Matrix4x5, Matrix5, U4, U5, Vector4, Vector5};
 use estim_core::{Differentiable, Error, Quantity, Stage, TwiceDifferentiable, VectorFunction};
+// f64's float functions without std (libm); with std the inherent methods are used.
+#[cfg(not(feature = "std"))]
+use num_traits::Float as _;
 
 /// Standard gravity, m/s² (converts the paper's mg figures).
 pub const STANDARD_GRAVITY: f64 = 9.80665;

@@ -174,12 +174,14 @@
 //!   corr(e, x̂) = −1. The check assumes the truth is drawn from the prior; it says nothing
 //!   about the filter here.
 
+#[cfg(feature = "std")]
 pub mod circle;
 pub mod filter;
 pub mod geometry;
 pub mod moments;
 pub mod rate;
 
+#[cfg(feature = "std")]
 pub use circle::{
     CircleConfig, CircleData, FilterKind, InitialConditions, ProcessKind, simulate_circle,
 };

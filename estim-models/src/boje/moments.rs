@@ -10,6 +10,9 @@
 
 use estim_core::nalgebra::{Matrix2, Matrix4x2, U2, U4, Vector2, Vector4};
 use estim_core::{Differentiable, Moments, TwiceDifferentiable, VectorFunction};
+// f64's float functions without std (libm); with std the inherent methods are used.
+#[cfg(not(feature = "std"))]
+use num_traits::Float as _;
 
 /// g(x, θ) = (cos θ, sin θ, x cos θ, x sin θ), argument order (x, θ).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

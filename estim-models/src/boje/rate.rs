@@ -20,6 +20,9 @@ use estim_core::{
     LinearProcessModel, MeasurementHessian, MeasurementJacobian, MeasurementModel, ProcessJacobian,
     ProcessModel,
 };
+// f64's float functions without std (libm); with std the inherent methods are used.
+#[cfg(not(feature = "std"))]
+use num_traits::Float as _;
 
 /// Scalar rate process ω⁺ = ω + Δt u, u = θ̈ from the accelerometers, Q = λ33 Δt².
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -98,7 +101,9 @@ pub fn riccati_step(p: f64, q: f64, r: f64, c: f64, s: f64) -> f64 {
 }
 
 /// Eq 17 iterated from `p0` until |pᵢ₊₁ − pᵢ| ≤ `rel_tol`·pᵢ₊₁ or `max_iterations`: returns
-/// (p, iterations, the trajectory p₀, p₁, …).
+/// (p, iterations, the trajectory p₀, p₁, …). Needs the `std` feature (the trajectory is a
+/// `Vec`).
+#[cfg(feature = "std")]
 pub fn iterate_riccati(
     p0: f64,
     q: f64,

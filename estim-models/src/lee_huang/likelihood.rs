@@ -21,6 +21,9 @@
 
 use estim_core::{Differentiable, TwiceDifferentiable, VectorFunction};
 use nalgebra::{Matrix2, Matrix2x6, Matrix6, U2, U6, Vector2, Vector6};
+// f64's float functions without std (libm); with std the inherent methods are used.
+#[cfg(not(feature = "std"))]
+use num_traits::Float as _;
 
 /// Which formula of the paper builds the pseudo-measurement.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]

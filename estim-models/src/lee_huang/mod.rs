@@ -152,6 +152,7 @@ pub mod likelihood;
 pub mod model;
 pub mod ote;
 pub mod sensors;
+#[cfg(feature = "std")]
 pub mod simulation;
 
 pub use likelihood::{LikelihoodForm, VelocityLikelihood, velocity_likelihood_as_printed};
@@ -161,4 +162,5 @@ pub use model::{
 };
 pub use ote::{OteSettings, OteSteadyState, OteStep, OwnShipTrajectoryEstimator, ote_steady_state};
 pub use sensors::{FourAccelerometers, RigidBodyMotion, rotation};
+#[cfg(feature = "std")]
 pub use simulation::{Scenario, SensorConfig, SensorSample, Simulation, simulate};

@@ -36,6 +36,9 @@ use nalgebra::{
 };
 
 use super::sensors::rotation;
+// f64's float functions without std (libm); with std the inherent methods are used.
+#[cfg(not(feature = "std"))]
+use num_traits::Float as _;
 
 /// Standard gravity g₀ = 9.80665 m/s².
 pub const STANDARD_GRAVITY: f64 = 9.80665;

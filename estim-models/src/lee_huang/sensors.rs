@@ -24,6 +24,9 @@
 //! ```
 
 use nalgebra::{Matrix2, Vector2, Vector3, Vector4};
+// f64's float functions without std (libm); with std the inherent methods are used.
+#[cfg(not(feature = "std"))]
+use num_traits::Float as _;
 
 /// Rotation from the body frame to the inertial frame, R(θ) = \[\[cos θ, −sin θ\], \[sin θ, cos θ\]\]
 /// (counter-clockwise, as in eq 16c/d).

@@ -6,10 +6,13 @@ use estim_core::{Error, Gaussian, Quantity, Stage};
 use estim_filters::{Estimator, KalmanFilter, Predict, Update, UpdateReport};
 use nalgebra::{Matrix2, Matrix3, Matrix3x2, U2, U3, Vector2, Vector3};
 
+#[cfg(feature = "std")]
+use super::model::transition_matrix;
 use super::model::{
     BiasCoupling, ErrorStateProcess, GpsMeasurement, Mechanisation,
-    PRINTED_FILTER_ACCEL_NOISE_VARIANCE, Scenario, transition_matrix,
+    PRINTED_FILTER_ACCEL_NOISE_VARIANCE, Scenario,
 };
+#[cfg(feature = "std")]
 use super::simulation::Simulator;
 
 /// What the filter assumes: noise variance, prior covariance M₀, and the sign of Φ₁₃. The
@@ -181,6 +184,7 @@ fn gain(p: &Matrix3<f64>, gps: &GpsMeasurement) -> Matrix3x2<f64> {
     p * GpsMeasurement::observation().transpose() * v_inv
 }
 
+#[cfg(feature = "std")]
 /// The deterministic covariances and gains at the GPS updates.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct CovarianceHistory {
@@ -194,6 +198,7 @@ pub struct CovarianceHistory {
     pub gain: Vec<Matrix3x2<f64>>,
 }
 
+#[cfg(feature = "std")]
 impl CovarianceHistory {
     /// The index of the entry nearest to time `t`.
     pub fn index_at(&self, t: f64) -> usize {
@@ -206,6 +211,7 @@ impl CovarianceHistory {
     }
 }
 
+#[cfg(feature = "std")]
 pub(crate) fn nearest(times: &[f64], t: f64) -> usize {
     let mut best = 0;
     for (i, &ti) in times.iter().enumerate() {
@@ -216,6 +222,7 @@ pub(crate) fn nearest(times: &[f64], t: f64) -> usize {
     best
 }
 
+#[cfg(feature = "std")]
 /// The paper's covariance recursion (§2.6) written out, for `steps` accelerometer steps:
 /// M ← Φ P Φᵀ + Γ W Γᵀ each step and, every `gps_every` steps, the information form
 /// P = (M⁻¹ + Hᵀ V⁻¹ H)⁻¹, K = P Hᵀ V⁻¹. An independent route to the framework filter's
@@ -269,6 +276,7 @@ pub fn covariance_history(
     Ok(history)
 }
 
+#[cfg(feature = "std")]
 /// One realization filtered, recorded at t = 0 and at every GPS update.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Realization {
@@ -290,6 +298,7 @@ pub struct Realization {
     pub mechanisation_error: Vec<Vector2<f64>>,
 }
 
+#[cfg(feature = "std")]
 /// Runs the filter on one realization of `scenario` (seed `seed`) and records it.
 ///
 /// Errors: an invalid scenario or settings ([`LuFilter::new`]; at most

@@ -128,20 +128,24 @@
 //! readings (E2–E5): the truth is drawn from the filter's prior and propagated by the same
 //! error dynamics the filter models, so nothing is left unmodelled.
 
+#[cfg(feature = "std")]
 pub mod analysis;
 pub mod filter;
 pub mod model;
+#[cfg(feature = "std")]
 pub mod simulation;
 
+#[cfg(feature = "std")]
 pub use analysis::{
     CovarianceAnalysis, PAPER_RESIDUAL_CORRELATION, covariance_analysis, quadrature_drive,
 };
-pub use filter::{
-    CovarianceHistory, FilterSettings, LuFilter, Realization, covariance_history, run_realization,
-};
+#[cfg(feature = "std")]
+pub use filter::{CovarianceHistory, Realization, covariance_history, run_realization};
+pub use filter::{FilterSettings, LuFilter};
 pub use model::{
     ACCEL_DT, ACCEL_NOISE_VARIANCE, BiasCoupling, ErrorStateProcess, GPS_EVERY, GpsMeasurement,
     Mechanisation, PRINTED_FILTER_ACCEL_NOISE_VARIANCE, Scenario, TruthIntegration, noise_input,
     transition_matrix,
 };
+#[cfg(feature = "std")]
 pub use simulation::{AccelerationProfile, SensorRecord, Simulator, Truth, simulate};

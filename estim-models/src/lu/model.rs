@@ -14,6 +14,9 @@ use estim_core::{
     Parameter, ProcessJacobian, ProcessModel, Quantity, Stage,
 };
 use nalgebra::{Matrix2, Matrix2x3, Matrix3, U2, U3, Vector2, Vector3};
+// f64's float functions without std (libm); with std the inherent methods are used.
+#[cfg(not(feature = "std"))]
+use num_traits::Float as _;
 
 /// Accelerometer sample period Δt = 0.005 s (200 Hz).
 pub const ACCEL_DT: f64 = 0.005;

@@ -48,8 +48,8 @@ impl fmt::Display for FusionError {
     }
 }
 
-impl std::error::Error for FusionError {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+impl core::error::Error for FusionError {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
         match self {
             FusionError::Core(e) => Some(e),
             _ => None,

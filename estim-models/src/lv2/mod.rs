@@ -129,12 +129,16 @@
 //! `examples/reproductions/lv2_fusion.rs`.
 
 mod error;
+#[cfg(feature = "std")]
 mod model;
+#[cfg(feature = "std")]
 pub mod simulate;
+#[cfg(feature = "std")]
 pub mod stats;
 pub mod xyq;
 
 pub use error::FusionError;
+#[cfg(feature = "std")]
 pub use model::{
     AxisStatus, DynAxes, FilterFusion, Fusion, PlanarAxes, RedundantAxes, SpatialAxes, XyqModel,
     screen,

@@ -25,12 +25,19 @@
 //! ```
 //!
 //! The exponential is nalgebra's `Matrix::exp` (scaling and squaring with a Padé
-//! approximant), computed on a runtime-sized 2n × 2n matrix whatever the sizes of F and G.
+//! approximant), computed on a runtime-sized 2n × 2n matrix whatever the sizes of F and G; it
+//! needs the `std` feature (the closed forms do not).
 
-use estim_core::checks::all_finite;
-use estim_core::nalgebra::{DMatrix, DefaultAllocator, Dim, OMatrix, SMatrix};
+use estim_core::nalgebra::SMatrix;
 use estim_core::scalar::real;
-use estim_core::{Alloc, Error, Parameter, Quantity, Real, Stage};
+use estim_core::{Error, Parameter, Quantity, Real, Stage};
+// What van_loan's runtime-sized matrix needs.
+#[cfg(feature = "std")]
+use estim_core::{
+    Alloc,
+    checks::all_finite,
+    nalgebra::{DMatrix, DefaultAllocator, Dim, OMatrix},
+};
 
 /// k! as `T` (k ≤ 170 is exact enough for `f64`; the chains here use k ≤ 2K).
 fn factorial<T: Real>(k: usize) -> T {
@@ -210,6 +217,7 @@ pub fn discrete_white_noise<T: Real, const K: usize>(
 /// ```
 // (Φ, Q_d) reads as the math does; a named pair type would only rename it.
 #[allow(clippy::type_complexity)]
+#[cfg(feature = "std")]
 pub fn van_loan<T: Real, N: Dim, W: Dim>(
     f: &OMatrix<T, N, N>,
     g: &OMatrix<T, N, W>,

@@ -54,7 +54,9 @@ mod trig;
 mod turn;
 mod unicycle;
 
-pub use discretize::{continuous_white_noise, discrete_white_noise, van_loan};
+#[cfg(feature = "std")]
+pub use discretize::van_loan;
+pub use discretize::{continuous_white_noise, discrete_white_noise};
 pub use kinematic::{ConstantAcceleration, ConstantVelocity, Noise};
 pub use stochastic::{GaussMarkov, RandomWalk};
 pub use turn::{CoordinatedTurn, CoordinatedTurnRate};

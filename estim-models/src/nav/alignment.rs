@@ -1,6 +1,9 @@
 //! Static initial alignment: levelling from the accelerometer, heading from the magnetometer.
 
 use estim_core::nalgebra::{UnitQuaternion, Vector3};
+// f64's float functions without std (libm); with std the inherent methods are used.
+#[cfg(not(feature = "std"))]
+use num_traits::Float as _;
 
 use super::earth::NavError;
 

@@ -3,7 +3,11 @@
 use core::fmt;
 
 use estim_core::nalgebra::Vector3;
+#[cfg(feature = "std")]
 use map_3d::Ellipsoid;
+// f64's sin and sqrt without std (libm); with std the inherent methods are used.
+#[cfg(not(feature = "std"))]
+use num_traits::Float as _;
 
 /// The earth's rotation rate Ω (WGS-84) \[rad/s\].
 pub const EARTH_RATE: f64 = 7.292_115e-5;
@@ -44,7 +48,7 @@ impl fmt::Display for NavError {
     }
 }
 
-impl std::error::Error for NavError {}
+impl core::error::Error for NavError {}
 
 /// γ(φ, h): WGS-84 normal gravity at geodetic latitude φ \[rad\] and height h \[m\] above the
 /// ellipsoid \[m/s²\]: Somigliana γ₀ = γ_e (1 + k sin²φ)/√(1 − e² sin²φ), continued upward as
@@ -130,7 +134,9 @@ impl Origin {
     }
 
     /// The NED position \[m\] of the point at `latitude`, `longitude` \[deg\], `height` \[m\]
-    /// (exact ellipsoidal geodesy through ECEF, `map_3d::geodetic2ned`).
+    /// (exact ellipsoidal geodesy through ECEF, `map_3d::geodetic2ned`). Needs the `std`
+    /// feature (`map_3d` calls std's float functions).
+    #[cfg(feature = "std")]
     pub fn ned(&self, latitude: f64, longitude: f64, height: f64) -> Vector3<f64> {
         let (n, e, d) = map_3d::geodetic2ned(
             latitude.to_radians(),
@@ -145,9 +151,13 @@ impl Origin {
     }
 
     /// The radii of curvature at the origin \[m\]: meridian R_M = R_N (1 − e²)/(1 − e² sin²φ₀)
-    /// and prime vertical R_N = a / √(1 − e² sin²φ₀) (`map_3d::get_radius_normal`).
+    /// and prime vertical R_N = a / √(1 − e² sin²φ₀) (`map_3d::get_radius_normal` with std,
+    /// the same closed form through libm without).
     pub fn radii(&self) -> (f64, f64) {
+        #[cfg(feature = "std")]
         let normal = map_3d::get_radius_normal(self.latitude, Ellipsoid::WGS84);
+        #[cfg(not(feature = "std"))]
+        let normal = radius_normal(self.latitude);
         let meridian = normal * (1.0 - E2) / (1.0 - E2 * self.latitude.sin().powi(2));
         (meridian, normal)
     }
@@ -160,5 +170,36 @@ impl Origin {
     /// γ at height h₀ − p_D above the ellipsoid (p_D the NED down coordinate) \[m/s²\].
     pub fn gravity(&self, down: f64) -> f64 {
         normal_gravity(self.latitude, self.height - down)
+    }
+}
+
+/// R_N(φ) = a / √(1 − e² sin²φ), the prime-vertical radius of curvature \[m\]: the closed form
+/// `Origin::radii` uses without std (`map_3d::get_radius_normal` with std).
+#[cfg_attr(feature = "std", allow(dead_code))]
+fn radius_normal(latitude: f64) -> f64 {
+    A / (1.0 - E2 * latitude.sin().powi(2)).sqrt()
+}
+
+#[cfg(all(test, feature = "std"))]
+mod tests {
+    use super::*;
+
+    /// The no_std closed form of R_N against map_3d's, which the std build uses: the two
+    /// routes of `Origin::radii` agree. Both evaluate a / √(1 − e² sin²φ) in a few
+    /// operations (map_3d from its own a and f), so they differ by rounding only: 1e-15
+    /// relative (a few ulps) is the tolerance.
+    #[test]
+    fn radius_normal_matches_map_3d() {
+        for degrees in [
+            -89.0, -51.642, -10.0, 0.0, 0.3, 30.0, 45.0, 51.642, 80.0, 89.9,
+        ] {
+            let latitude = f64::to_radians(degrees);
+            let ours = radius_normal(latitude);
+            let theirs = map_3d::get_radius_normal(latitude, Ellipsoid::WGS84);
+            assert!(
+                ((ours - theirs) / theirs).abs() < 1e-15,
+                "{degrees}°: {ours} vs {theirs}"
+            );
+        }
     }
 }

@@ -4,6 +4,9 @@
 use estim_core::manifold::{AttitudeError, so3_exp, so3_log};
 use estim_core::nalgebra::{Const, Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 use estim_core::{ProcessJacobian, ProcessModel};
+// f64's float functions without std (libm); with std the inherent methods are used.
+#[cfg(not(feature = "std"))]
+use num_traits::Float as _;
 
 use super::earth::{NavError, Origin};
 

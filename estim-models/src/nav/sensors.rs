@@ -3,6 +3,9 @@
 
 use estim_core::nalgebra::{Const, Matrix1, Matrix3, SMatrix, SVector, Vector1, Vector3};
 use estim_core::{MeasurementJacobian, MeasurementModel, wrap_angle};
+// f64's float functions without std (libm); with std the inherent methods are used.
+#[cfg(not(feature = "std"))]
+use num_traits::Float as _;
 
 use super::ins::{ATTITUDE, POSITION, STATE, VELOCITY, attitude};
 
