@@ -52,7 +52,8 @@ where
         sigma,
         ..
     } = scratch;
-    for (o, &v) in offsets.iter_mut().zip(s.iter()) {
+    // Slices, not nalgebra's strided iterators (≈ 20 instructions an entry at 6/4).
+    for (o, &v) in offsets.as_mut_slice().iter_mut().zip(s.as_slice()) {
         *o = v * gamma;
     }
     // The crate's one sigma-point generator, as the full-covariance UKF forms its points.
@@ -234,7 +235,7 @@ where
     innovation_into(model, z, predicted, report)?;
     // (odd, even) = ((d₊ − d₋), (d₊ + d₋)) √(2w)/2, in place of (D₋, D₊).
     let half_root = (real::<T>(2.0) * weight).sqrt() * real::<T>(0.5);
-    for (p, q) in even.iter_mut().zip(odd.iter_mut()) {
+    for (p, q) in even.as_mut_slice().iter_mut().zip(odd.as_mut_slice()) {
         let (plus, minus) = (*p, *q);
         *q = (plus - minus) * half_root;
         *p = (plus + minus) * half_root;
