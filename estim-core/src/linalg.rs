@@ -125,6 +125,43 @@ where
     Ok(())
 }
 
+/// [`psd_factor`] into `out`, bit for bit: the same unpivoted factorisation (with its
+/// zero-pivot tolerance) in `out`, so a positive definite C, or a semi-definite one whose zero
+/// directions come without covariances, allocates nothing; only a C that needs pivoting takes
+/// [`psd_factor`]'s pivoted route (which allocates for runtime sizes). The square-root
+/// filters' noise factors.
+///
+/// ```
+/// use estim_core::{psd_factor, Stage};
+/// use estim_core::linalg::psd_factor_exact_into;
+/// use estim_core::nalgebra::Matrix2;
+///
+/// let c = Matrix2::new(4.0, 2.0, 2.0, 2.0);
+/// let mut s = Matrix2::zeros();
+/// psd_factor_exact_into(&c, &mut s, Stage::Propagation)?;
+/// assert_eq!(s, psd_factor(&c, Stage::Propagation)?); // the same bits
+/// assert!(psd_factor_exact_into(&Matrix2::new(1.0, 2.0, 2.0, 1.0), &mut s, Stage::Propagation).is_err());
+/// # Ok::<(), estim_core::Error>(())
+/// ```
+pub fn psd_factor_exact_into<T: Real, D: Dim>(
+    c: &OMatrix<T, D, D>,
+    out: &mut OMatrix<T, D, D>,
+    stage: Stage,
+) -> Result<()>
+where
+    DefaultAllocator: Allocator<D> + Allocator<D, D>,
+{
+    if out.shape() == c.shape() {
+        copy(out, c);
+        if lower_factor_in_place(out, zero_pivot_bounds(c), None).is_ok() {
+            out.fill_upper_triangle(T::zero(), 1);
+            return Ok(());
+        }
+    }
+    *out = psd_factor(c, stage)?;
+    Ok(())
+}
+
 /// Largest |Cᵢᵢ| and the entry bound for a zero-variance direction: |cᵢⱼ|² ≤ dᵢ dⱼ, so with a
 /// pivot within `tol` of zero the remaining covariances must be within √(tol · max Cᵢᵢ).
 fn zero_pivot_bounds<T: Real, D: Dim>(c: &OMatrix<T, D, D>) -> (T, T)

@@ -101,10 +101,15 @@
 //! # Cost and allocation
 //!
 //! The covariance P = S Sᵀ is **cached**: formed once per committed step (n³/2
-//! multiply-adds), so [`Estimator::covariance`] is a plain reference. Static sizes allocate
-//! nothing. Runtime sizes allocate their pre-array and factor buffers at each step (no
-//! workspace is kept yet) and use the same slice kernels, not faer. Costs against the Joseph
-//! form: BENCHMARKS.md, "Square-root filters".
+//! multiply-adds), so [`Estimator::covariance`] is a plain reference. Every step works in a
+//! [`FactorScratch`] of the pre-array blocks and the new estimate, which the filter swaps in
+//! on success. Static sizes keep it on the stack and allocate nothing. Runtime sizes keep one
+//! per shape in the filter, sized by the first step with that shape (or by
+//! [`prepare_predict`](Predict::prepare_predict) and [`prepare_update`](Update::prepare_update)),
+//! so every later step allocates nothing, with models that opt in through
+//! [`InPlace`](estim_core::InPlace) (`tests/it/no_alloc_dynamic.rs`; the cross-covariance of
+//! [`PredictCross`] still allocates). They use the same slice kernels as static sizes, not
+//! faer. Costs against the Joseph form: BENCHMARKS.md, "Square-root filters".
 //!
 //! The state is a vector (ℝⁿ, ⊞ = +) by default; states with angles or attitudes take a
 //! [`StateSpace`] with [`with_state_space`](SquareRootFilter::with_state_space), as the full-P
@@ -137,16 +142,18 @@
 
 mod linearized;
 mod propagator;
+mod scratch;
 mod triangular;
 mod unscented;
 
-pub use propagator::{FactorEstimate, FactorPredict, FactorUpdate};
+pub use propagator::{FactorPredict, FactorUpdate};
+pub use scratch::FactorScratch;
 
 use estim_core::checks::{
     all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_shape, finite_or_error,
 };
 use estim_core::kernel::{self, Accum};
-use estim_core::linalg::{mirror_lower_checked, psd_factor};
+use estim_core::linalg::{mirror_lower_checked, psd_factor, psd_factor_exact_into};
 use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::propagate::{Affine, Linearized, Unscented};
 use estim_core::{
@@ -154,11 +161,12 @@ use estim_core::{
     StateSpace, error::Result,
 };
 
-use crate::gaussian_filter::ensure_time_step;
+use crate::gaussian_filter::{Step, ensure_time_step};
 use crate::report::UpdateReport;
 use crate::snapshot::{EstimateSnapshot, FactorSnapshot, copy_matrix};
 use crate::traits::{Estimator, OnStateSpace, Predict, PredictCross, Rollback, Update};
 use crate::update::{Gate, UpdateSettings, report_statistics};
+use scratch::FactorCache;
 use triangular::{Block, lower_triangularize};
 
 /// A Gaussian filter that carries the covariance as a lower-triangular factor S, P = S Sᵀ
@@ -167,7 +175,7 @@ use triangular::{Block, lower_triangularize};
 ///
 /// It implements [`Estimator`], [`Predict`] and [`Update`] for the same models as the
 /// full-covariance filter of the same name, so it drops into code written for those.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Debug)]
 pub struct SquareRootFilter<T: Real, N: Dim, Pr, S = Euclidean>
 where
     DefaultAllocator: Alloc<N>,
@@ -183,6 +191,43 @@ where
     /// The state space: sigma points x̂ ⊞ δ, deviations ⊟, correction x̂ ⊞ K ν.
     space: S,
     settings: UpdateSettings<T>,
+    /// The steps' buffers for runtime sizes (not state: not cloned, not compared).
+    scratch: FactorCache<T>,
+}
+
+/// A clone starts with an empty scratch cache (its first `Dyn` steps size their own).
+impl<T: Real, N: Dim, Pr: Clone, S: Clone> Clone for SquareRootFilter<T, N, Pr, S>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    fn clone(&self) -> Self {
+        Self {
+            state: self.state.clone(),
+            factor: self.factor.clone(),
+            covariance: self.covariance.clone(),
+            factored: self.factored,
+            propagator: self.propagator.clone(),
+            space: self.space.clone(),
+            settings: self.settings,
+            scratch: FactorCache::default(),
+        }
+    }
+}
+
+/// Equal estimate, factor, propagator, state space and settings (the scratch is not compared).
+impl<T: Real, N: Dim, Pr: PartialEq, S: PartialEq> PartialEq for SquareRootFilter<T, N, Pr, S>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    fn eq(&self, other: &Self) -> bool {
+        self.state == other.state
+            && self.factor == other.factor
+            && self.covariance == other.covariance
+            && self.factored == other.factored
+            && self.propagator == other.propagator
+            && self.space == other.space
+            && self.settings == other.settings
+    }
 }
 
 /// The square-root linear Kalman filter: [`KalmanFilter`](crate::KalmanFilter)'s equations,
@@ -261,6 +306,7 @@ where
             propagator,
             space: Euclidean,
             settings: UpdateSettings::new(),
+            scratch: FactorCache::default(),
         }
     }
 
@@ -295,6 +341,7 @@ where
             propagator,
             space: Euclidean,
             settings: UpdateSettings::new(),
+            scratch: FactorCache::default(),
         })
     }
 }
@@ -331,6 +378,7 @@ where
             propagator: self.propagator,
             space,
             settings: self.settings,
+            scratch: self.scratch,
         }
     }
 
@@ -409,28 +457,34 @@ where
             })
         }
     }
+}
 
-    /// Makes (x̂, S) the estimate, with P = S Sᵀ, if P passes the checks the full-P filters
-    /// make of theirs: finite (a finite S can still overflow in P: S = 10²⁰⁰ I gives
-    /// P = 10⁴⁰⁰ I = ∞ in f64; issue 41) and, as there, no negative variance (which
-    /// Pᵢᵢ = Σₖ Sᵢₖ² cannot have once finite, but the rule is the same for every filter).
-    /// Otherwise `NonFinite` (`NotPositiveSemiDefinite`) for `stage`'s `Covariance`, and the
-    /// filter is unchanged.
-    fn commit(
-        &mut self,
-        stage: Stage,
-        state: OVector<T, N>,
-        factor: OMatrix<T, N, N>,
-    ) -> Result<()> {
-        let quantity = Quantity::Covariance;
-        let (covariance, finite) = outer_checked(&factor);
-        finite_or_error(finite, stage, quantity)?;
-        ensure_nonnegative_diagonal(&covariance, stage, quantity)?;
-        self.covariance = covariance;
-        self.state = state;
-        self.factor = factor;
-        Ok(())
-    }
+/// Makes the estimate in `scratch` (x̂ in `state`, S in `factor`) the filter's, with P = S Sᵀ
+/// formed in `scratch.covariance`, if P passes the checks the full-P filters make of theirs:
+/// finite (a finite S can still overflow in P: S = 10²⁰⁰ I gives P = 10⁴⁰⁰ I = ∞ in f64; issue
+/// 41) and, as there, no negative variance (which Pᵢᵢ = Σₖ Sᵢₖ² cannot have once finite, but
+/// the rule is the same for every filter). Otherwise `NonFinite` (`NotPositiveSemiDefinite`)
+/// for `stage`'s `Covariance`, and the filter is unchanged. Commits by swapping buffers (no
+/// copy for runtime sizes); the scratch then holds the old estimate.
+#[inline(always)]
+fn commit<T: Real, N: Dim, M: Dim>(
+    stage: Stage,
+    state: &mut OVector<T, N>,
+    factor: &mut OMatrix<T, N, N>,
+    covariance: &mut OMatrix<T, N, N>,
+    scratch: &mut FactorScratch<T, N, M>,
+) -> Result<()>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    let quantity = Quantity::Covariance;
+    let finite = outer_into(&scratch.factor, &mut scratch.covariance);
+    finite_or_error(finite, stage, quantity)?;
+    ensure_nonnegative_diagonal(&scratch.covariance, stage, quantity)?;
+    core::mem::swap(covariance, &mut scratch.covariance);
+    core::mem::swap(state, &mut scratch.state);
+    core::mem::swap(factor, &mut scratch.factor);
+    Ok(())
 }
 
 /// x̂, S and the P formed from it, copied as they are: a restore does not refactorise.
@@ -503,9 +557,18 @@ where
 {
     let n = s.shape_generic().0;
     let mut p = OMatrix::zeros_generic(n, n);
-    kernel::mul_tr_lower(&mut p, Accum::Replace, T::one(), s, s);
-    let finite = mirror_lower_checked(&mut p);
+    let finite = outer_into(s, &mut p);
     (p, finite)
+}
+
+/// S Sᵀ into `p` (of S's shape), exactly symmetric, and whether it is finite.
+#[inline(always)]
+fn outer_into<T: Real, N: Dim>(s: &OMatrix<T, N, N>, p: &mut OMatrix<T, N, N>) -> bool
+where
+    DefaultAllocator: Alloc<N>,
+{
+    kernel::mul_tr_lower(p, Accum::Replace, T::one(), s, s);
+    mirror_lower_checked(p)
 }
 
 /// A lower-triangular factor of the covariance `c` and whether it exists: [`psd_factor`]
@@ -525,15 +588,18 @@ where
     }
 }
 
-/// A square root of the noise covariance `q` (m × m): its shape, non-negative diagonal and
-/// finiteness checked, then [`psd_factor`] (semi-definite allowed; an indefinite `q` is
+/// A square root of the noise covariance `q` (m × m) into `root`: its shape, non-negative
+/// diagonal and finiteness checked, then [`psd_factor`]'s factor
+/// ([`psd_factor_exact_into`]: semi-definite allowed; an indefinite `q` is
 /// `NotPositiveSemiDefinite` naming `quantity`).
+#[inline(always)]
 fn noise_factor<T: Real, M: Dim>(
     q: &OMatrix<T, M, M>,
+    root: &mut OMatrix<T, M, M>,
     m: usize,
     stage: Stage,
     quantity: Quantity,
-) -> Result<OMatrix<T, M, M>>
+) -> Result<()>
 where
     DefaultAllocator: Alloc<M>,
 {
@@ -542,7 +608,8 @@ where
         return Err(Error::NonFinite { stage, quantity });
     }
     ensure_nonnegative_diagonal(q, stage, quantity)?;
-    psd_factor(q, stage).map_err(|_| Error::NotPositiveSemiDefinite { stage, quantity })
+    psd_factor_exact_into(q, root, stage)
+        .map_err(|_| Error::NotPositiveSemiDefinite { stage, quantity })
 }
 
 /// `Ok` if `x` is finite, else `NonFinite` naming `quantity`.
@@ -560,9 +627,6 @@ where
         Err(Error::NonFinite { stage, quantity })
     }
 }
-
-/// A new estimate (x̂, S), not yet committed.
-use propagator::FactorEstimate as Estimate;
 
 /// ν = z ⊖ ẑ into the report, checked finite (a non-finite z is `NonFinite`, `Measurement`).
 fn innovation_into<T, N, M, H>(
@@ -597,52 +661,59 @@ where
     finite(&report.innovation, stage, Quantity::Innovation)
 }
 
-/// The tail both array-form updates share: from the lower factor `l` of S_zz
-/// (`report.innovation` holds ν), the whitened gain K̄ = P_xz L⁻ᵀ and the posterior factor,
-/// the report's statistics (S_zz = L Lᵀ; NIS, log-likelihood and gate as every update forms
-/// them) and, unless gated, x̂⁺ = x̂ + K̄ L⁻¹ν. A zero (or non-finite) pivot of L is a singular
-/// (non-finite) S_zz; a non-finite posterior is an error. Inlined into both updates: a call
-/// of its own added 48 bytes to the SR-UKF 6/4 firmware step's peak stack.
+/// The tail both array-form updates share: from the lower factor L of S_zz in
+/// `scratch.root`, the whitened gain K̄ = P_xz L⁻ᵀ in `scratch.gain` and the posterior factor
+/// in `scratch.factor` (`report.innovation` holds ν), the report's statistics (S_zz = L Lᵀ;
+/// NIS, log-likelihood and gate as every update forms them) and, unless gated (`Ok(false)`),
+/// x̂⁺ = x̂ ⊞ K̄ L⁻¹ν into `scratch.state` (`Ok(true)`). A zero (or non-finite) pivot of L is a
+/// singular (non-finite) S_zz; a non-finite posterior is an error. Inlined into both updates:
+/// a call of its own added 48 bytes to the SR-UKF 6/4 firmware step's peak stack.
 #[inline(always)]
 fn finish_update<T: Real, N: Dim, M: Dim, S: StateSpace<T, N>>(
     space: &S,
     state: &OVector<T, N>,
-    l: &OMatrix<T, M, M>,
-    kbar: &OMatrix<T, N, M>,
-    posterior: OMatrix<T, N, N>,
     threshold: Option<T>,
+    scratch: &mut FactorScratch<T, N, M>,
     report: &mut UpdateReport<T, M>,
-) -> Result<Option<Estimate<T, N>>>
+) -> Result<bool>
 where
     DefaultAllocator: Alloc<N, M>,
 {
     let stage = Stage::Update;
     let quantity = Quantity::InnovationCovariance;
+    let FactorScratch {
+        state: new_state,
+        factor: posterior,
+        root: l,
+        gain: kbar,
+        whitened,
+        step: delta,
+        ..
+    } = scratch;
     finite(l, stage, quantity)?;
     let m = l.nrows();
     if (0..m).any(|i| !(l[(i, i)] > T::zero())) {
         return Err(Error::NotPositiveDefinite { stage, quantity });
     }
-    report.innovation_covariance = outer(l);
-    let mut whitened = report.innovation.clone();
-    kernel::solve_lower_in_place(l, &mut whitened);
+    outer_into(l, &mut report.innovation_covariance);
+    kernel::copy(whitened, &report.innovation);
+    kernel::solve_lower_in_place(l, whitened);
     let nis = whitened.norm_squared();
     if !report_statistics(l, nis, threshold, report) {
-        return Ok(None);
+        return Ok(false);
     }
-    finite(&posterior, stage, Quantity::Covariance)?;
-    let mut new_state = state.clone();
+    finite(posterior, stage, Quantity::Covariance)?;
     if S::VECTOR {
-        kernel::mul(&mut new_state, Accum::Add, T::one(), kbar, &whitened);
+        kernel::copy(new_state, state);
+        kernel::mul(new_state, Accum::Add, T::one(), kbar, whitened);
     } else {
         // x̂⁺ = x̂ ⊞ K̄ L⁻¹ν.
-        let mut delta = state.clone();
-        kernel::mul(&mut delta, Accum::Replace, T::one(), kbar, &whitened);
-        space.plus_into(state, &delta, &mut new_state);
-        ensure_shape(&new_state, state.nrows(), 1, stage, Quantity::Mean)?;
+        kernel::mul(delta, Accum::Replace, T::one(), kbar, whitened);
+        space.plus_into(state, delta, new_state);
+        ensure_shape(new_state, state.nrows(), 1, stage, Quantity::Mean)?;
     }
-    finite(&new_state, stage, Quantity::Mean)?;
-    Ok(Some((new_state, posterior)))
+    finite(new_state, stage, Quantity::Mean)?;
+    Ok(true)
 }
 
 // ---------------------------------------------------------------------------------------
@@ -652,46 +723,101 @@ impl<T: Real, N: Dim, Pr, S: StateSpace<T, N>> SquareRootFilter<T, N, Pr, S>
 where
     DefaultAllocator: Alloc<N>,
 {
-    /// Q(x̂, u, Δt) after the checks every prediction starts with.
-    fn process_noise<P: ProcessModel<T, N>>(
-        &self,
-        model: &P,
-        input: &P::Input,
-        dt: T,
-    ) -> Result<OMatrix<T, N, N>> {
-        ensure_time_step(dt)?;
-        self.ensure_factored(Stage::Prediction)?;
-        let n = self.state.shape_generic().0;
-        let mut q = OMatrix::zeros_generic(n, n);
-        estim_core::in_place::process_noise_into(model, &self.state, input, dt, &mut q);
-        Ok(q)
-    }
-
-    /// The prediction (with C = cov(xₖ, xₖ₊₁) into `cross` if given), committed if it
-    /// succeeds.
+    /// The prediction (with C = cov(xₖ, xₖ₊₁) into `cross` if given), computed in the step's
+    /// scratch (a local for static sizes, the cached one for `Dyn`) and committed if it
+    /// succeeds and `step` applies it.
+    #[inline(always)]
     fn predict_step<P>(
         &mut self,
         model: &P,
         input: &P::Input,
         dt: T,
         cross: Option<&mut OMatrix<T, N, N>>,
+        step: Step,
     ) -> Result<()>
     where
         P: ProcessModel<T, N>,
         Pr: FactorPredict<T, N, P>,
     {
-        let q = self.process_noise(model, input, dt)?;
-        let (x, s) = (self.propagator).predict_factor(
-            &self.space,
-            &self.state,
-            &self.factor,
-            model,
-            input,
-            dt,
-            &q,
-            cross,
-        )?;
-        self.commit(Stage::Prediction, x, s)
+        ensure_time_step(dt)?;
+        self.ensure_factored(Stage::Prediction)?;
+        let Self {
+            state,
+            factor,
+            covariance,
+            propagator,
+            space,
+            scratch: cache,
+            ..
+        } = self;
+        let n = state.shape_generic().0;
+        let mut local;
+        let (work, cached) = match cache.predict(n) {
+            Some((work, _)) => (work, true),
+            None => {
+                local = FactorScratch::new(n, n);
+                (&mut local, false)
+            }
+        };
+        estim_core::in_place::process_noise_into(model, state, input, dt, &mut work.noise);
+        let result = propagator
+            .predict_factor(space, state, factor, model, input, dt, work, cross)
+            .and_then(|()| match step {
+                Step::Apply => commit(Stage::Prediction, state, factor, covariance, work),
+                Step::Prepare => Ok(()),
+            });
+        if result.is_err() && cached {
+            cache.discard_predict();
+        }
+        result
+    }
+
+    /// An update with `model` and `z` (or its preparation), computed in the step's scratch
+    /// and committed if applied.
+    #[inline(always)]
+    fn update_step<M, H>(
+        &mut self,
+        model: &H,
+        z: &OVector<T, M>,
+        report: &mut UpdateReport<T, M>,
+        step: Step,
+    ) -> Result<()>
+    where
+        M: Dim,
+        H: MeasurementModel<T, N, M>,
+        Pr: FactorUpdate<T, N, M, H>,
+        DefaultAllocator: Alloc<N, M>,
+    {
+        self.ensure_factored(Stage::Update)?;
+        let threshold = self.settings.threshold(z.nrows());
+        let Self {
+            state,
+            factor,
+            covariance,
+            propagator,
+            space,
+            scratch: cache,
+            ..
+        } = self;
+        let (n, m) = (state.shape_generic().0, z.shape_generic().0);
+        let mut local;
+        let (work, slot) = match cache.update(n, m) {
+            Some((work, slot)) => (work, Some(slot)),
+            None => {
+                local = FactorScratch::new(n, m);
+                (&mut local, None)
+            }
+        };
+        let result = propagator
+            .update_factor(space, state, factor, model, z, threshold, work, report)
+            .and_then(|apply| match step {
+                Step::Apply if apply => commit(Stage::Update, state, factor, covariance, work),
+                _ => Ok(()),
+            });
+        if let (Err(_), Some(slot)) = (&result, slot) {
+            cache.discard_update(slot);
+        }
+        result
     }
 }
 
@@ -705,7 +831,12 @@ where
     DefaultAllocator: Alloc<N>,
 {
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
-        self.predict_step(model, input, dt, None)
+        self.predict_step(model, input, dt, None, Step::Apply)
+    }
+
+    /// Sizes the runtime-size prediction buffers by one prediction that is not committed.
+    fn prepare_predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
+        self.predict_step(model, input, dt, None, Step::Prepare)
     }
 }
 
@@ -754,7 +885,7 @@ where
     ) -> Result<OMatrix<T, N, N>> {
         let n = self.state.shape_generic().0;
         let mut cross = OMatrix::zeros_generic(n, n);
-        self.predict_step(model, input, dt, Some(&mut cross))?;
+        self.predict_step(model, input, dt, Some(&mut cross), Step::Apply)?;
         Ok(cross)
     }
 }
@@ -775,20 +906,13 @@ where
         z: &OVector<T, M>,
         report: &mut UpdateReport<T, M>,
     ) -> Result<()> {
-        self.ensure_factored(Stage::Update)?;
-        let threshold = self.settings.threshold(z.nrows());
-        let result = (self.propagator).update_factor(
-            &self.space,
-            &self.state,
-            &self.factor,
-            model,
-            z,
-            threshold,
-            report,
-        )?;
-        match result {
-            Some((x, s)) => self.commit(Stage::Update, x, s),
-            None => Ok(()),
-        }
+        self.update_step(model, z, report, Step::Apply)
+    }
+
+    /// Sizes the runtime-size update buffers for this model's measurement length (and
+    /// `report`) by one update with z = h(x̂) that is not committed.
+    fn prepare_update(&mut self, model: &H, report: &mut UpdateReport<T, M>) -> Result<()> {
+        let z = model.measure(&self.state);
+        self.update_step(model, &z, report, Step::Prepare)
     }
 }

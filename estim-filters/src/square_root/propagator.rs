@@ -14,20 +14,19 @@ use estim_core::{
 };
 
 use super::linearized::{linearized_predict, linearized_update};
+use super::scratch::FactorScratch;
 use super::unscented::{unscented_predict, unscented_update};
 use crate::report::UpdateReport;
-
-/// A new estimate (x̂, S) computed by a factor propagator, not yet committed.
-pub type FactorEstimate<T, N> = (OVector<T, N>, OMatrix<T, N, N>);
 
 /// The prediction of a square-root filter through process models `P`.
 pub trait FactorPredict<T: Real, N: Dim, P: ProcessModel<T, N>>
 where
     DefaultAllocator: Alloc<N>,
 {
-    /// (x̂⁻, S⁻) for x⁺ = f(x, u, Δt) + w, w ~ N(0, Q) with `noise` = Q(x̂, u, Δt), from x ~
-    /// N(x̂, S Sᵀ) on the state space `space` (sigma points x̂ ⊞ δ, deviations ⊟); C =
-    /// cov(x, f(x)) into `cross` if given. Errors as the filter's `predict`.
+    /// (x̂⁻, S⁻) into `scratch.state` and `scratch.factor` for x⁺ = f(x, u, Δt) + w,
+    /// w ~ N(0, Q) with Q = Q(x̂, u, Δt) in `scratch.noise` on entry, from x ~ N(x̂, S Sᵀ) on the
+    /// state space `space` (sigma points x̂ ⊞ δ, deviations ⊟); C = cov(x, f(x)) into `cross`
+    /// if given. Errors as the filter's `predict`; the filter commits nothing then.
     #[allow(clippy::too_many_arguments)]
     fn predict_factor<S: StateSpace<T, N>>(
         &self,
@@ -37,9 +36,9 @@ where
         model: &P,
         input: &P::Input,
         dt: T,
-        noise: &OMatrix<T, N, N>,
+        scratch: &mut FactorScratch<T, N, N>,
         cross: Option<&mut OMatrix<T, N, N>>,
-    ) -> Result<FactorEstimate<T, N>>;
+    ) -> Result<()>;
 }
 
 /// The update of a square-root filter with measurement models `H` of `M` components.
@@ -48,8 +47,9 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     /// The report of the update with `z` (innovation, its covariance, NIS, log-likelihood,
-    /// outcome) and, unless the NIS exceeds `threshold`, the corrected (x̂⁺, S⁺), x̂⁺ = x̂ ⊞ K ν
-    /// on the state space `space`.
+    /// outcome) and, unless the NIS exceeds `threshold`, the corrected (x̂⁺, S⁺) into
+    /// `scratch.state` and `scratch.factor`, x̂⁺ = x̂ ⊞ K ν on the state space `space`. `true`
+    /// when the filter is to commit them, `false` when the update was gated.
     #[allow(clippy::too_many_arguments)]
     fn update_factor<S: StateSpace<T, N>>(
         &self,
@@ -59,8 +59,9 @@ where
         model: &H,
         z: &OVector<T, M>,
         threshold: Option<T>,
+        scratch: &mut FactorScratch<T, N, M>,
         report: &mut UpdateReport<T, M>,
-    ) -> Result<Option<FactorEstimate<T, N>>>;
+    ) -> Result<bool>;
 }
 
 /// Writes the two impls of a derivative-based propagator (`Affine`, `Linearized`), which
@@ -79,11 +80,11 @@ macro_rules! linear_factor_propagator {
                 model: &P,
                 input: &P::Input,
                 dt: T,
-                noise: &OMatrix<T, N, N>,
+                scratch: &mut FactorScratch<T, N, N>,
                 cross: Option<&mut OMatrix<T, N, N>>,
-            ) -> Result<FactorEstimate<T, N>> {
+            ) -> Result<()> {
                 let f = Transition::on(space, model, input, dt);
-                linearized_predict(state, factor, &f, noise, cross)
+                linearized_predict(state, factor, &f, scratch, cross)
             }
         }
 
@@ -100,9 +101,10 @@ macro_rules! linear_factor_propagator {
                 model: &H,
                 z: &OVector<T, M>,
                 threshold: Option<T>,
+                scratch: &mut FactorScratch<T, N, M>,
                 report: &mut UpdateReport<T, M>,
-            ) -> Result<Option<FactorEstimate<T, N>>> {
-                linearized_update(space, state, factor, model, z, threshold, report)
+            ) -> Result<bool> {
+                linearized_update(space, state, factor, model, z, threshold, scratch, report)
             }
         }
     };
@@ -123,11 +125,11 @@ where
         model: &P,
         input: &P::Input,
         dt: T,
-        noise: &OMatrix<T, N, N>,
+        scratch: &mut FactorScratch<T, N, N>,
         cross: Option<&mut OMatrix<T, N, N>>,
-    ) -> Result<FactorEstimate<T, N>> {
+    ) -> Result<()> {
         let f = Transition::on(space, model, input, dt);
-        unscented_predict(self, state, factor, &f, noise, cross)
+        unscented_predict(self, state, factor, &f, scratch, cross)
     }
 }
 
@@ -144,8 +146,11 @@ where
         model: &H,
         z: &OVector<T, M>,
         threshold: Option<T>,
+        scratch: &mut FactorScratch<T, N, M>,
         report: &mut UpdateReport<T, M>,
-    ) -> Result<Option<FactorEstimate<T, N>>> {
-        unscented_update(self, space, state, factor, model, z, threshold, report)
+    ) -> Result<bool> {
+        unscented_update(
+            self, space, state, factor, model, z, threshold, scratch, report,
+        )
     }
 }

@@ -16,11 +16,11 @@ use estim_core::nalgebra::{DMatrix, DVector, Dyn};
 use estim_core::propagate::Unscented;
 use estim_core::{
     Gaussian, InPlace, LinearMeasurement, LinearProcess, MeasurementHessian, MeasurementJacobian,
-    MeasurementModel, ProcessHessian, ProcessJacobian, ProcessModel,
+    MeasurementModel, ProcessHessian, ProcessJacobian, ProcessModel, WrappedAngles,
 };
 use estim_filters::{
     Ekf, Estimator, FadingMemoryRls, GaussianFilter, GaussianSecondOrderEkf, KalmanFilter, Predict,
-    SecondOrderEkf, Ukf, Update, UpdateReport,
+    SecondOrderEkf, SrEkf, SrKalmanFilter, SrUkf, Ukf, Update, UpdateReport,
 };
 
 const DT: f64 = 0.1;
@@ -374,6 +374,66 @@ fn ukfs_do_not_allocate_per_dynamic_step() {
         let cubature = GaussianFilter::with_propagator(prior(n), Unscented::cubature());
         assert_eq!(count_nonlinear(cubature, n), 0, "cubature n = {n}");
     }
+}
+
+#[test]
+fn square_root_filters_do_not_allocate_per_dynamic_step() {
+    // Runtime sizes up to 16 pre-array rows are triangularised by reflections, larger ones by
+    // rotations: n = 8 (12 and 14 rows) and n = 100 take both kernels.
+    for n in SIZES {
+        let kf = SrKalmanFilter::new(prior(n));
+        assert_eq!(count_linear(kf, n), 0, "SrKalmanFilter n = {n}");
+        assert_eq!(
+            count_linear(SrEkf::new(prior(n)), n),
+            0,
+            "SrEkf linear n = {n}"
+        );
+        assert_eq!(count_nonlinear(SrEkf::new(prior(n)), n), 0, "SrEkf n = {n}");
+        assert_eq!(count_nonlinear(SrUkf::new(prior(n)), n), 0, "SrUkf n = {n}");
+        // β < α²: R̃'s factor by a rank-one downdate.
+        let cubature = SrUkf::with_propagator(prior(n), Unscented::cubature());
+        assert_eq!(count_nonlinear(cubature, n), 0, "SR cubature n = {n}");
+        // A state space: the correction x̂ ⊞ K̄ L⁻¹ν and the SR-UKF's ⊞/⊟ sigma points.
+        let angles = WrappedAngles::new([0, 3]);
+        let ekf = SrEkf::new(prior(n)).with_state_space(angles);
+        assert_eq!(count_nonlinear(ekf, n), 0, "SrEkf on angles n = {n}");
+        let ukf = SrUkf::new(prior(n)).with_state_space(angles);
+        assert_eq!(count_nonlinear(ukf, n), 0, "SrUkf on angles n = {n}");
+    }
+}
+
+#[test]
+fn square_root_warm_up_allocates_once_and_a_failed_step_is_undone() {
+    // Unprepared: the first step sizes the scratch (counted), the second allocates nothing.
+    let n = 8;
+    let (process, measurement) = linear_models(n);
+    let none = DVector::zeros(0);
+    let z = DVector::from_element(n / 2, 0.1);
+    let mut report = UpdateReport::zeros(Dyn(n / 2));
+    let mut kf = SrKalmanFilter::new(prior(n));
+    let mut step = |kf: &mut SrKalmanFilter<f64, Dyn>| {
+        allocations_during(|| {
+            kf.predict(&process, &none, DT).unwrap();
+            kf.update_into(&measurement, &z, &mut report).unwrap();
+        })
+    };
+    assert!(step(&mut kf) > 0);
+    assert_eq!(step(&mut kf), 0);
+    // A prediction and an update that fail inside the cached scratch (a NaN in Q, a NaN
+    // reading) change nothing, and the next steps equal those of a clone that never failed.
+    let mut twin = kf.clone();
+    let (x, p) = (kf.state().clone(), kf.covariance().clone());
+    let mut bad_process = process.clone();
+    bad_process.noise[(1, 1)] = f64::NAN;
+    let bad = DVector::from_element(n / 2, f64::NAN);
+    assert!(kf.predict(&bad_process, &none, DT).is_err());
+    assert!(kf.update(&measurement, &bad).is_err());
+    assert_unchanged(&kf, &x, &p);
+    assert_eq!(kf.factor(), twin.factor());
+    for filter in [&mut kf, &mut twin] {
+        step(filter);
+    }
+    assert_unchanged(&kf, twin.state(), twin.covariance());
 }
 
 #[test]
