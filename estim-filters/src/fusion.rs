@@ -166,5 +166,6 @@ pub use outcome::{
 };
 pub use sensors::SensorSet;
 pub use settings::{
-    FusionSettings, InputConvention, MonitorSettings, ResetSettings, SensorSettings,
+    DuplicatePolicy, FusionSettings, InputConvention, MonitorSettings, ResetSettings,
+    SensorSettings,
 };
