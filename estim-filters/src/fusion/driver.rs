@@ -11,7 +11,7 @@ use super::sensors::SensorSet;
 use super::settings::{DuplicatePolicy, FusionSettings, InputConvention, Resolved, SensorSettings};
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback};
 
-
+mod smooth;
 
 /// A filter `F` of the family, its process model `P` with its input, and the sensors `S`,
 /// driven by timestamped events: see the [module docs](super) for what it does and why.

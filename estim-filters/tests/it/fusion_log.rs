@@ -2,12 +2,13 @@
 //! step (no subdivision), and the log-likelihood of a run with late readings, which equals a
 //! plain filter's over the same readings in time order.
 
-use estim_core::nalgebra::{Matrix1, U1, Vector1};
+use estim_core::nalgebra::{Matrix1, U1, U2, Vector1};
 use estim_core::{Gaussian, LinearMeasurement, LinearProcess, error::Result};
 use estim_filters::fusion::{
     DuplicatePolicy, FusionDriver, FusionError, FusionSettings, Innovation, SensorSet,
     SensorSettings,
 };
+use estim_filters::smoother::{ReadingsError, filter_readings, smooth_readings};
 use estim_filters::{Estimator, KalmanFilter, Predict, Update};
 
 use crate::fusion_support::{
@@ -180,4 +181,142 @@ fn the_log_likelihood_of_a_run_with_late_readings_is_the_time_ordered_one() {
         (got - expected).abs() <= 1e-9 * expected.abs(),
         "{got} vs {expected}"
     );
+}
+
+/// The cart's readings of `measurements(seed, 120)` as a log `(time, reading)` in time order
+/// (sensor 0 before 1 at equal times, the driver's order), and the driver fed them 3 grid
+/// steps late, in arrival order, with one prediction per gap.
+fn late_run(
+    seed: u64,
+    q: f64,
+) -> (
+    Vec<(f64, Reading)>,
+    FusionDriver<f64, U2, KalmanFilter<f64, U2>, ConstantVelocity, Cart>,
+) {
+    let (_, taken) = measurements(seed, 120);
+    let log: Vec<_> = taken.iter().map(|m| (m.time(), m.reading)).collect();
+    let mut arrivals: Vec<_> = taken.iter().map(|m| (m.step + 3, *m)).collect();
+    arrivals.sort_by_key(|a| a.0);
+    let mut driver = FusionDriver::new(
+        KalmanFilter::new(prior()),
+        ConstantVelocity { q },
+        (),
+        Cart::new(),
+        0.0,
+        FusionSettings {
+            max_step: f64::INFINITY,
+            ..settings()
+        },
+        SensorSettings::default(),
+    )
+    .unwrap();
+    for (_, m) in &arrivals {
+        driver.fuse(m.time(), m.reading).unwrap();
+    }
+    (log, driver)
+}
+
+/// The driver's run (late readings replayed) smoothed equals the batch RTS of the same log in
+/// time order: the same times, and moments equal to round-off. The filtered estimates are
+/// bit-identical (the replay is); the two backward passes then run the same arithmetic, so
+/// 1e-12 relative is generous. Smoothing leaves the driver as it was.
+#[test]
+fn the_driver_run_smoothed_is_the_batch_smoother_of_the_sorted_log() {
+    let (log, mut driver) = late_run(5, Q);
+    let before = snapshot(&driver);
+    let track = driver.smooth().unwrap();
+    assert_eq!(snapshot(&driver), before);
+    let batch = smooth_readings(
+        &mut KalmanFilter::new(prior()),
+        &ConstantVelocity { q: Q },
+        |_| (),
+        &Cart::new(),
+        0.0,
+        &log,
+    )
+    .unwrap();
+    assert_eq!(track.times, batch.track.times);
+    assert_eq!(track.estimates.len(), batch.track.estimates.len());
+    for (a, b) in track.estimates.iter().zip(&batch.track.estimates) {
+        let scale = 1.0 + b.mean().amax().max(b.covariance().amax());
+        assert!((a.mean() - b.mean()).amax() <= 1e-12 * scale);
+        assert!((a.covariance() - b.covariance()).amax() <= 1e-12 * scale);
+    }
+    // And its log-likelihood is the batch's (same filtered run: 1e-12 relative).
+    let ll = driver.log_likelihood();
+    assert!((ll - batch.log_likelihood).abs() <= 1e-12 * ll.abs());
+}
+
+/// Bad logs are typed errors naming the reading, and the filter is as it was.
+#[test]
+fn bad_logs_name_the_reading_and_leave_the_filter_unchanged() {
+    let (log, _) = late_run(7, Q);
+    let (model, cart) = (ConstantVelocity { q: Q }, Cart::new());
+    let mut kf = KalmanFilter::new(prior());
+    kf.update(&cart.position, &Vector1::new(0.1)).unwrap();
+    let before = kf.estimate();
+    let mut run = |log: &[(f64, Reading)]| {
+        let error = filter_readings(&mut kf, &model, |_| (), &cart, 0.0, log).unwrap_err();
+        let smoothed = smooth_readings(&mut kf, &model, |_| (), &cart, 0.0, log).unwrap_err();
+        // Compared as text: a NaN time is not equal to itself.
+        assert_eq!(error.to_string(), smoothed.to_string());
+        error
+    };
+    let mut unsorted = log.clone();
+    unsorted.swap(3, 4);
+    assert!(matches!(
+        run(&unsorted),
+        ReadingsError::NotSorted { index: 4, .. }
+    ));
+    let mut unknown = log.clone();
+    unknown[2].1 = Reading::Unknown;
+    assert_eq!(
+        run(&unknown),
+        ReadingsError::UnknownSensor {
+            index: 2,
+            sensor: 5,
+            count: 2
+        }
+    );
+    let mut nan_time = log.clone();
+    nan_time[6].0 = f64::NAN;
+    assert!(matches!(
+        run(&nan_time),
+        ReadingsError::NonFiniteTime { index: Some(6), .. }
+    ));
+    // A NaN reading fails inside the filter, after the readings before it ran.
+    let mut nan = log.clone();
+    nan[9].1 = position(f64::NAN);
+    let error = run(&nan);
+    assert!(
+        matches!(error, ReadingsError::Step { index: 9, .. }),
+        "{error}"
+    );
+    assert!(error.to_string().contains("reading 9"));
+    assert_eq!(kf.estimate(), before);
+}
+
+/// Maximum likelihood of the process noise over a driver run with late readings finds what it
+/// finds over the batch log: the two log-likelihoods are the same function of q (to 1e-12
+/// relative, previous test), so the optima agree to the optimiser's tolerance (1e-6 in ln q,
+/// far below the standard error of ~0.3).
+#[cfg(feature = "likelihood")]
+#[test]
+fn ml_over_a_driver_run_equals_ml_over_the_batch() {
+    use estim_filters::noise_id::{MaximumLikelihood, NoiseIdError};
+    let (log, _) = late_run(9, Q);
+    let over_driver = |theta: &[f64]| -> Result<f64, NoiseIdError> {
+        Ok(late_run(9, theta[0].exp()).1.log_likelihood())
+    };
+    let over_batch = |theta: &[f64]| -> Result<f64, NoiseIdError> {
+        let model = ConstantVelocity { q: theta[0].exp() };
+        let mut kf = KalmanFilter::new(prior());
+        let run = filter_readings(&mut kf, &model, |_| (), &Cart::new(), 0.0, &log).unwrap();
+        Ok(run.log_likelihood)
+    };
+    let ml = MaximumLikelihood::new();
+    let a = ml.maximize(over_driver, &[0.0]).unwrap();
+    let b = ml.maximize(over_batch, &[0.0]).unwrap();
+    assert!((a.parameters[0] - b.parameters[0]).abs() < 1e-6);
+    assert!((a.log_likelihood - b.log_likelihood).abs() <= 1e-9 * b.log_likelihood.abs());
 }

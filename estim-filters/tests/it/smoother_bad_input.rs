@@ -81,6 +81,7 @@ fn lengths_that_disagree_are_refused() {
                 found_rows: found,
                 found_cols: 1,
             },
+            state: None,
         };
         assert_all_fail(&process, &sensor, &kf, inputs, 0.5, zs, expected);
     }
@@ -106,7 +107,11 @@ fn bad_time_steps_are_refused() {
             },
         ),
     ] {
-        let expected = SmootherError { step: 0, error };
+        let expected = SmootherError {
+            step: 0,
+            error,
+            state: None,
+        };
         assert_all_fail(&process, &sensor, &kf, &inputs, dt, &zs, expected);
     }
 }
@@ -132,14 +137,16 @@ fn non_finite_data_fails_at_its_step() {
     assert_all_fail(&process, &sensor, &kf, &inputs, 0.5, &zs, e);
 }
 
-/// F = 0 and Q = 0 make every predicted covariance 0, and F = 0 with an indefinite Q makes it
-/// indefinite: filtering runs (the updates see S > 0), the backward pass fails at the last
-/// recorded step (K − 1, the first it computes) and the filter is restored;
-/// `filter_sequence` on the same data succeeds.
+/// F = [[1, 0], [1, 0]] and Q = 0 copy the position into the velocity: every predicted
+/// covariance is singular along state 1 with both variances positive (not a fixed state, which
+/// the smoother handles): filtering runs (the updates see S > 0), the backward pass fails at
+/// the last recorded step (K − 1, the first it computes) naming state 1, and the filter is
+/// restored; `filter_sequence` on the same data succeeds. An indefinite Q is refused earlier,
+/// by the prediction.
 #[test]
 fn an_indefinite_predicted_covariance_fails_the_backward_pass() {
     let (mut process, sensor, kf) = system(0.0);
-    process.transition = Matrix2::zeros();
+    process.transition = Matrix2::new(1.0, 0.0, 1.0, 0.0);
     let (inputs, zs) = data(5);
     let expected = SmootherError {
         step: 4,
@@ -147,6 +154,7 @@ fn an_indefinite_predicted_covariance_fails_the_backward_pass() {
             stage: Stage::Smoothing,
             quantity: Quantity::Covariance,
         },
+        state: Some(1),
     };
     let mut f = kf.clone();
     assert!(filter_sequence(&mut f, &process, &inputs, 0.5, &sensor, &zs).is_ok());
@@ -181,6 +189,7 @@ fn an_indefinite_predicted_covariance_fails_the_backward_pass() {
             stage: Stage::Prediction,
             quantity: Quantity::ProcessNoise,
         },
+        state: None,
     };
     let forward = filter_sequence(&mut g, &process, &inputs, 0.5, &sensor, &zs);
     assert_eq!(forward.unwrap_err(), forward_error);
