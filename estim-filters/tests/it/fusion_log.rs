@@ -12,7 +12,8 @@ use estim_filters::smoother::{ReadingsError, filter_readings, smooth_readings};
 use estim_filters::{Estimator, KalmanFilter, Predict, Update};
 
 use crate::fusion_support::{
-    Cart, ConstantVelocity, Q, Reading, kf_driver, measurements, prior, settings, snapshot,
+    Cart, CartDriver, ConstantVelocity, Q, Reading, kf_driver, measurements, prior, settings,
+    snapshot,
 };
 
 fn position(z: f64) -> Reading {
@@ -186,13 +187,9 @@ fn the_log_likelihood_of_a_run_with_late_readings_is_the_time_ordered_one() {
 /// The cart's readings of `measurements(seed, 120)` as a log `(time, reading)` in time order
 /// (sensor 0 before 1 at equal times, the driver's order), and the driver fed them 3 grid
 /// steps late, in arrival order, with one prediction per gap.
-fn late_run(
-    seed: u64,
-    q: f64,
-) -> (
-    Vec<(f64, Reading)>,
-    FusionDriver<f64, U2, KalmanFilter<f64, U2>, ConstantVelocity, Cart>,
-) {
+type Log = Vec<(f64, Reading)>;
+
+fn late_run(seed: u64, q: f64) -> (Log, CartDriver<KalmanFilter<f64, U2>>) {
     let (_, taken) = measurements(seed, 120);
     let log: Vec<_> = taken.iter().map(|m| (m.time(), m.reading)).collect();
     let mut arrivals: Vec<_> = taken.iter().map(|m| (m.step + 3, *m)).collect();
