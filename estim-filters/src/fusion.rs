@@ -4,9 +4,11 @@
 //! [`FusionDriver`] holds a filter of the family, the process model and its input, and takes
 //! timestamped measurements from several sensors:
 //!
-//! - it **predicts to each measurement's time**, in equal sub-steps of at most
-//!   [`FusionSettings::max_step`] (n = ⌈Δt / h − 10⁻⁹⌉ steps of Δt / n, so that rounding in the
-//!   timestamps never adds a sliver of a step; no prediction at all between equal times);
+//! - it **predicts to each measurement's time**: by default in one prediction of Δt, or, if
+//!   [`FusionSettings::max_step`] h is set, in equal sub-steps (n = ⌈Δt / h − 10⁻⁹⌉ steps of
+//!   Δt / n, so that rounding in the timestamps never adds a sliver of a step); no prediction
+//!   at all between equal times, where two readings of one sensor follow the
+//!   [`DuplicatePolicy`] (fused both by default);
 //! - it **fuses a late (out-of-sequence) measurement at the time it was taken**: a bounded
 //!   history ([`FusionSettings::horizon`] seconds, at most [`FusionSettings::capacity`]
 //!   records) keeps, after every event, the state, the covariance, the input in force and the
@@ -20,7 +22,13 @@
 //!   filter, or excluded because its sensor is faulty; it keeps counters and a health summary
 //!   per sensor ([`SensorHealth`]);
 //! - it **detects faults** with a windowed NIS χ² monitor per sensor and excludes a faulty
-//!   sensor until it recovers ([`MonitorSettings`]).
+//!   sensor until it recovers ([`MonitorSettings`]);
+//! - its run is **smoothable and has a likelihood**: [`FusionDriver::smooth`] is the
+//!   Rauch–Tung–Striebel pass over the history, each late reading where it was taken, with
+//!   the estimates' times; [`FusionDriver::log_likelihood`] sums the accepted updates'
+//!   ln N(ν; 0, S), for maximum-likelihood noise identification over a run. Both equal the
+//!   batch functions ([`smooth_readings`](crate::smoother::smooth_readings),
+//!   [`filter_readings`](crate::smoother::filter_readings)) on the same log in time order.
 //!
 //! The driver never changes the filters: it calls [`Predict::predict`](crate::Predict) and the
 //! sensors' updates, reads the estimate through [`Estimator`](crate::Estimator), and rolls the
@@ -166,5 +174,6 @@ pub use outcome::{
 };
 pub use sensors::SensorSet;
 pub use settings::{
-    FusionSettings, InputConvention, MonitorSettings, ResetSettings, SensorSettings,
+    DuplicatePolicy, FusionSettings, InputConvention, MonitorSettings, ResetSettings,
+    SensorSettings,
 };

@@ -44,6 +44,19 @@
 //! Nothing the caller passes is modified on an error: the record, the filter (restored from
 //! its snapshot by the sequence functions, bit for bit) and the data are as before the call.
 //!
+//! # Fixed states
+//!
+//! A state with zero variance (a known offset, a calibration held constant: no process noise
+//! and an exact prior) passes every filter but makes P⁻ₖ₊₁ singular, so its Cholesky
+//! factorisation fails. The backward pass then sets aside the states whose predicted variance
+//! is zero (P⁻ᵢᵢ ≤ n ε maxⱼ P⁻ⱼⱼ: a positive semi-definite matrix has a zero row and column
+//! there) and uses the Moore–Penrose inverse, G = C (P⁻)⁺, which for P⁻ = [A 0; 0 0] is
+//! C [A⁻¹ 0; 0 0]: the other states are smoothed exactly as if the fixed ones were constants
+//! of the model, and a fixed state's row of C is zero (it is uncorrelated with everything), so
+//! it keeps its filtered value and zero variance. If P⁻ is still singular on the remaining
+//! states, the error names the state index where the factorisation broke down
+//! ([`SmootherError::state`]) and its likely cause.
+//!
 //! A square-root run is smoothed in this covariance form: the backward pass factorises
 //! P⁻ = S⁻S⁻ᵀ, so it does not inherit the square-root filter's robustness (an `f32` or
 //! ill-conditioned run the filter survives can still fail here with
@@ -81,21 +94,55 @@ use std::collections::VecDeque;
 
 use estim_core::checks::{all_finite, symmetrize};
 use estim_core::kernel::{self, CholeskyScratch};
-use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1};
+use estim_core::nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, U1, try_convert};
 use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, StateSpace, error::Result};
 
 use crate::gaussian_filter::ensure_time_step;
 use crate::report::{UpdateOutcome, UpdateReport};
 use crate::traits::{OnStateSpace, Predict, PredictCross, ProcessInput, Rollback, Update};
 
-/// A failed backward step, with the index k of the estimate it was computing (0 = the first).
+mod fixed;
+mod readings;
+
+pub use readings::{ReadingsError, ReadingsRun, filter_readings, smooth_readings};
+
+/// A failed backward step, with the index k of the estimate it was computing (0 = the first)
+/// and, when the predicted covariance P⁻ₖ₊₁ could not be factorised, the state along which it
+/// is singular.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
-#[error("smoothing step {step}: {error}")]
+#[error("smoothing step {step}: {error}{}", state_cause(.state))]
 pub struct SmootherError {
     /// The index of the smoothed estimate that failed.
     pub step: usize,
     /// What failed.
     pub error: Error,
+    /// The state index i at which the Cholesky factorisation of P⁻ₖ₊₁ broke down (after the
+    /// fixed, zero-variance states were set aside: module docs, "Fixed states"), if that is
+    /// what failed.
+    pub state: Option<usize>,
+}
+
+impl SmootherError {
+    /// The error at backward step `step`, with no state named.
+    pub(crate) fn at(step: usize, error: Error) -> Self {
+        Self {
+            step,
+            error,
+            state: None,
+        }
+    }
+}
+
+fn state_cause(state: &Option<usize>) -> String {
+    match state {
+        None => String::new(),
+        Some(i) => format!(
+            " at state {i}: the predicted covariance is singular or indefinite along it \
+             (zero-variance states are handled as fixed, so state {i} is likely an exact \
+             combination of other states, e.g. a constraint or a duplicated state, or its \
+             variance went negative in the filter)"
+        ),
+    }
 }
 
 /// What one prediction of the forward pass leaves for the backward pass.
@@ -109,6 +156,8 @@ where
     predicted_state: OVector<T, N>,
     predicted_covariance: OMatrix<T, N, N>,
     cross: OMatrix<T, N, N>,
+    /// The time of `state` \[s\] (the smoother's clock before the prediction).
+    time: f64,
 }
 
 /// A Rauch–Tung–Striebel smoother over a forward pass driven through [`Rts::predict`]
@@ -121,6 +170,8 @@ where
 {
     records: VecDeque<Record<T, N>>,
     lag: Option<usize>,
+    /// The time of the filter's current estimate: the start plus every recorded Δt.
+    clock: f64,
 }
 
 impl<T: Real, N: Dim> Default for Rts<T, N>
@@ -131,6 +182,7 @@ where
         Self {
             records: VecDeque::new(),
             lag: None,
+            clock: 0.0,
         }
     }
 }
@@ -181,6 +233,7 @@ where
             // (allocation failure) here for records that may never come (issue 41).
             records: VecDeque::new(),
             lag: Some(lag),
+            clock: 0.0,
         }
     }
 
@@ -210,6 +263,8 @@ where
     {
         let (state, covariance) = (filter.state().clone(), filter.covariance().clone());
         let cross = filter.predict_with_cross_covariance(model, input, dt)?;
+        let time = self.clock;
+        self.clock += try_convert::<T, f64>(dt).unwrap_or(f64::NAN);
         if self.lag == Some(self.records.len()) && self.records.pop_front().is_none() {
             return Ok(()); // lag 0: nothing is kept
         }
@@ -219,6 +274,7 @@ where
             predicted_state: filter.state().clone(),
             predicted_covariance: filter.covariance().clone(),
             cross,
+            time,
         });
         Ok(())
     }
@@ -288,6 +344,66 @@ where
         })
     }
 
+    /// This smoother with its clock at `time` \[s\]: the time of the filter's estimate before
+    /// the first recorded prediction. Each [`predict`](Self::predict) advances the clock by
+    /// its Δt, and [`smooth_with_times`](Self::smooth_with_times) returns each estimate with
+    /// its time. (The clock starts at 0 otherwise.)
+    ///
+    /// ```
+    /// use estim_filters::{KalmanFilter, Update};
+    /// use estim_filters::smoother::Rts;
+    /// use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
+    /// use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, Matrix2x1, Vector1, Vector2};
+    ///
+    /// let process = LinearProcess {
+    ///     transition: Matrix2::new(1.0, 0.5, 0.0, 1.0),
+    ///     input: Matrix2x1::zeros(),
+    ///     noise: Matrix2::identity() * 1e-2,
+    /// };
+    /// let sensor = LinearMeasurement { observation: Matrix1x2::new(1.0, 0.0), noise: Matrix1::new(0.5) };
+    /// let mut kf = KalmanFilter::new(Gaussian::new(Vector2::zeros(), Matrix2::identity())?);
+    /// let mut rts = Rts::new().starting_at(100.0);
+    /// for (dt, z) in [(0.5, 0.4), (0.25, 0.6), (1.0, 1.2)] {
+    ///     rts.predict(&mut kf, &process, &Vector1::zeros(), dt)?;
+    ///     kf.update(&sensor, &Vector1::new(z))?;
+    /// }
+    /// let track = rts.smooth_with_times(&kf)?;
+    /// assert_eq!(track.times, [100.0, 100.5, 100.75, 101.75]);
+    /// assert_eq!(track.estimates.len(), 4);
+    /// assert_eq!(rts.time(), 101.75);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn starting_at(mut self, time: f64) -> Self {
+        self.clock = time;
+        self
+    }
+
+    /// The time of the filter's current estimate \[s\]: the start
+    /// ([`starting_at`](Self::starting_at), else 0) plus the Δt of every prediction recorded.
+    pub fn time(&self) -> f64 {
+        self.clock
+    }
+
+    /// Sets the clock (the time of the filter's current estimate).
+    pub(crate) fn set_clock(&mut self, time: f64) {
+        self.clock = time;
+    }
+
+    /// [`smooth`](Self::smooth), each estimate with its time: the time of the state before each
+    /// recorded prediction, then [`time`](Self::time) for the last (`filter`'s current
+    /// estimate). Errors as [`smooth`](Self::smooth); example at
+    /// [`starting_at`](Self::starting_at).
+    pub fn smooth_with_times<F: OnStateSpace<T, N>>(
+        &self,
+        filter: &F,
+    ) -> core::result::Result<Track<T, N>, SmootherError> {
+        let estimates = self.backward(filter, None)?;
+        let mut times = Vec::with_capacity(estimates.len());
+        times.extend(self.records.iter().map(|r| r.time));
+        times.push(self.clock);
+        Ok(Track { times, estimates })
+    }
+
     /// The backward pass; pushes Pₖ₊₁,ₖ|K into `cross` (in time order) if given.
     fn backward<F: OnStateSpace<T, N>>(
         &self,
@@ -306,19 +422,27 @@ where
         let (mut dx, mut correction) =
             (OVector::zeros_generic(n, U1), OVector::zeros_generic(n, U1));
         for (step, record) in self.records.iter().enumerate().rev() {
-            let fail = |error| SmootherError { step, error };
+            let fail = |error| SmootherError::at(step, error);
             let next = smoothed.last().expect("starts with the last estimate");
             // G = C (P⁻)⁻¹ = C L⁻ᵀ L⁻¹, solved from the right in G's own storage.
             factor.copy_from(&record.predicted_covariance);
-            if !kernel::cholesky_in_place(&mut factor, &mut cholesky) {
-                return Err(fail(Error::NotPositiveDefinite {
-                    stage: Stage::Smoothing,
-                    quantity: Quantity::Covariance,
-                }));
+            if kernel::cholesky_in_place(&mut factor, &mut cholesky) {
+                gain.copy_from(&record.cross);
+                kernel::solve_right_lower_transpose_in_place(&factor, &mut gain);
+                kernel::solve_right_lower_in_place(&factor, &mut gain);
+            } else {
+                // Fixed states (zero predicted variance): G = C (P⁻)⁺ on the others.
+                fixed::gain(&record.predicted_covariance, &record.cross, &mut gain).map_err(
+                    |state| SmootherError {
+                        step,
+                        error: Error::NotPositiveDefinite {
+                            stage: Stage::Smoothing,
+                            quantity: Quantity::Covariance,
+                        },
+                        state: Some(state),
+                    },
+                )?;
             }
-            gain.copy_from(&record.cross);
-            kernel::solve_right_lower_transpose_in_place(&factor, &mut gain);
-            kernel::solve_right_lower_in_place(&factor, &mut gain);
             // x̂ˢ = x̂ ⊞ G (x̂ˢₖ₊₁ ⊟ x̂⁻).
             space.minus_into(next.mean(), &record.predicted_state, &mut dx);
             correction.gemv(T::one(), &gain, &dx, T::zero());
@@ -349,6 +473,20 @@ where
         }
         Ok(smoothed)
     }
+}
+
+/// Estimates with the times they are at: what the timed smoothers return
+/// ([`Rts::smooth_with_times`], [`smooth_readings`],
+/// [`FusionDriver::smooth`](crate::fusion::FusionDriver::smooth)).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Track<T: Real, N: Dim>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    /// The time of each estimate \[s\], non-decreasing.
+    pub times: Vec<f64>,
+    /// The estimates, `estimates[k]` at `times[k]`.
+    pub estimates: Vec<Gaussian<T, N>>,
 }
 
 /// A backward pass with its lag-one cross-covariances
@@ -588,9 +726,9 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     if measurements.len() != inputs.len() + 1 {
-        return Err(SmootherError {
-            step: measurements.len().min(inputs.len() + 1),
-            error: Error::DimensionMismatch {
+        return Err(SmootherError::at(
+            measurements.len().min(inputs.len() + 1),
+            Error::DimensionMismatch {
                 stage: Stage::Smoothing,
                 quantity: Quantity::Measurement,
                 expected_rows: inputs.len() + 1,
@@ -598,10 +736,10 @@ where
                 found_rows: measurements.len(),
                 found_cols: 1,
             },
-        });
+        ));
     }
     if !inputs.is_empty() {
-        ensure_time_step(dt).map_err(|error| SmootherError { step: 0, error })?;
+        ensure_time_step(dt).map_err(|error| SmootherError::at(0, error))?;
     }
     let mut sequence = Sequence {
         estimates: Vec::with_capacity(measurements.len()),
@@ -609,7 +747,7 @@ where
         log_likelihood: T::zero(),
     };
     for (step, z) in measurements.iter().enumerate() {
-        let fail = |error| SmootherError { step, error };
+        let fail = |error| SmootherError::at(step, error);
         let report = match z {
             Some(z) => {
                 let report = filter.update(measurement, z).map_err(fail)?;

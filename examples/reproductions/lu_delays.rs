@@ -42,8 +42,8 @@ use crate::common::{Band, Headline, Output, Series, band_plot, line_plot};
 use crate::sharding::Session;
 use estim::core::{Gaussian, LinearMeasurement, error::Result as EstimResult};
 use estim::filters::fusion::{
-    FusionDriver, FusionError, FusionSettings, Innovation, MonitorSettings, ResetSettings,
-    SensorSet, SensorSettings, SensorStatus,
+    DuplicatePolicy, FusionDriver, FusionError, FusionSettings, Innovation, MonitorSettings,
+    ResetSettings, SensorSet, SensorSettings, SensorStatus,
 };
 use estim::filters::monte_carlo::{EnsembleStats, MonteCarlo, Recorder};
 use estim::filters::{KalmanFilter, Update, ValidationError};
@@ -194,6 +194,8 @@ pub fn make_driver(scenario: &Scenario, method: Method) -> Result<LuDriver, Fusi
         capacity: 32,
         max_step: scenario.dt,
         max_substeps: 1_000_000,
+        // Lu's protocol drops a second fix of a channel at one time.
+        duplicates: DuplicatePolicy::Refuse,
     };
     let judged = |state: usize, variance: f64| {
         SensorSettings::gated(0.9999)

@@ -13,6 +13,7 @@
 //! | `residual_x`, `x_mean_fn` | a [`StateSpace`](crate::core::StateSpace) (⊞/⊟) given to `with_state_space` |
 //! | Joseph form update (`update` default in FilterPy) | `CovarianceUpdate::Joseph` (the default) |
 //! | `batch_filter(zs)`, `rts_smoother(Xs, Ps)` | `filter_sequence`, `smooth_sequence` (missing `z` as `None`), `Rts` |
+//! | a log with irregular times and several sensors (a loop calling `predict(dt)`, `update(z, R, H)` per row) | `filter_readings`, `smooth_readings` over `(time, reading)` with a `SensorSet`; the results carry their times |
 //! | pykalman `KalmanFilter.smooth`, `loglikelihood` | `smooth_sequence(..)?.estimates`, `.log_likelihood` |
 //! | `filterpy.stats.NEES` | `estim::filters::consistency::nees`, and the Monte Carlo runner |
 //! | `Saver` | keep what you need in your loop (reports are values) |

@@ -82,7 +82,8 @@
 //! |---|---|
 //! | `horizon` | the largest latency you accept (a fix older than that is refused, with its time) |
 //! | `capacity` | events per second × horizon + 2 (each fix, input change and `advance_to` is one record) |
-//! | `max_step` | the sample period your discretised Q is written for (Lu's error state: 5 ms) |
+//! | `max_step` | default ∞: one prediction per gap (the models take Δt); set it to the sample period your discretised Q is written for (Lu's error state: 5 ms) |
+//! | `duplicates` | default `FuseBoth`: two readings of one sensor at one time are two measurements; `KeepFirst` when the log repeats the same line; `Refuse` for the old error |
 //! | gate | 0.999–0.9999: rejections cascade (a rejected fix was informative), so gate loosely |
 //! | monitor | W fixes a channel may take to be declared faulty once its NIS exceeds the clip c: at most ⌈q/c⌉ (7 for m = 1, W = 20, α = 10⁻³) |
 //! | reset | only for sensors the filter may be re-initialised from; it fires when no *other* sensor was accepted during the run of rejections, so a healthy second sensor protects you from resetting to a stuck one |
@@ -90,6 +91,16 @@
 //! A gate cannot refuse an outlier that lies inside the prior's spread (at the first fixes, a
 //! 4 m/s velocity outlier against a 1 m/s prior σ): start with a prior you trust, or keep the
 //! monitor to exclude the channel that the filter then disagrees with.
+//!
+//! ## Smoothing a run, and its likelihood
+//!
+//! `driver.smooth()` returns the run's Rauch–Tung–Striebel estimates over the history kept
+//! (size `capacity` to the log), in time order with each late reading where it was taken, as
+//! a `Track` (times and estimates); it equals `smooth_readings` on the same log sorted by
+//! time. `driver.log_likelihood()` is the sum of the accepted updates' ln N(ν; 0, S), the
+//! same as `filter_readings(..)?.log_likelihood`, so maximum-likelihood noise identification
+//! runs over a driver run. Both batch functions take a log of `(time, reading)` with
+//! irregular times and the driver's `SensorSet`, so one sensor definition serves both.
 //!
 //! The `lu_delays` example (`cargo run --release --example lu_delays`) runs Lu's GPS/accelerometer
 //! problem with 0–300 ms latency, 100 σ outliers and a stuck channel three ways: fused as

@@ -56,6 +56,12 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
+//! A log with irregular times and several sensors goes through `smooth_readings` (a
+//! `(time, reading)` log and a `SensorSet`, as for the fusion driver), and
+//! `Rts::smooth_with_times` returns each estimate with its time. A state with zero variance
+//! (a fixed offset) is smoothed as a constant; where the predicted covariance is singular for
+//! another reason, `SmootherError::state` names the state.
+//!
 //! On any error the sequence functions return a [`SmootherError`](crate::filters::SmootherError)
 //! naming the time of the failing step and leave the filter as it was.
 //!

@@ -8,8 +8,10 @@ use super::history::{Event, History, Record};
 use super::monitor::{Health, SensorHealth};
 use super::outcome::{ExclusionReason, Fused, Innovation, Outcome, ResetReason};
 use super::sensors::SensorSet;
-use super::settings::{FusionSettings, InputConvention, Resolved, SensorSettings};
+use super::settings::{DuplicatePolicy, FusionSettings, InputConvention, Resolved, SensorSettings};
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback};
+
+mod smooth;
 
 /// A filter `F` of the family, its process model `P` with its input, and the sensors `S`,
 /// driven by timestamped events: see the [module docs](super) for what it does and why.
@@ -208,13 +210,15 @@ where
     /// Errors, each leaving the driver exactly as it was: [`FusionError::NonFiniteTime`],
     /// [`FusionError::UnknownSensor`], [`FusionError::TooOld`] (more than the horizon before
     /// the latest event, or before the oldest record kept), [`FusionError::Duplicate`] (this
-    /// sensor already has a measurement at this time), [`FusionError::GapTooLong`], and
+    /// sensor already has a measurement at this time and
+    /// [`FusionSettings::duplicates`] is [`DuplicatePolicy::Refuse`]; the default fuses
+    /// both), [`FusionError::GapTooLong`], and
     /// [`FusionError::Filter`] when a filter step fails (e.g. a non-finite reading).
     ///
     /// ```
     /// # use estim_core::nalgebra::{Matrix1, U1, Vector1};
     /// # use estim_core::{Gaussian, LinearMeasurement, LinearProcess, error::Result};
-    /// # use estim_filters::fusion::{FusionDriver, FusionError, FusionSettings, Innovation, SensorSet, SensorSettings};
+    /// # use estim_filters::fusion::{DuplicatePolicy, FusionDriver, FusionError, FusionSettings, Innovation, SensorSet, SensorSettings};
     /// # use estim_filters::{Estimator, KalmanFilter, Update};
     /// # struct One(LinearMeasurement<f64, U1, U1>);
     /// # impl<F: Update<f64, U1, U1, LinearMeasurement<f64, U1, U1>>> SensorSet<f64, U1, F> for One {
@@ -227,7 +231,7 @@ where
     /// let walk = LinearProcess { transition: Matrix1::new(1.0), input: Matrix1::zeros(), noise: Matrix1::new(1e-3) };
     /// let sensor = One(LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(0.1) });
     /// let filter = KalmanFilter::new(Gaussian::new(Vector1::zeros(), Matrix1::new(1.0))?);
-    /// let settings = FusionSettings { horizon: 0.3, ..FusionSettings::default() };
+    /// let settings = FusionSettings { horizon: 0.3, duplicates: DuplicatePolicy::Refuse, ..FusionSettings::default() };
     /// let mut driver = FusionDriver::new(filter, walk, Vector1::zeros(), sensor, 0.0, settings, SensorSettings::default())?;
     /// driver.fuse(1.0, Vector1::new(0.5))?;
     /// let before = driver.filter().estimate();
@@ -256,8 +260,23 @@ where
         if time < oldest {
             return Err(FusionError::TooOld { time, oldest });
         }
-        if self.history.iter().any(|r| r.is_measurement(time, sensor)) {
-            return Err(FusionError::Duplicate { sensor, time });
+        let first = self.history.iter().find(|r| r.is_measurement(time, sensor));
+        match (first, self.settings.duplicates) {
+            (None, _) | (Some(_), DuplicatePolicy::FuseBoth) => {}
+            (Some(_), DuplicatePolicy::Refuse) => {
+                return Err(FusionError::Duplicate { sensor, time });
+            }
+            (Some(first), DuplicatePolicy::KeepFirst) => {
+                if let Some(outcome) = first.outcome {
+                    return Ok(Fused {
+                        sensor,
+                        time,
+                        outcome,
+                        replayed: 0,
+                        ignored: true,
+                    });
+                }
+            }
         }
         let at = self.history.insertion_index(time, sensor);
         if at == 0 {
@@ -288,6 +307,7 @@ where
             time,
             outcome,
             replayed,
+            ignored: false,
         })
     }
 
@@ -586,6 +606,43 @@ where
         self.health.sensors[sensor].summary()
     }
 
+    /// The prediction-error log-likelihood of the run so far, Σ ln N(νᵢ; 0, Sᵢ) over the
+    /// accepted measurements ([`Outcome::Accepted`]; rejected, excluded and reset ones add
+    /// nothing), each taken at its time (a late one after its replay): the
+    /// [`Sequence::log_likelihood`](crate::smoother::Sequence::log_likelihood) of the same
+    /// readings in time order, so maximum-likelihood noise identification
+    /// ([`noise_id`](crate::noise_id)) works over a driver run. It covers the whole run, not
+    /// only the history kept.
+    ///
+    /// ```
+    /// # use estim_core::nalgebra::{Matrix1, U1, Vector1};
+    /// # use estim_core::{Gaussian, LinearMeasurement, LinearProcess, error::Result};
+    /// # use estim_filters::fusion::{FusionDriver, FusionSettings, Innovation, SensorSet, SensorSettings};
+    /// # use estim_filters::{KalmanFilter, Update};
+    /// # struct One(LinearMeasurement<f64, U1, U1>);
+    /// # impl<F: Update<f64, U1, U1, LinearMeasurement<f64, U1, U1>>> SensorSet<f64, U1, F> for One {
+    /// #     type Reading = Vector1<f64>;
+    /// #     fn count(&self) -> usize { 1 }
+    /// #     fn sensor(&self, _: &Vector1<f64>) -> usize { 0 }
+    /// #     fn dimension(&self, _: usize) -> usize { 1 }
+    /// #     fn update(&self, f: &mut F, z: &Vector1<f64>) -> Result<Innovation<f64>> { f.update(&self.0, z).map(|r| Innovation::of(&r)) }
+    /// # }
+    /// let walk = LinearProcess { transition: Matrix1::new(1.0), input: Matrix1::zeros(), noise: Matrix1::new(1e-2) };
+    /// let sensor = One(LinearMeasurement { observation: Matrix1::new(1.0), noise: Matrix1::new(0.1) });
+    /// let filter = KalmanFilter::new(Gaussian::new(Vector1::zeros(), Matrix1::new(1.0))?);
+    /// let mut driver = FusionDriver::new(filter, walk, Vector1::zeros(), sensor, 0.0, FusionSettings::default(), SensorSettings::default())?;
+    /// let first = driver.fuse(1.0, Vector1::new(0.3))?.outcome.innovation().log_likelihood;
+    /// // S = P⁻ + R = 1.01 + 0.1, ν = 0.3.
+    /// let expected = -0.5 * (0.3f64.powi(2) / 1.11 + (2.0 * std::f64::consts::PI * 1.11).ln());
+    /// assert!((first - expected).abs() < 1e-12);
+    /// driver.fuse(2.0, Vector1::new(0.2))?;
+    /// assert!(driver.log_likelihood() < first); // a second term, negative here
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn log_likelihood(&self) -> T {
+        self.health.log_likelihood
+    }
+
     /// The decisions recorded in the history, oldest first, as `(time, sensor, outcome)`:
     /// after a replay they are the re-made ones.
     pub fn decisions(&self) -> impl Iterator<Item = (f64, usize, Outcome<T>)> + '_ {
@@ -807,5 +864,6 @@ where
     state.run = 0;
     state.health.accepted += 1;
     health.accepted += 1;
+    health.log_likelihood += innovation.log_likelihood;
     Ok(Outcome::Accepted { innovation })
 }

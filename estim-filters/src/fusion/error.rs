@@ -10,7 +10,7 @@ pub enum FusionSetting {
     Horizon,
     /// [`FusionSettings::capacity`](super::FusionSettings::capacity): at least 2 records.
     Capacity,
-    /// [`FusionSettings::max_step`](super::FusionSettings::max_step): finite and > 0 seconds.
+    /// [`FusionSettings::max_step`](super::FusionSettings::max_step): > 0 seconds (∞ allowed).
     MaxStep,
     /// [`FusionSettings::max_substeps`](super::FusionSettings::max_substeps): at least 1.
     MaxSubsteps,
@@ -43,20 +43,28 @@ pub enum FusionSetting {
 impl fmt::Display for FusionSetting {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
-            FusionSetting::Horizon => "horizon",
-            FusionSetting::Capacity => "history capacity",
-            FusionSetting::MaxStep => "maximum step",
-            FusionSetting::MaxSubsteps => "maximum number of sub-steps",
-            FusionSetting::StartTime => "start time",
-            FusionSetting::GateProbability => "gate probability",
-            FusionSetting::ResetAfter => "rejections before a reset",
-            FusionSetting::ResetState => "reset state index",
-            FusionSetting::ResetVariance => "reset variance",
-            FusionSetting::MonitorWindow => "monitor window",
-            FusionSetting::MonitorProbability => "monitor probability",
-            FusionSetting::Sensor => "sensor index",
-            FusionSetting::SensorDimension => "sensor dimension",
-            FusionSetting::InputConvention => "input convention (set it before the first event)",
+            FusionSetting::Horizon => "FusionSettings::horizon (finite, >= 0 s)",
+            FusionSetting::Capacity => "FusionSettings::capacity (2 ..= MAX_CAPACITY records)",
+            FusionSetting::MaxStep => "FusionSettings::max_step (> 0 s; infinity: no sub-steps)",
+            FusionSetting::MaxSubsteps => "FusionSettings::max_substeps (at least 1)",
+            FusionSetting::StartTime => "start time of FusionDriver::new (finite)",
+            FusionSetting::GateProbability => {
+                "SensorSettings::gate_probability (strictly between 0 and 1)"
+            }
+            FusionSetting::ResetAfter => "ResetSettings::after_rejections (at least 1)",
+            FusionSetting::ResetState => "ResetSettings::states (an index below the state size)",
+            FusionSetting::ResetVariance => {
+                "ResetSettings::variance or blow_up_variance (finite, > 0)"
+            }
+            FusionSetting::MonitorWindow => "MonitorSettings::window (1 ..= MAX_WINDOW)",
+            FusionSetting::MonitorProbability => {
+                "MonitorSettings::false_alarm or clip_probability (strictly between 0 and 1)"
+            }
+            FusionSetting::Sensor => "sensor index (below SensorSet::count)",
+            FusionSetting::SensorDimension => "SensorSet::dimension (at least 1)",
+            FusionSetting::InputConvention => {
+                "input convention (call with_input_convention before the first event)"
+            }
         })
     }
 }
@@ -75,7 +83,10 @@ pub enum FusionError {
     /// A measurement older than the history can replay: before the oldest checkpoint kept, or
     /// more than the horizon before the latest event. It is not fused (fusing it as current
     /// would make the filter inconsistent).
-    #[error("measurement at {time} s is older than the history (oldest usable time {oldest} s)")]
+    #[error(
+        "measurement at {time} s is older than the history (oldest usable time {oldest} s): \
+         raise FusionSettings::horizon, or FusionSettings::capacity if the history filled up"
+    )]
     TooOld {
         /// The measurement's timestamp.
         time: f64,
@@ -84,15 +95,23 @@ pub enum FusionError {
     },
     /// An input or a time mark before the latest event: inputs and marks must come in time
     /// order (only measurements may be late).
-    #[error("time {time} s is before the latest event at {latest} s")]
+    #[error(
+        "time {time} s is before the latest event at {latest} s: inputs and time marks must \
+         come in time order (only measurements may be late)"
+    )]
     NotMonotone {
         /// The time given.
         time: f64,
         /// The latest event's time.
         latest: f64,
     },
-    /// The history already holds a measurement of this sensor at this time.
-    #[error("sensor {sensor} already has a measurement at {time} s")]
+    /// The history already holds a measurement of this sensor at this time, and
+    /// [`FusionSettings::duplicates`](super::FusionSettings::duplicates) is
+    /// [`DuplicatePolicy::Refuse`](super::DuplicatePolicy::Refuse).
+    #[error(
+        "sensor {sensor} already has a measurement at {time} s (FusionSettings::duplicates \
+         is Refuse; FuseBoth or KeepFirst accept it)"
+    )]
     Duplicate {
         /// The sensor.
         sensor: usize,
@@ -100,7 +119,7 @@ pub enum FusionError {
         time: f64,
     },
     /// The reading names a sensor the set does not have.
-    #[error("unknown sensor {sensor} (the set has {count})")]
+    #[error("unknown sensor {sensor}: SensorSet::sensor must be below SensorSet::count = {count}")]
     UnknownSensor {
         /// The sensor index the reading gave.
         sensor: usize,
@@ -109,7 +128,10 @@ pub enum FusionError {
     },
     /// Predicting over this gap would take more than
     /// [`FusionSettings::max_substeps`](super::FusionSettings::max_substeps) sub-steps.
-    #[error("a gap of {gap} s needs more than the allowed sub-steps of {max_step} s")]
+    #[error(
+        "a gap of {gap} s needs more than FusionSettings::max_substeps sub-steps of \
+         FusionSettings::max_step = {max_step} s: raise either, or check the timestamp"
+    )]
     GapTooLong {
         /// The gap in seconds.
         gap: f64,
@@ -117,7 +139,7 @@ pub enum FusionError {
         max_step: f64,
     },
     /// A setting is out of range.
-    #[error("invalid {setting}: {value}")]
+    #[error("invalid {setting}: {value} given")]
     InvalidSetting {
         /// Which.
         setting: FusionSetting,

@@ -39,10 +39,11 @@ pub(crate) struct Record<T: Real, Sn, U, R> {
 impl<T: Real, Sn, U, R> Record<T, Sn, U, R> {
     /// Whether a measurement of `sensor` at `time` goes after this record: records are
     /// ordered by time, and measurements at equal times by sensor index (so that the order
-    /// does not depend on the order of arrival).
+    /// does not depend on the order of arrival); two readings of one sensor at one time
+    /// ([`DuplicatePolicy::FuseBoth`](super::DuplicatePolicy::FuseBoth)) in arrival order.
     fn precedes(&self, time: f64, sensor: usize) -> bool {
         match self.event {
-            Event::Measurement { sensor: s, .. } if self.time == time => s < sensor,
+            Event::Measurement { sensor: s, .. } if self.time == time => s <= sensor,
             _ => self.time <= time,
         }
     }

@@ -157,11 +157,13 @@ impl<T: Real> SensorState<T> {
     }
 }
 
-/// The health of every sensor, and the driver-wide count of accepted measurements.
+/// The health of every sensor, the driver-wide count of accepted measurements and the sum
+/// of their log-likelihoods (checkpointed with the rest, so a replay re-makes the sum too).
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Health<T> {
     pub sensors: Vec<SensorState<T>>,
     pub accepted: u64,
+    pub log_likelihood: T,
 }
 
 impl<T: Real> Health<T> {
@@ -170,6 +172,7 @@ impl<T: Real> Health<T> {
         Self {
             sensors: windows.map(SensorState::new).collect(),
             accepted: 0,
+            log_likelihood: T::zero(),
         }
     }
 
@@ -179,5 +182,6 @@ impl<T: Real> Health<T> {
             a.copy_from(b);
         }
         self.accepted = other.accepted;
+        self.log_likelihood = other.log_likelihood;
     }
 }

@@ -23,6 +23,9 @@ pub struct Innovation<T> {
     pub largest: T,
     /// Whether the filter applied the update (`false` only if the filter has its own gate).
     pub applied: bool,
+    /// ln N(ν; 0, S) = −½ (νᵀ S⁻¹ ν + ln det(2π S)), the update's term of the
+    /// prediction-error log-likelihood (the report's `log_likelihood`).
+    pub log_likelihood: T,
     normalized: [T; MAX_REPORTED_COMPONENTS],
 }
 
@@ -65,6 +68,7 @@ impl<T: Real> Innovation<T> {
             largest_component,
             largest,
             applied: report.outcome == UpdateOutcome::Applied,
+            log_likelihood: report.log_likelihood,
             normalized,
         }
     }
@@ -178,4 +182,9 @@ pub struct Fused<T> {
     /// How many later events were re-run after it (0 for a measurement in time order). Their
     /// decisions are re-made too, as a time-ordered delivery would have made them.
     pub replayed: usize,
+    /// `true` when the reading was not fused because
+    /// [`DuplicatePolicy::KeepFirst`](super::DuplicatePolicy::KeepFirst) kept an earlier
+    /// reading of its sensor at its time: `outcome` is then that earlier reading's, and
+    /// nothing changed.
+    pub ignored: bool,
 }

@@ -416,6 +416,7 @@ where
         let last = self.records.len();
         let mismatch = |quantity, expected: usize, found: usize| SmootherError {
             step: last,
+            state: None,
             error: Error::DimensionMismatch {
                 stage: Stage::Smoothing,
                 quantity,
@@ -446,9 +447,11 @@ where
         let mut step = Backward::new(n, self.method);
         for (k, record) in self.records.iter().enumerate().rev() {
             let next = smoothed.last().expect("starts with the last estimate");
-            let at_k = step
-                .smooth(record, next)
-                .map_err(|error| SmootherError { step: k, error })?;
+            let at_k = step.smooth(record, next).map_err(|error| SmootherError {
+                step: k,
+                error,
+                state: None,
+            })?;
             smoothed.push(at_k);
         }
         smoothed.reverse();

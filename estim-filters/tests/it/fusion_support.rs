@@ -8,7 +8,8 @@ use estim_core::{
     Gaussian, LinearMeasurement, LinearProcessModel, ProcessJacobian, ProcessModel, error::Result,
 };
 use estim_filters::fusion::{
-    FusionDriver, FusionSettings, Innovation, Outcome, SensorHealth, SensorSet, SensorSettings,
+    DuplicatePolicy, FusionDriver, FusionSettings, Innovation, Outcome, SensorHealth, SensorSet,
+    SensorSettings,
 };
 use estim_filters::{KalmanFilter, Predict, Rollback, Update};
 use rand::rngs::StdRng;
@@ -117,6 +118,8 @@ pub fn settings() -> FusionSettings {
         capacity: 128,
         max_step: GRID,
         max_substeps: 100_000,
+        // The replay and error tests hold a second fix of a sensor at one time as an error.
+        duplicates: DuplicatePolicy::Refuse,
     }
 }
 

@@ -27,6 +27,7 @@ mod equivalence;
 mod fusion_errors;
 mod fusion_gating;
 mod fusion_inputs;
+mod fusion_log;
 mod fusion_replay;
 mod fusion_sizes;
 mod fusion_support;

@@ -336,9 +336,10 @@ fn an_indefinite_prediction_is_a_typed_error_naming_the_step() {
     let u = Vector1::new(0.0);
     rts.predict(&mut kf, &Scenario::process(0.5), &u, 0.5)
         .unwrap();
-    // A singular step: F = 0 and Q = 0 make P⁻ = 0.
+    // A singular step: F = [[1, 0], [1, 0]] and Q = 0 make P⁻ singular along state 1 with
+    // both variances positive (no fixed state to set aside).
     let collapse = LinearProcess {
-        transition: Matrix2::zeros(),
+        transition: Matrix2::new(1.0, 0.0, 1.0, 0.0),
         input: Matrix2x1::zeros(),
         noise: Matrix2::zeros(),
     };
@@ -351,7 +352,9 @@ fn an_indefinite_prediction_is_a_typed_error_naming_the_step() {
             stage: Stage::Smoothing,
             quantity: Quantity::Covariance,
         },
+        state: Some(1),
     };
+    assert!(expected.to_string().contains("at state 1"));
     assert_eq!(rts.smooth(&kf).unwrap_err(), expected);
     assert_eq!(rts.smooth(&kf).unwrap_err(), expected);
     assert_eq!(rts.len(), 3);
@@ -561,5 +564,71 @@ fn smoothed_nees_is_in_its_chi_square_band_and_smoothing_only_shrinks_covariance
             shrink >= -1e-12 * pf.norm(),
             "time {k}: Pᶠ − Pˢ has eigenvalue {shrink}"
         );
+    }
+}
+
+/// A fixed offset b (zero prior variance, no process noise) in z = position + b used to fail
+/// the backward pass (P⁻ singular along b). It is smoothed as a constant of the model: the
+/// position and velocity equal the smoothed 2-state model fed z − b, and b keeps its value and
+/// zero variance. Tolerance: the two routes differ only by exact zeros in the forward pass and
+/// by the Cholesky code of the backward gain (the plain one against the fixed-state one), so
+/// round-off of a few ε on O(1) moments; 1e-10 leaves a wide margin.
+#[test]
+fn a_fixed_state_is_smoothed_as_a_constant() {
+    use estim_core::nalgebra::{Matrix1x3, Matrix3, Matrix3x1, Vector3};
+    let offset = 0.7;
+    let with_offset = LinearProcess {
+        transition: Matrix3::new(1.0, 0.5, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+        input: Matrix3x1::zeros(),
+        noise: Matrix3::new(1e-3, 0.0, 0.0, 0.0, 1e-2, 0.0, 0.0, 0.0, 0.0),
+    };
+    let sensor3 = LinearMeasurement {
+        observation: Matrix1x3::new(1.0, 0.0, 1.0),
+        noise: Matrix1::new(0.2),
+    };
+    let prior3 = Gaussian::new(
+        Vector3::new(0.0, 1.0, offset),
+        Matrix3::new(1.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0),
+    )
+    .unwrap();
+    let without = LinearProcess {
+        transition: Matrix2::new(1.0, 0.5, 0.0, 1.0),
+        input: Matrix2x1::zeros(),
+        noise: Matrix2::new(1e-3, 0.0, 0.0, 1e-2),
+    };
+    let sensor2 = LinearMeasurement {
+        observation: Matrix1x2::new(1.0, 0.0),
+        noise: Matrix1::new(0.2),
+    };
+    let prior2 = Gaussian::new(Vector2::new(0.0, 1.0), Matrix2::new(1.0, 0.0, 0.0, 0.5)).unwrap();
+    let zs: Vec<f64> = (0..12)
+        .map(|k| 0.5 * k as f64 + offset + 0.1 * (k % 3) as f64)
+        .collect();
+    let z3: Vec<_> = zs.iter().map(|&z| Some(Vector1::new(z))).collect();
+    let z2: Vec<_> = zs.iter().map(|&z| Some(Vector1::new(z - offset))).collect();
+    let run3 = smooth_sequence(
+        &mut KalmanFilter::new(prior3),
+        &with_offset,
+        &[Vector1::zeros(); 11],
+        0.5,
+        &sensor3,
+        &z3,
+    )
+    .unwrap();
+    let run2 = smooth_sequence(
+        &mut KalmanFilter::new(prior2),
+        &without,
+        &[Vector1::zeros(); 11],
+        0.5,
+        &sensor2,
+        &z2,
+    )
+    .unwrap();
+    for (a, b) in run3.estimates.iter().zip(&run2.estimates) {
+        let (x, p) = (a.mean(), a.covariance());
+        assert_close(&[x[0], x[1]], b.mean().as_slice(), 1e-10, "mean");
+        let block = [p[(0, 0)], p[(1, 0)], p[(0, 1)], p[(1, 1)]];
+        assert_close(&block, b.covariance().as_slice(), 1e-10, "covariance");
+        assert_eq!((x[2], p[(2, 2)]), (offset, 0.0));
     }
 }
