@@ -5,7 +5,8 @@
 //!
 //! Everything specific to a recording is read from it: the origin (the ORGN home row, else the
 //! first 3-D fix), the noise settings (PARM's EKF3 values, see [`Settings`]), the GPS latency
-//! (PARM `GPS_DELAY_MS` when non-zero), the IMU period, the alignment (the first
+//! (PARM `GPS_DELAY_MS` when non-zero, else the maximum-likelihood latency of the GPS fixes
+//! given the IMU, [`GPS_DELAY_GRID`]), the IMU period, the alignment (the first
 //! [`Config::align_s`] seconds, checked to be at rest) and the airborne window (first to last GPS
 //! speed above 8 m/s).
 
@@ -36,10 +37,23 @@ use log::{LogError, Table, read_parameters, read_table};
 /// GPS speed above which the vehicle counts as airborne [m/s] (the definition).
 pub const AIRBORNE_SPEED: f64 = 8.0;
 
-/// GPS latency when PARM has no non-zero `GPS_DELAY_MS` [s]: ArduPilot then uses its driver's
-/// default lag (0.12 s for a u-blox M8, 0.22 s for an unknown receiver); 0.15 s is the shift that
-/// best fits the autopilot's EKF3 on the vendored flight (data README).
-pub const DEFAULT_GPS_DELAY: f64 = 0.15;
+/// The GPS latencies tried when neither `--gps-delay` nor PARM's `GPS_DELAY_MS` gives one [s]:
+/// 0 to 0.3 s (receivers report 0.1-0.25 s; ArduPilot assumes 0.12 s for a u-blox M8, 0.22 s
+/// for an unknown one) in 0.02 s steps. The run then takes the latency whose EKF run has the
+/// largest GPS log-likelihood, Σ log N(ν; 0, S) over the fixes: a maximum-likelihood estimate
+/// from the recording itself (IMU and GPS only; the autopilot's estimates are not used).
+pub const GPS_DELAY_GRID: (f64, f64, usize) = (0.0, 0.02, 16);
+
+/// Where the GPS latency came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DelaySource {
+    /// `--gps-delay` ([`Config::gps_delay`]).
+    Flag,
+    /// PARM's `GPS_DELAY_MS`.
+    Parameter,
+    /// The maximum-likelihood estimate over [`GPS_DELAY_GRID`].
+    Likelihood,
+}
 
 /// The vendored recording: `examples/data/ardupilot-p23`.
 pub fn vendored() -> PathBuf {
@@ -61,8 +75,8 @@ pub struct Config {
     pub latency_ignored: bool,
     /// Write the figures.
     pub figures: bool,
-    /// The GPS latency [s]; `None`: PARM's `GPS_DELAY_MS` if non-zero, else
-    /// [`DEFAULT_GPS_DELAY`].
+    /// The GPS latency [s]; `None`: PARM's `GPS_DELAY_MS` if non-zero, else the
+    /// maximum-likelihood estimate over [`GPS_DELAY_GRID`].
     pub gps_delay: Option<f64>,
     /// Length of the static alignment at the start of the IMU log [s].
     pub align_s: f64,
@@ -101,6 +115,8 @@ pub struct Settings {
     pub vel_sd: Vector3<f64>,
     /// GPS latency [s].
     pub gps_delay: f64,
+    /// Where [`gps_delay`](Self::gps_delay) came from.
+    pub gps_delay_source: DelaySource,
     /// Magnetic declination [rad]: `COMPASS_DEC` (0 when the autopilot computes it itself; it
     /// only seeds the heading, which GPS velocity makes observable in flight).
     pub declination: f64,
@@ -283,11 +299,14 @@ fn load(config: &Config) -> Result<Recording, Box<dyn std::error::Error>> {
     let vel_d = parm("EK3_VELD_M_NSE", 0.7);
     let delay_ms = parm("GPS_DELAY_MS", 0.0);
     let declination = parm("COMPASS_DEC", 0.0);
-    let gps_delay = config.gps_delay.unwrap_or(if delay_ms > 0.0 {
-        delay_ms * 1e-3
-    } else {
-        DEFAULT_GPS_DELAY
-    });
+    // Without a flag or a parameter the latency is estimated after loading (`run_config`);
+    // until then 0, which only the at-rest reference offset below uses (at rest the position
+    // does not depend on it).
+    let (gps_delay, gps_delay_source) = match config.gps_delay {
+        Some(d) => (d, DelaySource::Flag),
+        None if delay_ms > 0.0 => (delay_ms * 1e-3, DelaySource::Parameter),
+        None => (0.0, DelaySource::Likelihood),
+    };
     let periods: Vec<f64> = imu
         .rows
         .windows(2)
@@ -393,6 +412,7 @@ fn load(config: &Config) -> Result<Recording, Box<dyn std::error::Error>> {
         pos_sd: Vector3::new(pos_ne, pos_ne, alt),
         vel_sd: Vector3::new(vel_ne, vel_ne, vel_d),
         gps_delay,
+        gps_delay_source,
         declination,
         imu_period,
         from_log,
@@ -484,9 +504,15 @@ fn prior(rec: &Recording) -> Result<Gaussian<f64, Const<15>>, estim_core::Error>
     Gaussian::new(x, p)
 }
 
-/// A filter's track, its time per IMU sample [µs] and its gate rejections (positions,
-/// velocities).
-type Driven = (Vec<Point>, f64, (usize, usize));
+/// A filter's track, its time per IMU sample [µs], its gate rejections (positions,
+/// velocities) and the GPS log-likelihood of the run.
+type Driven = (Vec<Point>, f64, (usize, usize), f64);
+
+/// The largest latency of [`GPS_DELAY_GRID`] [s].
+fn largest_grid_delay() -> f64 {
+    let (first, step, count) = GPS_DELAY_GRID;
+    first + step * (count - 1) as f64
+}
 
 fn drive<F>(
     rec: &Recording,
@@ -556,7 +582,8 @@ where
             let g = &rec.gps.rows[next_gps];
             next_gps += 1;
             let taken = t(g) - latency;
-            if taken <= rec.start {
+            // The same fixes at every latency of the grid, so that their likelihoods compare.
+            if taken <= rec.start || t(g) <= rec.start + largest_grid_delay() {
                 continue;
             }
             let (pos, vel) = gps_ned(&rec.origin, g);
@@ -600,7 +627,7 @@ where
         });
     }
     let us = clock.elapsed().as_secs_f64() * 1e6 / track.len().max(1) as f64;
-    Ok((track, us, rejected))
+    Ok((track, us, rejected, driver.log_likelihood()))
 }
 
 fn quaternion(r: &[f64]) -> UnitQuaternion<f64> {
@@ -684,10 +711,26 @@ fn windows(
     })
 }
 
+/// The latency of [`GPS_DELAY_GRID`] whose EKF run over the recording up to `end` has the
+/// largest GPS log-likelihood (ties: the smaller latency).
+fn likeliest_gps_delay(rec: &Recording, end: f64) -> Result<f64, Box<dyn std::error::Error>> {
+    let (first, step, count) = GPS_DELAY_GRID;
+    let mut best = (f64::NEG_INFINITY, first);
+    for k in 0..count {
+        let latency = first + step * k as f64;
+        let filter = Ekf::new(prior(rec)?).with_state_space(state_space());
+        let (_, _, _, log_likelihood) = drive(rec, latency, end, filter)?;
+        if log_likelihood > best.0 {
+            best = (log_likelihood, latency);
+        }
+    }
+    Ok(best.1)
+}
+
 /// Runs the example's core: load, align, filter(s), compare.
 pub fn run_config(config: &Config) -> Result<FlightResult, Box<dyn std::error::Error>> {
     let clock = Instant::now();
-    let rec = load(config)?;
+    let mut rec = load(config)?;
     let fast: Vec<f64> = rec
         .gps
         .rows
@@ -706,9 +749,13 @@ pub fn run_config(config: &Config) -> Result<FlightResult, Box<dyn std::error::E
         .map(|a| (*a, fast[fast.len() - 1].min(end)))
         .filter(|(a, b)| a < b);
     let whole = (rec.start, end);
+    if rec.settings.gps_delay_source == DelaySource::Likelihood {
+        rec.settings.gps_delay = likeliest_gps_delay(&rec, end)?;
+    }
+    let rec = rec;
     let ekf_with = |latency: f64| -> Result<Run, Box<dyn std::error::Error>> {
         let filter = Ekf::new(prior(&rec)?).with_state_space(state_space());
-        let (track, us_per_sample, rejected) = drive(&rec, latency, end, filter)?;
+        let (track, us_per_sample, rejected, _) = drive(&rec, latency, end, filter)?;
         Ok(Run {
             windows: windows(&rec, &track, 0, whole, airborne)?,
             track,
@@ -724,7 +771,7 @@ pub fn run_config(config: &Config) -> Result<FlightResult, Box<dyn std::error::E
     };
     let ukf = if config.ukf {
         let filter = Ukf::new(prior(&rec)?).with_state_space(state_space());
-        let (track, us_per_sample, rejected) = drive(&rec, rec.settings.gps_delay, end, filter)?;
+        let (track, us_per_sample, rejected, _) = drive(&rec, rec.settings.gps_delay, end, filter)?;
         Some(Run {
             windows: windows(&rec, &track, 0, whole, airborne)?,
             track,

@@ -105,7 +105,8 @@ pub fn json(result: &FlightResult) -> Value {
         "airborne_s": result.airborne.map(|(a, b)| [a, b]),
         "imu_samples": result.imu_samples,
         "settings": {
-            "gps_delay_s": s.gps_delay, "gyro_noise": s.gyro_noise, "accel_noise": s.accel_noise,
+            "gps_delay_s": s.gps_delay, "gps_delay_source": format!("{:?}", s.gps_delay_source),
+            "gyro_noise": s.gyro_noise, "accel_noise": s.accel_noise,
             "gyro_bias_walk": s.gyro_bias_walk, "accel_bias_walk": s.accel_bias_walk,
             "gps_position_sd_m": [s.pos_sd.x, s.pos_sd.y, s.pos_sd.z],
             "gps_velocity_sd_m_s": [s.vel_sd.x, s.vel_sd.y, s.vel_sd.z],
@@ -131,8 +132,13 @@ pub fn run(config: &Config) -> Result<Output, Box<dyn std::error::Error>> {
             .map_or("never".to_owned(), |(a, b)| format!("{a:.1}-{b:.1} s")),
     );
     println!(
-        "GPS latency {:.3} s; from PARM: {}\n",
+        "GPS latency {:.3} s ({}); from PARM: {}\n",
         s.gps_delay,
+        match s.gps_delay_source {
+            super::DelaySource::Flag => "--gps-delay",
+            super::DelaySource::Parameter => "PARM GPS_DELAY_MS",
+            super::DelaySource::Likelihood => "maximum likelihood over 0-0.3 s",
+        },
         if s.from_log.is_empty() {
             "nothing (ArduPilot defaults)".to_owned()
         } else {
