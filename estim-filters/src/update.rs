@@ -33,7 +33,7 @@
 //! function, so no vector tree can span the arms; the results are bit for bit those of
 //! opt-level 1. The AD bench's lockstep check (analytic against automatic derivatives, to
 //! 10⁻¹²) is the guard: it fails before timing anything if this recurs. The reproduction is
-//! `benches/errata/slp_joseph_repro.rs` (an example of the bench package).
+//! `benches/errata/slp_joseph_repro.rs` (a bench target of the bench package).
 
 use estim_core::checks::{
     all_finite, ensure_finite, ensure_nonnegative_diagonal, ensure_semidefinite_noise,

@@ -4,11 +4,11 @@
 //! covariance form; SrEkf, SrUkf), with analytic and with automatic derivatives, 64 steps;
 //! prints a hash of the bits of every posterior state and covariance. Rust does not contract
 //! or reassociate floating point, so the hashes must be identical at every opt-level. The
-//! models and trajectory are the bench's (module `vehicle`); an example of the bench package,
-//! so every lint and test build compiles it.
+//! models and trajectory are the bench's (module `vehicle`); a bench target of the bench
+//! package, so every lint compiles it.
 //!
 //! To run it: compare the output of the binary built by
-//! `cargo rustc -p estim-filters-benches --profile bench --example opt_level_check` with and without
+//! `cargo rustc -p estim-filters-benches --profile bench --bench opt_level_check` with and without
 //! `-- -C opt-level=1` (the filter code is generic, so it is all compiled in this crate).
 //! At `05d49fa`: all 17 × 2 hashes identical between opt-level 1 and 3, and identical to
 //! those of `df5c075` at opt-level 1. (At `df5c075` this file did not show the miscompile:

@@ -1,19 +1,19 @@
 //! Reproduction of the optimised-build divergence of the analytic EKF (see the module docs of
 //! `estim_filters::update`, "Optimised builds"): `benches/autodiff.rs` cut down to its models,
-//! its trajectory and the EKF lockstep, no criterion. Not built by the workspace.
+//! its trajectory and the EKF lockstep, no criterion. A bench target of the bench package
+//! (`slp_joseph_repro`), so every lint compiles it.
 //!
-//! To run it: copy it to `estim-filters/benches/slp_repro.rs`, add
-//! `[[bench]] name = "slp_repro" path = "slp_repro.rs" harness = false` to `estim-filters/benches/Cargo.toml`, restore the
-//! inlined `Standard`/`Symmetrized` arms of `update::apply` (as at `df5c075`) and
+//! To run it: restore the inlined `Standard`/`Symmetrized` arms of `update::apply` (as at
+//! `df5c075`) and
 //!
 //! ```text
-//! cargo rustc -p estim-filters-benches --profile bench --bench slp_repro            # gap 4.1e-2
+//! cargo rustc -p estim-filters-benches --profile bench --bench slp_joseph_repro     # gap 4.1e-2
 //! cargo rustc ... -- -C no-vectorize-slp                                    # 6.7e-16
 //! cargo rustc ... -- -C codegen-units=1   (or -C opt-level=1, -C opt-level=2) # 6.7e-16
 //! RUSTC_BOOTSTRAP=1 cargo rustc -j1 ... -- -C llvm-args=-debug-counter=slp-vectorized=0-N
 //! ```
 //!
-//! then run `target/release/examples/slp_joseph_repro-*`. Non-incremental builds only: with
+//! then run `target/release/deps/slp_joseph_repro-*`. Non-incremental builds only: with
 //! `CARGO_INCREMENTAL=1` the crate is split into other codegen units and the gap is 6.7e-16.
 //! Bisecting N (`-j1` keeps the counter's order fixed) finds the one SLP tree that breaks it;
 //! in a variant of this file that also logged every step it was N = 580 (0-579: 6.7e-16,
