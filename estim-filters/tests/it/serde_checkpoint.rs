@@ -109,24 +109,24 @@ fn bad_square_root_checkpoints_are_refused() {
         serde_json::from_value::<SrUkf<f64, U3>>(v)
     };
     assert!(with_factor(good["factor"].clone()).is_ok());
-    // Column-major: an entry above the diagonal, a negative pivot, an overflowing S Sᵀ.
-    assert!(
-        with_factor(serde_json::json!([
-            1.0, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 1.0
-        ]))
-        .is_err()
+    // Column-major: an entry above the diagonal, a negative pivot, an overflowing S Sᵀ. Each
+    // is refused by the filter's own check (its message), not by a serde type error.
+    let refused = |factor: serde_json::Value, why: &str| {
+        let e = with_factor(factor).unwrap_err().to_string();
+        assert!(e.contains(why), "{e}");
+    };
+    let not_psd = "not positive semi-definite";
+    refused(
+        serde_json::json!([1.0, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 1.0]),
+        not_psd,
     );
-    assert!(
-        with_factor(serde_json::json!([
-            -1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
-        ]))
-        .is_err()
+    refused(
+        serde_json::json!([-1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
+        not_psd,
     );
-    assert!(
-        with_factor(serde_json::json!([
-            1e200, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
-        ]))
-        .is_err()
+    refused(
+        serde_json::json!([1e200, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
+        "not finite",
     );
 }
 
@@ -185,11 +185,32 @@ fn bad_checkpoints_are_refused() {
     assert!(with(&[], good.clone()).is_ok());
     // (Non-finite entries have no JSON form: JSON writes NaN as null, which is refused as a
     // type error; the finiteness check is for formats that carry them.)
-    assert!(with(&["state"], serde_json::json!([0.0, null, 0.0])).is_err());
-    assert!(with(&["state"], serde_json::json!([0.0, 0.0])).is_err());
-    assert!(with(&["propagator", "alpha"], serde_json::json!(-1.0)).is_err());
-    assert!(with(&["gate"], serde_json::json!({"Nis": -1.0})).is_err());
-    assert!(with(&["gate"], serde_json::json!({"Probability": 1.5})).is_err());
+    // Each refusal names its cause: serde's type and length checks for the first two, the
+    // filter's own parameter checks for the rest.
+    let refused = |path: &[&str], value: serde_json::Value, why: &str| {
+        let e = with(path, value).unwrap_err().to_string();
+        assert!(e.contains(why), "{e}");
+    };
+    refused(
+        &["state"],
+        serde_json::json!([0.0, null, 0.0]),
+        "invalid type: null",
+    );
+    refused(
+        &["state"],
+        serde_json::json!([0.0, 0.0]),
+        "invalid length 2",
+    );
+    let alpha = serde_json::json!(-1.0);
+    refused(
+        &["propagator", "alpha"],
+        alpha,
+        "unscented alpha = -1 is out of range",
+    );
+    let gate = serde_json::json!({"Nis": -1.0});
+    refused(&["gate"], gate, "gate threshold = -1 is out of range");
+    let gate = serde_json::json!({"Probability": 1.5});
+    refused(&["gate"], gate, "gate probability = 1.5 is out of range");
     // Runtime sizes: a covariance of the wrong size.
     let prior = Gaussian::new(DVector::<f64>::zeros(2), DMatrix::identity(2, 2)).unwrap();
     let mut v = serde_json::to_value(KalmanFilter::new(prior)).unwrap();
