@@ -100,7 +100,7 @@
 //!
 //! Runnable examples: `examples/attitude.rs` (an AHRS whose quaternion measurement model is
 //! differentiated automatically, on a 3-dimensional attitude-error state) and
-//! `examples/heading_wrap.rs` (a heading state across ±π with
+//! `examples/reproductions/heading_wrap.rs` (a heading state across ±π with
 //! [`WrappedAngles`](crate::core::WrappedAngles)).
 //!
 //! **A missing derivative** is a compile error that names the trait to implement in its first

@@ -1,7 +1,7 @@
-//! The `estim` package's integration tests, one binary: the examples' reproductions of the
-//! papers (each example's body, module `<name>` of the `estim-reproductions` library in
-//! `examples/reproductions/`, the one the examples run) and the other examples' runs (their
-//! files included by `#[path]`).
+//! The `estim` package's integration tests, one binary: the examples' runs (each example's
+//! body is module `<name>` of the `estim-reproductions` library in `examples/reproductions/`,
+//! the one the example runs, compiled once for both; `attitude`, which needs the `autodiff`
+//! feature, is included by `#[path]`).
 //!
 //! `cargo test -p estim --test it`
 
@@ -17,23 +17,15 @@ use estim_reproductions::boje_rate;
 use estim_reproductions::common;
 use estim_reproductions::consistency;
 use estim_reproductions::flight_ins;
-#[allow(dead_code)] // its `main` and printing helpers
-#[path = "../../examples/heading_wrap.rs"]
-mod heading_wrap;
-#[allow(dead_code)] // its `main` and printing helpers
-#[path = "../../examples/large_state.rs"]
-mod large_state;
-#[allow(dead_code)] // its `main` and printing helpers
-#[path = "../../examples/manoeuvring_target.rs"]
-mod manoeuvring_target;
+use estim_reproductions::heading_wrap;
+use estim_reproductions::large_state;
 use estim_reproductions::lee_huang;
-#[allow(dead_code)] // its `main` and printing helpers
-#[path = "../../examples/particle_growth.rs"]
-mod particle_growth;
 use estim_reproductions::lu_calibration;
 use estim_reproductions::lu_delays;
 use estim_reproductions::lu_noise_id;
 use estim_reproductions::lv2_fusion;
+use estim_reproductions::manoeuvring_target;
+use estim_reproductions::particle_growth;
 use estim_reproductions::plaza_range;
 use estim_reproductions::sharding;
 
