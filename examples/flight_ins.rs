@@ -3,10 +3,13 @@
 //! UKF, GPS fused at the time each fix was taken, compared with the autopilot's own EKF3. Prints
 //! the table, writes figures to `target/figures/`, and with `--json` prints one JSON line last.
 //!
-//! `cargo run --release --example flight_ins [-- --data DIR] [-- --gps-delay S] [-- --json]`
+//! `cargo run --release --example flight_ins [-- --data DIR] [-- --gps-delay S] [-- --imu N]
+//! [-- --mag N] [-- --core C] [-- --json]`
 //!
 //! `--data DIR`: a folder holding the log's `IMU`, `GPS`, `MAG`, `XKQ`, `XKF1` (and optionally
-//! `PARM`, `ORGN`) as `<TYPE>.csv.gz`, named as in the vendored folder.
+//! `PARM`, `ORGN`) as `<TYPE>.csv.gz`, named as in the vendored folder; `--imu N`, `--mag N`:
+//! the IMU and compass instances (`I` column, default 0); `--core C`: the EKF3 core the
+//! filters are scored against (0 or 1, default 0; core c runs on IMU c).
 
 use estim_reproductions::common;
 use estim_reproductions::flight_ins::{self, Config};
@@ -22,6 +25,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut config = Config::full(data);
     if let Some(s) = value("--gps-delay") {
         config.gps_delay = Some(s.parse()?);
+    }
+    if let Some(n) = value("--imu") {
+        config.imu = n.parse()?;
+    }
+    if let Some(n) = value("--mag") {
+        config.mag = n.parse()?;
+    }
+    if let Some(c) = value("--core") {
+        config.core = c.parse()?;
     }
     let output = flight_ins::run(&config)?;
     if common::json_requested() {
