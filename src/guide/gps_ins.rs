@@ -33,7 +33,7 @@
 //!    `Heading`) as one [`SensorSet`](crate::filters::fusion::SensorSet). A receiver reports a
 //!    fix after it was taken (0.1-0.2 s for a u-blox): fuse it at the time it was *taken*; the
 //!    driver rolls the filter back and replays the IMU samples since. On the vendored flight
-//!    that is the difference between 0.41 m and 3.10 m of NE position error against the
+//!    that is the difference between 0.40 m and 2.89 m of NE position error against the
 //!    autopilot's EKF3. An unknown latency can be estimated from the recording: run the
 //!    filter at a few candidate latencies and keep the one whose fixes are likeliest
 //!    ([`FusionDriver::log_likelihood`](crate::filters::fusion::FusionDriver::log_likelihood),

@@ -6,28 +6,14 @@
 //! Everything specific to a recording is read from it: the origin (the ORGN home row, else the
 //! first 3-D fix), the noise settings (PARM's EKF3 values, see [`Settings`]), the GPS latency
 //! (PARM `GPS_DELAY_MS` when non-zero, else the maximum-likelihood latency of the GPS fixes
-//! given the IMU, [`GPS_DELAY_GRID`]), the IMU period, the alignment (the first
+//! given the IMU, [`GPS_DELAY_GRID`]), the IMU period and the samples' lag (PARM
+//! `INS_GYRO_FILTER`, [`Settings::imu_lag`]), the alignment (the first
 //! [`Config::align_s`] seconds, checked to be at rest) and the airborne window (first to last GPS
 //! speed above 8 m/s).
+
 //!
-//! ## Results, and the same code on transformed recordings
-//!
-//! Airborne, EKF against EKF3 (`cargo run --release --example flight_ins -- --json`; EKF3's
-//! own core-to-core spread is 1.42° / 3.44°, 0.28 m, 0.37 m/s):
-//!
-//! | run | GPS latency | attitude median / p95 | NE position | NE velocity | 3σ coverage att/pos/vel |
-//! |---|---|---|---|---|---|
-//! | IMU 0, compass 0, vs core 0 | 0.14 s | 0.51° / 1.29° | 0.41 m | 0.175 m/s | 98 / 96 / 100 % |
-//! | IMU 1, compass 1, vs core 1 (`--imu 1 --mag 1 --core 1`) | 0.16 s | 0.61° / 1.41° | 0.56 m | 0.255 m/s | 98 / 89 / 98 % |
-//! | IMU 1, compass 1, vs core 0 | 0.16 s | 1.55° / 3.62° | 0.59 m | 0.402 m/s | 74 / 88 / 88 % |
-//! | IMU at half rate, 25 Hz (every other row) | 0.16 s | 0.90° / 3.57° | 0.83 m | 0.293 m/s | 87 / 70 / 96 % |
-//! | the same, IMU 1 vs core 1 | 0.16 s | 0.97° / 3.59° | 0.82 m | 0.324 m/s | 87 / 71 / 93 % |
-//!
-//! IMU 1 against core 0 is as far from it as EKF3's own core 1 is (1.42°): the two IMUs
-//! disagree by that much, which is why each is scored against the core that runs on it. At
-//! 25 Hz a sample stands for a 40 ms interval of a rate up to 10 rad/s (0.4 rad a step) and
-//! the integration of the sampled rates is coarser; the time shift of a sample (a quarter
-//! period, below) was measured at 50 Hz.
+//! Results, and the same code on other IMUs and rates: the example's docs
+//! (`examples/flight_ins.rs`).
 
 pub mod log;
 mod report;
@@ -165,6 +151,12 @@ pub struct Settings {
     pub declination: f64,
     /// Median IMU period [s].
     pub imu_period: f64,
+    /// How long a logged IMU sample lags the motion it measures [s]: the group delay at low
+    /// frequency of the autopilot's two-pole Butterworth low-pass at `INS_GYRO_FILTER` Hz,
+    /// √2 / (2π f_c) (11.25 ms at 20 Hz; 0 with the filter off). The sample is the rate at
+    /// TimeUS − lag, so it is taken as the mean over the interval of one period centred there
+    /// (the midpoint rule): (TimeUS − lag − T/2, TimeUS − lag + T/2].
+    pub imu_lag: f64,
     /// Which values came from PARM (the others are ArduPilot's defaults).
     pub from_log: Vec<&'static str>,
 }
@@ -340,6 +332,7 @@ fn load(config: &Config) -> Result<Recording, Box<dyn std::error::Error>> {
     let accel_noise = parm("EK3_ACC_P_NSE", 0.35);
     let accel_bias_walk = parm("EK3_ABIAS_P_NSE", 0.003);
     let gyro_bias_walk = parm("EK3_GBIAS_P_NSE", 0.001);
+    let gyro_filter = parm("INS_GYRO_FILTER", 20.0);
     let loop_rate = parm("SCHED_LOOP_RATE", 0.0);
     let pos_ne = parm("EK3_POSNE_M_NSE", 0.5);
     let alt = parm("EK3_ALT_M_NSE", 3.0);
@@ -472,6 +465,11 @@ fn load(config: &Config) -> Result<Recording, Box<dyn std::error::Error>> {
         gps_delay_source,
         declination,
         imu_period,
+        imu_lag: if gyro_filter > 0.0 {
+            core::f64::consts::SQRT_2 / (2.0 * core::f64::consts::PI * gyro_filter)
+        } else {
+            0.0
+        },
         from_log,
     };
     Ok(Recording {
@@ -627,9 +625,9 @@ where
         SensorSettings::gated(0.99999),
     )?
     .with_input_convention(InputConvention::Preceding)?;
-    // An IMU sample best covers the interval ending about a quarter period before its TimeUS
-    // (the data README: 5 ms at 50 Hz).
-    let shift = 0.25 * s.imu_period;
+    // An IMU sample stands for the interval of one period centred on TimeUS − lag
+    // (`Settings::imu_lag`): the driver's interval ends at TimeUS − shift.
+    let shift = s.imu_lag - 0.5 * s.imu_period;
     let mut track = Vec::with_capacity(rec.imu.rows.len());
     let mut rejected = (0, 0);
     let mut next_gps = 0;

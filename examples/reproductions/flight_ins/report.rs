@@ -110,7 +110,7 @@ pub fn json(result: &FlightResult) -> Value {
             "gyro_bias_walk": s.gyro_bias_walk, "accel_bias_walk": s.accel_bias_walk,
             "gps_position_sd_m": [s.pos_sd.x, s.pos_sd.y, s.pos_sd.z],
             "gps_velocity_sd_m_s": [s.vel_sd.x, s.vel_sd.y, s.vel_sd.z],
-            "declination_rad": s.declination, "imu_period_s": s.imu_period,
+            "declination_rad": s.declination, "imu_period_s": s.imu_period, "imu_lag_s": s.imu_lag,
             "ekf3_step_s": s.ekf_step, "imu_instance": result.instances.0,
             "mag_instance": result.instances.1, "scored_against_core": result.instances.2,
             "from_parm": s.from_log,
