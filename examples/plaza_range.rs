@@ -5,11 +5,12 @@
 //! GPS ground truth. Prints the table, writes figures to `target/figures/`, and with `--json`
 //! prints one JSON line last.
 //!
-//! `cargo run --release --example plaza_range [-- --data DIR] [-- --seconds S] [-- --particles N] [-- --json]`
+//! `cargo run --release --example plaza_range [-- --data DIR] [-- --seconds S] [-- --particles N]
+//! [-- --seed N] [-- --json]`
 //!
 //! `--data DIR`: a folder holding `GT`, `DR`, `TD` and `TL` as `.csv` or `.csv.gz` (named as in
 //! the data set); `--seconds S`: only the first S seconds; `--particles N`: the particle
-//! filter's count (default 1000).
+//! filter's count (default 1000); `--seed N`: its random seed (default 38).
 
 use estim_reproductions::common;
 use estim_reproductions::plaza_range::{self, Config};
@@ -36,6 +37,9 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
     }
     if let Some(n) = value("--particles") {
         config.particles = n.parse()?;
+    }
+    if let Some(n) = value("--seed") {
+        config.seed = n.parse()?;
     }
     let output = plaza_range::run(&config)?;
     if common::json_requested() {

@@ -23,7 +23,8 @@
 //!    of degrees of heading from a disturbed compass).
 //! 4. **The process**: [`Strapdown`](crate::models::nav::Strapdown) with the IMU's noise
 //!    densities ([`InsSettings`](crate::models::nav::InsSettings); `flight_ins` reads them from
-//!    the autopilot's own parameters), its input an [`Imu`](crate::models::nav::Imu) sample.
+//!    the autopilot's own parameters, which are per-step σ at the autopilot's filter step Δt:
+//!    the density is σ √Δt), its input an [`Imu`](crate::models::nav::Imu) sample.
 //!    An IMU sample is the mean over the interval *before* its time: tell the driver so with
 //!    [`InputConvention::Preceding`](crate::filters::fusion::InputConvention::Preceding)
 //!    (each span is predicted with the sample that covers it, not with the one before).
@@ -32,11 +33,11 @@
 //!    `Heading`) as one [`SensorSet`](crate::filters::fusion::SensorSet). A receiver reports a
 //!    fix after it was taken (0.1-0.2 s for a u-blox): fuse it at the time it was *taken*; the
 //!    driver rolls the filter back and replays the IMU samples since. On the vendored flight
-//!    that is the difference between 0.58 m and 3.15 m of NE position error against the
+//!    that is the difference between 0.40 m and 2.89 m of NE position error against the
 //!    autopilot's EKF3. An unknown latency can be estimated from the recording: run the
 //!    filter at a few candidate latencies and keep the one whose fixes are likeliest
 //!    ([`FusionDriver::log_likelihood`](crate::filters::fusion::FusionDriver::log_likelihood),
-//!    Σ log N(ν; 0, S)); `flight_ins` does so and finds 0.16 s.
+//!    Σ log N(ν; 0, S)); `flight_ins` does so and finds 0.14 s.
 //!
 //! A vehicle at rest, level, heading north, 1 s of 50 Hz IMU samples and one fix taken
 //! 0.15 s before it arrives:

@@ -3,18 +3,17 @@
 
 use std::path::PathBuf;
 
-use crate::plaza_range::data::{DataError, load, write_csv};
+use crate::plaza_range::data::{DataError, load, read, write_csv};
 use crate::plaza_range::model::MAX_BEACONS;
 use crate::plaza_range::{Config, run_config, vendored};
 
 /// The slice: the first 300 s (48 s at rest, then about 250 m driven), the EKF with its
-/// smoother, the iterated EKF and a small particle filter; no UKF, no white-noise comparisons,
-/// no figures.
+/// smoother, the iterated EKF and the particle filter at the example's 1000 particles; no
+/// UKF, no white-noise comparisons, no figures.
 fn slice() -> Config {
     Config {
         seconds: Some(300.0),
         ukf: false,
-        particles: 500,
         white_noise_models: false,
         figures: false,
         ..Config::full(vendored())
@@ -47,16 +46,117 @@ fn short_slice_localises_from_ranges_and_the_smoother_is_best() {
         assert!(s.coverage.unwrap() >= 0.95, "{s:?}");
     }
     // The particle filter is particle-limited in its 8 live dimensions (pose, common bias,
-    // four beacon biases): 500 particles localise to 2.5 m and cover half the errors (the
-    // coverage grows with the count: 63 % at 300, 77 % at 1000, 80 % at 3000 on this slice).
+    // four beacon biases), and on this slice its result depends on the seed: over 53 seeds at
+    // 1000 particles (38, 1-52) the coverage has median 0.85 and ranges 0.51-1.00, the RMSE
+    // 1.23-2.47 m (at 500 particles, 25 seeds: coverage 0.19-0.93, RMSE up to 3.5 m, so that
+    // count is not tested). The RMSE bound holds for all 53 seeds, the coverage bound for 51:
+    // a change to the filter that redraws its particles but keeps its statistics passes about
+    // 24 times in 25. A coverage of 0.55 is what a Gaussian error gets from a σ understated
+    // 3.6 times (P(|z| < 3/3.6)): a filter that much more overconfident fails (the PF here,
+    // seed 38: 0.77).
     assert!(particle.rmse < 2.5, "{particle:?}");
-    assert!(particle.coverage.unwrap() >= 0.5, "{particle:?}");
+    assert!(particle.coverage.unwrap() >= 0.55, "{particle:?}");
     // The NIS of the range updates: 1 for a consistent 1-D sensor; the bias states keep it
     // within [0.5, 2] where a white range model is far off (the full run's comparison).
     let u = r.ekf.updates.unwrap();
     assert!((0.5..=2.0).contains(&u.mean_nis), "{u:?}");
     // Outliers exist but are few: at most 5 % gated.
     assert!(u.gated_fraction() <= 0.05, "{u:?}");
+}
+
+/// The same recording with other beacon ids, listed in another order, and every position
+/// (beacons, ground truth) moved by a constant offset; the odometry is relative and stays.
+/// None of that is information an estimate may depend on: the EKF, its smoother and dead
+/// reckoning must give the same RMSE, coverage and NIS, and the same bias per beacon.
+///
+/// Tolerance 10⁻⁹ m: every value is written exactly (`{}` of an f64 reads back to the same
+/// f64), so the differences are the rounding of coordinates near 10³ m instead of 10¹ m,
+/// about 10⁻¹³ m per value; over the whole run they stay at 10⁻¹³ m. A filter that used an id,
+/// the survey's order or the absolute position would be off by centimetres or more.
+#[test]
+fn relabelled_reordered_and_moved_beacons_give_the_same_run() {
+    let source = vendored();
+    let dir = scratch("transformed");
+    let (dx, dy) = (1234.5, -789.25);
+    // 0, 1, 5, 6 → 100, 93, 65, 58: distinct, none of the old ids.
+    let id = |old: f64| 100.0 - 7.0 * old;
+    let table =
+        |name: &str, columns: usize, timed: bool| read(&source, name, columns, timed).unwrap();
+    let lines = |rows: Vec<String>| rows.join("\n") + "\n";
+    let mut survey: Vec<String> = table("TL", 3, false)
+        .rows
+        .iter()
+        .map(|r| format!("{},{},{}", id(r[0]), r[1] + dx, r[2] + dy))
+        .collect();
+    survey.reverse();
+    write_csv(&dir, "TL", &lines(survey)).unwrap();
+    let truth = table("GT", 4, true)
+        .rows
+        .iter()
+        .map(|r| format!("{},{},{},{}", r[0], r[1] + dx, r[2] + dy, r[3]))
+        .collect();
+    write_csv(&dir, "GT", &lines(truth)).unwrap();
+    // In the file's own order (it steps back in time twice; the reader sorts it).
+    let ranges = table("TD", 4, false)
+        .rows
+        .iter()
+        .map(|r| format!("{},{},{},{}", r[0], r[1], id(r[2]), r[3]))
+        .collect();
+    write_csv(&dir, "TD", &lines(ranges)).unwrap();
+    let odometry = table("DR", 3, true)
+        .rows
+        .iter()
+        .map(|r| format!("{},{},{}", r[0], r[1], r[2]))
+        .collect();
+    write_csv(&dir, "DR", &lines(odometry)).unwrap();
+
+    // 120 s: 48 s at rest, the start fit over the first 20 m driven, a minute of tracking.
+    let fast = |data: PathBuf| Config {
+        seconds: Some(120.0),
+        ukf: false,
+        iekf: false,
+        particle: false,
+        white_noise_models: false,
+        figures: false,
+        ..Config::full(data)
+    };
+    let a = run_config(&fast(source)).unwrap();
+    let b = run_config(&fast(dir.clone())).unwrap();
+    let close = |x: f64, y: f64| (x - y).abs() <= 1e-9;
+    let (sa, sb) = (
+        a.ekf.smoothed.as_ref().unwrap().1,
+        b.ekf.smoothed.as_ref().unwrap().1,
+    );
+    for (x, y) in [
+        (a.dead_reckoning.1, b.dead_reckoning.1),
+        (a.ekf.score, b.ekf.score),
+        (sa, sb),
+    ] {
+        assert!(close(x.rmse, y.rmse), "{x:?} vs {y:?}");
+        assert_eq!(x.coverage.is_some(), y.coverage.is_some());
+        assert!(
+            close(x.coverage.unwrap_or(0.0), y.coverage.unwrap_or(0.0)),
+            "{x:?} vs {y:?}"
+        );
+    }
+    let (ua, ub) = (a.ekf.updates.unwrap(), b.ekf.updates.unwrap());
+    assert_eq!((ua.applied, ua.gated), (ub.applied, ub.gated));
+    assert!(close(ua.mean_nis, ub.mean_nis), "{ua:?} vs {ub:?}");
+    // The biases: the common one, then one per beacon in the survey's order (here reversed).
+    let mut per_beacon = b.ekf.biases[1..].to_vec();
+    per_beacon.reverse();
+    assert!(
+        close(a.ekf.biases[0], b.ekf.biases[0]),
+        "{:?} vs {:?}",
+        a.ekf.biases,
+        b.ekf.biases
+    );
+    for (x, y) in a.ekf.biases[1..].iter().zip(&per_beacon) {
+        assert!(close(*x, *y), "{:?} vs {:?}", a.ekf.biases, b.ekf.biases);
+    }
+    // And the scores are not trivially equal: the run localised.
+    assert!(sa.rmse > 0.0 && sa.rmse < 2.0, "{sa:?}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A scratch folder of this test process.

@@ -64,9 +64,10 @@ pub struct InsSettings {
 }
 
 impl Default for InsSettings {
-    /// A MEMS IMU: 0.015 rad/s/√Hz, 0.35 m/s²/√Hz (ArduPilot's EKF3 defaults), bias walks
-    /// 10⁻⁴ rad/s²/√Hz and 10⁻³ m/s³/√Hz; earth and transport rates off (below a MEMS gyro's
-    /// noise).
+    /// A MEMS IMU, set generously: 0.015 rad/s/√Hz, 0.35 m/s²/√Hz (the values of ArduPilot's
+    /// EKF3 defaults, which EKF3 uses as per-step σ, a density of σ √Δt: 0.0021 and 0.049 at
+    /// 50 Hz), bias walks 10⁻⁴ rad/s²/√Hz and 10⁻³ m/s³/√Hz; earth and transport rates off
+    /// (below a MEMS gyro's noise).
     fn default() -> Self {
         Self {
             gyro_noise: 0.015,
@@ -112,8 +113,11 @@ struct Step {
     q_next: UnitQuaternion<f64>,
     phi: Vector3<f64>,
     f: Vector3<f64>,
-    /// R(q ⊗ Exp(φ/2)).
+    /// R(Exp(−ω_in Δt/2) ⊗ q ⊗ Exp(φ/2)): the body at mid-step in the navigation frame at
+    /// mid-step.
     r_mid: Matrix3<f64>,
+    /// R(Exp(−ω_in Δt/2)).
+    nav_half: Matrix3<f64>,
     /// ω_in.
     nav_rate: Vector3<f64>,
     /// 2 ω_ie + ω_en.
@@ -177,9 +181,13 @@ impl Strapdown {
         let coriolis = self.earth * 2.0 + transport;
         let mut q_next = so3_exp(&(-nav_rate * dt)) * q * so3_exp(&phi);
         q_next.renormalize();
-        let r_mid = (q * so3_exp(&(phi * 0.5)))
+        let nav_half = so3_exp(&(-nav_rate * (0.5 * dt)))
             .to_rotation_matrix()
             .into_inner();
+        let r_mid = nav_half
+            * (q * so3_exp(&(phi * 0.5)))
+                .to_rotation_matrix()
+                .into_inner();
         let gravity = Vector3::new(0.0, 0.0, self.origin.gravity(x[POSITION + 2]));
         let v_next = v + (r_mid * f - coriolis.cross(&v) + gravity) * dt;
         Step {
@@ -188,6 +196,7 @@ impl Strapdown {
             phi,
             f,
             r_mid,
+            nav_half,
             nav_rate,
             coriolis,
             v_next,
@@ -250,12 +259,14 @@ impl ProcessJacobian<f64, Const<STATE>> for Strapdown {
     ///
     /// ```text
     /// δθ⁺ = Exp(φ)ᵀ δθ − J_r(φ) Δt δb_g − R(q⁺)ᵀ J_r(ω_in Δt) A Δt δv
-    /// δv⁺ = δv + Δt (−R(q)[R(Exp(φ/2)) f]× δθ + ½ R_mid [f]× J_r(φ/2) Δt δb_g − R_mid δb_a
-    ///                − ([2ω_ie + ω_en]× − [v]× A) δv − γ'(h) e_D δp_D)
+    /// δv⁺ = δv + Δt (−E R(q)[R(Exp(φ/2)) f]× δθ + ½ R_mid [f]× J_r(φ/2) Δt δb_g − R_mid δb_a
+    ///                − ([2ω_ie + ω_en]× − [v]× A − ½ Δt E [w]× J_r(−ω_in Δt/2) A) δv
+    ///                − γ'(h) e_D δp_D)
     /// δp⁺ = δp + (δv + δv⁺) Δt / 2
     /// ```
     ///
-    /// (A the transport-rate matrix ω_en = A v, zero when off; γ' the free-air gradient.)
+    /// (A the transport-rate matrix ω_en = A v, zero when off; γ' the free-air gradient;
+    /// E = R(Exp(−ω_in Δt/2)) and w = R(q ⊗ Exp(φ/2)) f, so R_mid f = E w.)
     fn transition_jacobian(&self, x: &State, imu: &Imu, dt: f64) -> Square {
         let s = self.step(x, imu, dt);
         let v = x.fixed_rows::<3>(VELOCITY).into_owned();
@@ -274,10 +285,18 @@ impl ProcessJacobian<f64, Const<STATE>> for Strapdown {
         fm.fixed_view_mut::<3, 3>(ATTITUDE, VELOCITY)
             .copy_from(&dtheta_dv);
         // Velocity: ∂a/∂· for a the acceleration of the step.
-        let da_dtheta = -(rq * (half * s.f).cross_matrix());
+        let body_mid = rq * (half * s.f);
+        let da_dtheta = -(s.nav_half * rq * (half * s.f).cross_matrix());
         let da_dbg = s.r_mid * s.f.cross_matrix() * right_jacobian(&(s.phi * 0.5)) * (0.5 * dt);
         let da_dba = -s.r_mid;
-        let da_dv = -(s.coriolis.cross_matrix() - v.cross_matrix() * self.transport);
+        // ω_in = ω_ie + A v also turns the mid-step navigation frame E = Exp(−ω_in Δt/2):
+        // E Exp(J_r(−ω_in Δt/2) (−A δv Δt/2)) w ≈ E w + E [w]× J_r(−ω_in Δt/2) A δv Δt/2.
+        let da_dv = -(s.coriolis.cross_matrix() - v.cross_matrix() * self.transport)
+            + s.nav_half
+                * body_mid.cross_matrix()
+                * right_jacobian(&(-s.nav_rate * (0.5 * dt)))
+                * self.transport
+                * (0.5 * dt);
         let mut da_dp = Matrix3::zeros();
         da_dp[(2, 2)] = -crate::nav::normal_gravity_gradient(
             self.origin.latitude(),

@@ -6,9 +6,14 @@
 //! Everything specific to a recording is read from it: the origin (the ORGN home row, else the
 //! first 3-D fix), the noise settings (PARM's EKF3 values, see [`Settings`]), the GPS latency
 //! (PARM `GPS_DELAY_MS` when non-zero, else the maximum-likelihood latency of the GPS fixes
-//! given the IMU, [`GPS_DELAY_GRID`]), the IMU period, the alignment (the first
+//! given the IMU, [`GPS_DELAY_GRID`]), the IMU period and the samples' lag (PARM
+//! `INS_GYRO_FILTER`, [`Settings::imu_lag`]), the alignment (the first
 //! [`Config::align_s`] seconds, checked to be at rest) and the airborne window (first to last GPS
 //! speed above 8 m/s).
+
+//!
+//! Results, and the same code on other IMUs and rates: the example's docs
+//! (`examples/flight_ins.rs`).
 
 pub mod log;
 mod report;
@@ -80,6 +85,13 @@ pub struct Config {
     pub gps_delay: Option<f64>,
     /// Length of the static alignment at the start of the IMU log [s].
     pub align_s: f64,
+    /// The IMU instance (`I` of the IMU rows) the INS runs on.
+    pub imu: u8,
+    /// The compass instance (`I` of the MAG rows) the alignment's heading comes from.
+    pub mag: u8,
+    /// The EKF3 core (`C`: 0 or 1) the filters are scored against (the figures and the
+    /// reference spread stay against core 0). Core c runs on IMU c.
+    pub core: u8,
 }
 
 impl Config {
@@ -93,22 +105,39 @@ impl Config {
             figures: true,
             gps_delay: None,
             align_s: 5.0,
+            imu: 0,
+            mag: 0,
+            core: 0,
         }
     }
 }
 
+/// EKF3's own step when the loop is faster [s] (`EKF_TARGET_DT` in ArduPilot's EKF3): it
+/// runs at the loop rate `SCHED_LOOP_RATE`, but no faster than every 12 ms.
+pub const EKF3_TARGET_STEP: f64 = 0.012;
+
 /// The settings derived from the recording, with where each came from.
+///
+/// **The process noise.** EKF3's `EK3_*_P_NSE` parameters are not densities: EKF3 adds
+/// (Δt σ)² per prediction step to the variance of the step's delta angle (gyro, σ in rad/s),
+/// delta velocity (accelerometer, m/s²) and of the biases, Δt its own step
+/// ([`ekf_step`](Self::ekf_step)). White noise of density σ_c adds σ_c² Δt over the same step,
+/// so the density EKF3 assumes is σ_c = σ √Δt: 0.015 rad/s at 50 Hz is 0.0021 rad/s/√Hz. The
+/// nav model takes densities, so each parameter is converted so (at 50 Hz, ×0.141).
 #[derive(Clone, Debug)]
 pub struct Settings {
-    /// Gyro noise [rad/s/√Hz]: `EK3_GYRO_P_NSE`.
+    /// Gyro noise [rad/s/√Hz]: `EK3_GYRO_P_NSE` √Δt.
     pub gyro_noise: f64,
-    /// Accelerometer noise [m/s²/√Hz]: `EK3_ACC_P_NSE`.
+    /// Accelerometer noise [m/s²/√Hz]: `EK3_ACC_P_NSE` √Δt.
     pub accel_noise: f64,
-    /// Accelerometer bias walk [m/s³/√Hz]: `EK3_ABIAS_P_NSE`.
+    /// Accelerometer bias walk [m/s³/√Hz]: `EK3_ABIAS_P_NSE` √Δt.
     pub accel_bias_walk: f64,
-    /// Gyro bias walk [rad/s²/√Hz]: the nav model's default (EKF3's `EK3_GBIAS_P_NSE` scales
-    /// a per-step variance, not a density).
+    /// Gyro bias walk [rad/s²/√Hz]: `EK3_GBIAS_P_NSE` √Δt.
     pub gyro_bias_walk: f64,
+    /// EKF3's step Δt [s], which its `EK3_*_P_NSE` values are per: 1/`SCHED_LOOP_RATE`, at
+    /// least [`EKF3_TARGET_STEP`] (without `SCHED_LOOP_RATE`: the log's IMU period, which is
+    /// the loop period when the IMU is logged every loop).
+    pub ekf_step: f64,
     /// GPS NE position σ [m]: `EK3_POSNE_M_NSE`; down: `EK3_ALT_M_NSE`.
     pub pos_sd: Vector3<f64>,
     /// GPS velocity σ [m/s]: `EK3_VELNE_M_NSE` (N, E), `EK3_VELD_M_NSE` (D).
@@ -122,6 +151,12 @@ pub struct Settings {
     pub declination: f64,
     /// Median IMU period [s].
     pub imu_period: f64,
+    /// How long a logged IMU sample lags the motion it measures [s]: the group delay at low
+    /// frequency of the autopilot's two-pole Butterworth low-pass at `INS_GYRO_FILTER` Hz,
+    /// √2 / (2π f_c) (11.25 ms at 20 Hz; 0 with the filter off). The sample is the rate at
+    /// TimeUS − lag, so it is taken as the mean over the interval of one period centred there
+    /// (the midpoint rule): (TimeUS − lag − T/2, TimeUS − lag + T/2].
+    pub imu_lag: f64,
     /// Which values came from PARM (the others are ArduPilot's defaults).
     pub from_log: Vec<&'static str>,
 }
@@ -197,6 +232,8 @@ pub struct FlightResult {
     pub window: (f64, f64),
     pub airborne: Option<(f64, f64)>,
     pub imu_samples: usize,
+    /// The IMU and compass instances used, and the EKF3 core scored against.
+    pub instances: (u8, u8, u8),
     pub ekf: Run,
     pub ukf: Option<Run>,
     pub latency_ignored: Option<Run>,
@@ -252,8 +289,8 @@ fn load(config: &Config) -> Result<Recording, Box<dyn std::error::Error>> {
             "TimeUS", "I", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ",
         ],
     )?
-    .select(1, 0.0)
-    .non_empty("IMU 0 samples")?;
+    .select(1, f64::from(config.imu))
+    .non_empty(&format!("IMU {} samples", config.imu))?;
     let gps_cols = [
         "TimeUS", "I", "Status", "Lat", "Lng", "Alt", "Spd", "GCrs", "VZ",
     ];
@@ -270,7 +307,8 @@ fn load(config: &Config) -> Result<Recording, Box<dyn std::error::Error>> {
         file: gps.file,
     }
     .non_empty("3-D GPS fixes of GPS 0")?;
-    let mag = read_table(dir, "MAG", &["TimeUS", "I", "MagX", "MagY", "MagZ"])?.select(1, 0.0);
+    let mag = read_table(dir, "MAG", &["TimeUS", "I", "MagX", "MagY", "MagZ"])?
+        .select(1, f64::from(config.mag));
     let xkq_all = read_table(dir, "XKQ", &["TimeUS", "C", "Q1", "Q2", "Q3", "Q4"])?;
     let xkf_all = read_table(dir, "XKF1", &["TimeUS", "C", "VN", "VE", "PN", "PE"])?;
     let xkq = [
@@ -293,6 +331,9 @@ fn load(config: &Config) -> Result<Recording, Box<dyn std::error::Error>> {
     let gyro_noise = parm("EK3_GYRO_P_NSE", 0.015);
     let accel_noise = parm("EK3_ACC_P_NSE", 0.35);
     let accel_bias_walk = parm("EK3_ABIAS_P_NSE", 0.003);
+    let gyro_bias_walk = parm("EK3_GBIAS_P_NSE", 0.001);
+    let gyro_filter = parm("INS_GYRO_FILTER", 20.0);
+    let loop_rate = parm("SCHED_LOOP_RATE", 0.0);
     let pos_ne = parm("EK3_POSNE_M_NSE", 0.5);
     let alt = parm("EK3_ALT_M_NSE", 3.0);
     let vel_ne = parm("EK3_VELNE_M_NSE", 0.5);
@@ -316,11 +357,19 @@ fn load(config: &Config) -> Result<Recording, Box<dyn std::error::Error>> {
     if periods.is_empty() {
         return Err(LogError::Empty {
             file: imu.file.clone(),
-            what: "two IMU 0 samples".into(),
+            what: format!("two IMU {} samples", config.imu),
         }
         .into());
     }
     let imu_period = median(periods);
+    // EKF3's step (see `Settings`): the per-step σ of its parameters become densities.
+    let ekf_step = if loop_rate > 0.0 {
+        1.0 / loop_rate
+    } else {
+        imu_period
+    }
+    .max(EKF3_TARGET_STEP);
+    let density = ekf_step.sqrt();
     // The origin: the home row, else the first 3-D fix.
     let home = match read_table(dir, "ORGN", &["TimeUS", "Type", "Lat", "Lng", "Alt"]) {
         Ok(o) => o
@@ -368,7 +417,7 @@ fn load(config: &Config) -> Result<Recording, Box<dyn std::error::Error>> {
     if mag_window.is_empty() {
         return Err(LogError::Empty {
             file: mag.file.clone(),
-            what: "compass 0 readings during the alignment".into(),
+            what: format!("compass {} readings during the alignment", config.mag),
         }
         .into());
     }
@@ -405,16 +454,22 @@ fn load(config: &Config) -> Result<Recording, Box<dyn std::error::Error>> {
         Vector2::zeros()
     };
     let settings = Settings {
-        gyro_noise,
-        accel_noise,
-        accel_bias_walk,
-        gyro_bias_walk: InsSettings::default().gyro_bias_walk,
+        gyro_noise: gyro_noise * density,
+        accel_noise: accel_noise * density,
+        accel_bias_walk: accel_bias_walk * density,
+        gyro_bias_walk: gyro_bias_walk * density,
+        ekf_step,
         pos_sd: Vector3::new(pos_ne, pos_ne, alt),
         vel_sd: Vector3::new(vel_ne, vel_ne, vel_d),
         gps_delay,
         gps_delay_source,
         declination,
         imu_period,
+        imu_lag: if gyro_filter > 0.0 {
+            core::f64::consts::SQRT_2 / (2.0 * core::f64::consts::PI * gyro_filter)
+        } else {
+            0.0
+        },
         from_log,
     };
     Ok(Recording {
@@ -535,7 +590,12 @@ where
             accel_noise: s.accel_noise,
             gyro_bias_walk: s.gyro_bias_walk,
             accel_bias_walk: s.accel_bias_walk,
-            ..InsSettings::default()
+            // The gyros measure the earth's rotation too (15°/h; 11.8°/h about the vertical
+            // at 52° N, 1.2° of heading in 6 minutes), and EKF3 models it: a known input, not
+            // something for the gyro bias state to learn. No transport rate: the NED frame is
+            // the tangent plane at a fixed origin, which turns with the earth alone.
+            earth_rate: true,
+            transport_rate: false,
         },
     )?;
     let gnss = Gnss {
@@ -565,9 +625,9 @@ where
         SensorSettings::gated(0.99999),
     )?
     .with_input_convention(InputConvention::Preceding)?;
-    // An IMU sample best covers the interval ending about a quarter period before its TimeUS
-    // (the data README: 5 ms at 50 Hz).
-    let shift = 0.25 * s.imu_period;
+    // An IMU sample stands for the interval of one period centred on TimeUS − lag
+    // (`Settings::imu_lag`): the driver's interval ends at TimeUS − shift.
+    let shift = s.imu_lag - 0.5 * s.imu_period;
     let mut track = Vec::with_capacity(rec.imu.rows.len());
     let mut rejected = (0, 0);
     let mut next_gps = 0;
@@ -753,11 +813,19 @@ pub fn run_config(config: &Config) -> Result<FlightResult, Box<dyn std::error::E
         rec.settings.gps_delay = likeliest_gps_delay(&rec, end)?;
     }
     let rec = rec;
+    let core = usize::from(config.core);
+    if core > 1 {
+        return Err(LogError::Recording {
+            file: rec.xkq[0].file.clone(),
+            what: format!("EKF3 core {core} asked for: the comparison is with core 0 or 1"),
+        }
+        .into());
+    }
     let ekf_with = |latency: f64| -> Result<Run, Box<dyn std::error::Error>> {
         let filter = Ekf::new(prior(&rec)?).with_state_space(state_space());
         let (track, us_per_sample, rejected, _) = drive(&rec, latency, end, filter)?;
         Ok(Run {
-            windows: windows(&rec, &track, 0, whole, airborne)?,
+            windows: windows(&rec, &track, core, whole, airborne)?,
             track,
             us_per_sample,
             rejected,
@@ -773,7 +841,7 @@ pub fn run_config(config: &Config) -> Result<FlightResult, Box<dyn std::error::E
         let filter = Ukf::new(prior(&rec)?).with_state_space(state_space());
         let (track, us_per_sample, rejected, _) = drive(&rec, rec.settings.gps_delay, end, filter)?;
         Some(Run {
-            windows: windows(&rec, &track, 0, whole, airborne)?,
+            windows: windows(&rec, &track, core, whole, airborne)?,
             track,
             us_per_sample,
             rejected,
@@ -823,6 +891,7 @@ pub fn run_config(config: &Config) -> Result<FlightResult, Box<dyn std::error::E
         window: whole,
         airborne,
         imu_samples,
+        instances: (config.imu, config.mag, config.core),
         ekf,
         ukf,
         latency_ignored,

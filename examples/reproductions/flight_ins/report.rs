@@ -110,7 +110,9 @@ pub fn json(result: &FlightResult) -> Value {
             "gyro_bias_walk": s.gyro_bias_walk, "accel_bias_walk": s.accel_bias_walk,
             "gps_position_sd_m": [s.pos_sd.x, s.pos_sd.y, s.pos_sd.z],
             "gps_velocity_sd_m_s": [s.vel_sd.x, s.vel_sd.y, s.vel_sd.z],
-            "declination_rad": s.declination, "imu_period_s": s.imu_period,
+            "declination_rad": s.declination, "imu_period_s": s.imu_period, "imu_lag_s": s.imu_lag,
+            "ekf3_step_s": s.ekf_step, "imu_instance": result.instances.0,
+            "mag_instance": result.instances.1, "scored_against_core": result.instances.2,
             "from_parm": s.from_log,
         },
         "run_s": result.run_s,
@@ -122,9 +124,11 @@ pub fn run(config: &Config) -> Result<Output, Box<dyn std::error::Error>> {
     let result = run_config(config)?;
     let s = &result.settings;
     println!(
-        "flight_ins (estim's own extension): {} IMU samples at {:.0} Hz, {:.1}-{:.1} s, airborne {}",
+        "flight_ins (estim's own extension): {} samples of IMU {} at {:.0} Hz (compass {}), {:.1}-{:.1} s, airborne {}",
         result.imu_samples,
+        result.instances.0,
         1.0 / s.imu_period,
+        result.instances.1,
         result.window.0,
         result.window.1,
         result
@@ -147,7 +151,12 @@ pub fn run(config: &Config) -> Result<Output, Box<dyn std::error::Error>> {
     );
     println!(
         "{:<32} {:>6} {:>6} {:>6} {:>8} {:>8}   3-sigma coverage att/pos/vel",
-        "airborne (else whole) vs EKF3", "med°", "p95°", "max°", "pos m", "vel m/s"
+        format!("airborne (else whole) vs EKF3 c{}", result.instances.2),
+        "med°",
+        "p95°",
+        "max°",
+        "pos m",
+        "vel m/s"
     );
     println!("{}", row("EKF, GPS at time taken", &result.ekf.windows));
     if let Some(u) = &result.ukf {

@@ -37,6 +37,30 @@
 //! readings whose errors are the same for tens of seconds as if they were independent, so its
 //! covariance shrinks faster than its error. Modelled as states, the correlated part is
 //! estimated and carried (its uncertainty stays in P): both accurate and consistent.
+//!
+//! ## The same code on transformed recordings
+//!
+//! No second Plaza-like recording is at hand; these are the vendored one transformed, each
+//! run with `--data DIR` and no edit (position RMSE in metres, whole run):
+//!
+//! | recording | dead reckoning | EKF | UKF | IEKF | particle | smoother | coverage EKF / smoother / PF |
+//! |---|---|---|---|---|---|---|---|
+//! | as recorded | 1.933 | 1.039 | 1.041 | 1.021 | 1.140 | 0.857 | 99 / 97 / 93 % |
+//! | ids renamed (0, 1, 5, 6 → 17, 3, 42, 8), survey rows permuted | 1.933 | 1.039 | 1.041 | 1.021 | 1.208 | 0.857 | 99 / 97 / 93 % |
+//! | every position moved by (1234.5, −789.25) m | 1.933 | 1.039 | 1.041 | 1.021 | 1.140 | 0.857 | 99 / 97 / 93 % |
+//! | both | 1.933 | 1.039 | 1.041 | 1.021 | 1.208 | 0.857 | 99 / 97 / 93 % |
+//! | beacon 0 dropped | 1.933 | 1.416 | 1.416 | 1.511 | 1.571 | 1.002 | 96 / 97 / 94 % |
+//! | beacon 1 dropped | 1.933 | 1.250 | 1.266 | 1.053 | 1.475 | 0.893 | 99 / 99 / 95 % |
+//! | beacon 5 dropped | 1.933 | 1.058 | 1.054 | 1.014 | 1.167 | 0.895 | 100 / 98 / 96 % |
+//! | beacon 6 dropped | 1.933 | 1.127 | 1.135 | 1.107 | 1.162 | 1.008 | 99 / 97 / 97 % |
+//!
+//! Renaming and moving change the Kalman filters' and the smoother's RMSE by 10⁻¹³ m
+//! (the iterated EKF's by 7·10⁻⁷ m, its stopping test being absolute; the UKF's by 10⁻⁸ m);
+//! the particle filter's changes with the survey's order because its seeded draws go to the
+//! beacons' bias states in that order (another seed, in effect). With three beacons the
+//! smoother stays at 0.86-1.01 m and every filter's 3σ still covers 94 % or more. The CI test
+//! `relabelled_reordered_and_moved_beacons_give_the_same_run` checks the equality on a 120 s
+//! slice.
 
 pub mod data;
 pub mod model;
