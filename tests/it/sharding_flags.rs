@@ -1,8 +1,8 @@
 //! The examples' `--shard I/N --out FILE` / `--merge FILE...` flags (`sharding`): parsing, and
 //! shard files through a session on a tiny Monte Carlo (one slot, 40 runs: milliseconds), and
 //! through a hand-looped example's per-run records (`Session::records`), and through the
-//! examples whose sums over runs are exact (`Session::sums`: boje_circle on a few short
-//! runs).
+//! examples whose sums over runs are exact (`Session::sums`: boje_rate, boje_circle, each on
+//! a few short runs).
 
 use std::path::PathBuf;
 
@@ -354,13 +354,26 @@ fn shards_merge_to_the_whole_run(
     }
 }
 
-/// boje_circle on a few short runs (tens of milliseconds): its shards merge to the whole run
-/// bit for bit.
+/// boje_rate and boje_circle, each on a few short runs (tens of milliseconds): their shards
+/// merge to the whole run bit for bit.
 #[test]
 fn examples_with_exact_sums_merge_to_their_whole_run_bit_for_bit() {
     use crate::boje_circle::{circle_monte_carlo_in, circle_smoothing_in};
+    use crate::boje_rate::{RateConfig, rate_experiment_in};
     use estim::models::boje::CircleConfig;
 
+    let rate = RateConfig {
+        runs: 5,
+        steps: 1_100,
+        ..RateConfig::paper()
+    };
+    shards_merge_to_the_whole_run("boje_rate", |s| {
+        let r = rate_experiment_in(&rate, s)?;
+        if let Some(r) = &r {
+            s.summary("runs", &r.rms_over_time_deg_s);
+        }
+        Ok(r.map(|r| format!("{r:?}")))
+    });
     let circle = CircleConfig {
         runs: 4,
         t_end: 3.0,
