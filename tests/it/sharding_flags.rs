@@ -1,8 +1,8 @@
 //! The examples' `--shard I/N --out FILE` / `--merge FILE...` flags (`sharding`): parsing, and
 //! shard files through a session on a tiny Monte Carlo (one slot, 40 runs: milliseconds), and
 //! through a hand-looped example's per-run records (`Session::records`), and through the
-//! examples whose sums over runs are exact (`Session::sums`: boje_rate, boje_circle, each on
-//! a few short runs).
+//! examples whose sums over runs are exact (`Session::sums`: boje_rate, lv2_fusion,
+//! boje_circle, each on a few short runs).
 
 use std::path::PathBuf;
 
@@ -354,12 +354,13 @@ fn shards_merge_to_the_whole_run(
     }
 }
 
-/// boje_rate and boje_circle, each on a few short runs (tens of milliseconds): their shards
-/// merge to the whole run bit for bit.
+/// boje_rate, lv2_fusion and boje_circle, each on a few short runs (tens of milliseconds):
+/// their shards merge to the whole run bit for bit.
 #[test]
 fn examples_with_exact_sums_merge_to_their_whole_run_bit_for_bit() {
     use crate::boje_circle::{circle_monte_carlo_in, circle_smoothing_in};
     use crate::boje_rate::{RateConfig, rate_experiment_in};
+    use crate::lv2_fusion::{Lv2Config, monte_carlo_in};
     use estim::models::boje::CircleConfig;
 
     let rate = RateConfig {
@@ -373,6 +374,15 @@ fn examples_with_exact_sums_merge_to_their_whole_run_bit_for_bit() {
             s.summary("runs", &r.rms_over_time_deg_s);
         }
         Ok(r.map(|r| format!("{r:?}")))
+    });
+    let mut lv2 = Lv2Config::quick();
+    lv2.monte_carlo.runs = 4_500;
+    shards_merge_to_the_whole_run("lv2_fusion", |s| {
+        let mc = monte_carlo_in(&lv2.sigmas, &lv2.monte_carlo, lv2.false_alarm, s)?;
+        if let Some(mc) = &mc {
+            s.summary("readings", &[mc.chi2_mean, mc.chi2_variance]);
+        }
+        Ok(mc.map(|m| format!("{m:?}")))
     });
     let circle = CircleConfig {
         runs: 4,
