@@ -8,18 +8,22 @@
 //! heading tangent, ω = sgn(t − t_end/2)·0.1·t rad/s, t_end = 20 s. "Settled" = t ∈ [2, 20] s.
 //!
 //! `cargo run --release --example boje_circle [-- --json] [-- --quick]`
+//!
+//! Its Monte Carlos run also in shards (`--shard I/N --out FILE`, then `--merge FILE...`,
+//! optionally `--stats FILE`; see `estim_reproductions::sharding`), merged bit for bit.
 
 use estim_reproductions::boje_circle;
 use estim_reproductions::common;
-use estim_reproductions::sharding;
+use estim_reproductions::sharding::{self, Session};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    sharding::refuse_flags(
-        "boje_circle",
-        "not ported yet (its per-step sums over runs would need shard files of ~200 MB to merge bit for bit)",
-    )?;
-    let output = boje_circle::run(common::quick_requested())?;
-    if common::json_requested() {
+    let quick = common::quick_requested();
+    let session = Session::from_args("boje_circle", sharding::settings(quick))?;
+    let output = boje_circle::run_in(quick, &session)?;
+    session.finish()?;
+    if let Some(output) = output
+        && common::json_requested()
+    {
         println!("{}", output.json);
     }
     Ok(())

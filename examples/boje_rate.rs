@@ -4,18 +4,22 @@
 //! model) at constant rate on simulated accelerometer samples.
 //!
 //! `cargo run --release --example boje_rate [-- --json] [-- --quick]`
+//!
+//! Its Monte Carlo runs also in shards (`--shard I/N --out FILE`, then `--merge FILE...`,
+//! optionally `--stats FILE`; see `estim_reproductions::sharding`), merged bit for bit.
 
 use estim_reproductions::boje_rate;
 use estim_reproductions::common;
-use estim_reproductions::sharding;
+use estim_reproductions::sharding::{self, Session};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    sharding::refuse_flags(
-        "boje_rate",
-        "its runs share one random stream and it sums over every (run, step), so a shard cannot give the whole run's bits",
-    )?;
-    let output = boje_rate::run(common::quick_requested())?;
-    if common::json_requested() {
+    let quick = common::quick_requested();
+    let session = Session::from_args("boje_rate", sharding::settings(quick))?;
+    let output = boje_rate::run_in(quick, &session)?;
+    session.finish()?;
+    if let Some(output) = output
+        && common::json_requested()
+    {
         println!("{}", output.json);
     }
     Ok(())

@@ -7,21 +7,25 @@
 //!
 //! `cargo run --release --example lv2_fusion [-- --quick] [-- --json]`
 //!
+//! Its χ² Monte Carlo runs also in shards (`--shard I/N --out FILE`, then `--merge FILE...`,
+//! optionally `--stats FILE`; see `estim_reproductions::sharding`), merged bit for bit.
+//!
 //! Figures: `target/figures/lv2_error_ellipses.svg` (1σ ellipses of (x̂, ŷ) with and without
 //! each axis), `target/figures/lv2_chi2_cdf.svg` (Monte Carlo χ² CDF against χ²₁, fault-free
 //! and with a biased x axis).
 
 use estim_reproductions::common;
 use estim_reproductions::lv2_fusion;
-use estim_reproductions::sharding;
+use estim_reproductions::sharding::{self, Session};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    sharding::refuse_flags(
-        "lv2_fusion",
-        "its readings share one random stream and it keeps every reading's chi-square, so a shard cannot give the whole run's bits",
-    )?;
-    let output = lv2_fusion::run(common::quick_requested())?;
-    if common::json_requested() {
+    let quick = common::quick_requested();
+    let session = Session::from_args("lv2_fusion", sharding::settings(quick))?;
+    let output = lv2_fusion::run_in(quick, &session)?;
+    session.finish()?;
+    if let Some(output) = output
+        && common::json_requested()
+    {
         println!("{}", output.json);
     }
     Ok(())

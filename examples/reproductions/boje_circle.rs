@@ -8,15 +8,20 @@
 //! heading tangent, ω = sgn(t − t_end/2)·0.1·t rad/s, t_end = 20 s. "Settled" = t ∈ [2, 20] s.
 //!
 //! `cargo run --release --example boje_circle [-- --json] [-- --quick]`
+//!
+//! Its seven Monte Carlos (the main one, the five variants, the smoothed one) also run in
+//! shards (`--shard I/N --out FILE`, `--merge FILE...`, `--stats FILE`; `sharding`): their
+//! per-step sums over runs go through [`ExactSums`], so a shard file holds each sum's exact
+//! state (a few `f64` per sum, whatever the shard's run count), not every run's 192 000
+//! terms, and the merge gives the bits of one process.
 
 use crate::common::{Band, Headline, Output, Series, band_plot, line_plot};
+use crate::exact_sum::ExactSums;
+use crate::sharding::{self, Session};
 use estim::core::error::Result;
 use estim::core::nalgebra::{Matrix6, U6, Vector6};
 use estim::core::nalgebra::{Matrix6x1, Vector1};
-use estim::core::{
-    Error, Gaussian, MeasurementJacobian, MeasurementModel, Parameter, ProcessJacobian,
-    ProcessModel,
-};
+use estim::core::{Gaussian, MeasurementJacobian, MeasurementModel, ProcessJacobian, ProcessModel};
 use estim::filters::smoother::Rts;
 use estim::filters::{Ekf, Estimator, SecondOrderEkf, Ukf, Update};
 use estim::models::boje::circle::initial_prior;
@@ -178,28 +183,43 @@ impl StateStats {
     }
 }
 
-/// Accumulates per-step sums over runs.
+/// Per-step sums over runs of the squared errors and √P: each run adds its terms to
+/// [`ExactSums`] ([`add_trace`]), whose values do not depend on the order of the additions, so
+/// shards of the runs merge to the bits of one process.
 struct Accumulator {
     sum_sq: Vec<Vector6<f64>>,
     sum_sqrt_p: Vec<Vector6<f64>>,
     runs: usize,
 }
 
-impl Accumulator {
-    fn new(n: usize) -> Self {
-        Self {
-            sum_sq: vec![Vector6::zeros(); n],
-            sum_sqrt_p: vec![Vector6::zeros(); n],
-            runs: 0,
-        }
-    }
+/// The sums [`add_trace`] fills for `n` steps: the squared errors (6 per step), then √P.
+fn trace_sums(n: usize) -> usize {
+    12 * n
+}
 
-    fn add(&mut self, trace: &FilterTrace) {
-        for (i, (e, s)) in trace.errors.iter().zip(&trace.sqrt_p).enumerate() {
-            self.sum_sq[i] += e.component_mul(e);
-            self.sum_sqrt_p[i] += s;
+/// Adds a run's squared errors and √P at each step to the sums at `offset..offset +
+/// trace_sums(n)`.
+fn add_trace(sums: &mut ExactSums, offset: usize, trace: &FilterTrace) {
+    let n = trace.errors.len();
+    for (i, (e, s)) in trace.errors.iter().zip(&trace.sqrt_p).enumerate() {
+        sums.add_slice(offset + 6 * i, e.component_mul(e).as_slice());
+        sums.add_slice(offset + 6 * (n + i), s.as_slice());
+    }
+}
+
+impl Accumulator {
+    /// The sums over `runs` runs that [`add_trace`] filled for `n` steps at `offset`.
+    fn from_sums(sums: &ExactSums, offset: usize, n: usize, runs: usize) -> Self {
+        let at = |base: usize| -> Vec<Vector6<f64>> {
+            (0..n)
+                .map(|i| Vector6::from_fn(|j, _| sums.value(base + 6 * i + j)))
+                .collect()
+        };
+        Self {
+            sum_sq: at(offset),
+            sum_sqrt_p: at(offset + 6 * n),
+            runs,
         }
-        self.runs += 1;
     }
 
     fn stats(&self, times: &[f64], from: f64, to: f64) -> StateStats {
@@ -259,17 +279,47 @@ pub struct MonteCarloSummary {
 /// Errors: invalid configuration, filter errors.
 pub fn circle_monte_carlo(
     config: &CircleConfig,
-) -> Result<(MonteCarloSummary, CircleData, FilterTrace)> {
+) -> Result<(MonteCarloSummary, CircleData, FilterTrace), Box<dyn std::error::Error>> {
+    let (summary, first) = sharding::whole(circle_monte_carlo_in(
+        config,
+        "main",
+        true,
+        &Session::whole(),
+    )?)?;
+    let (data, trace) = sharding::whole(first)?;
+    Ok((summary, data, trace))
+}
+
+/// Run `run` of the circle Monte Carlo: its data (seed `config.seed + run`) and the filter's
+/// trace from the prior of `config.initial`.
+fn circle_run(config: &CircleConfig, run: usize) -> Result<(CircleData, FilterTrace)> {
+    let seed = config.seed.wrapping_add(run as u64);
+    let data = simulate_circle(config, seed)?;
+    let prior = initial_prior(&data.truth[0], &config.initial, seed)?;
+    let trace = run_circle_filter(&data, config, prior)?;
+    Ok((data, trace))
+}
+
+/// A Monte Carlo's summary and, when asked for, run 0's data and trace.
+pub type SummaryAndFirst = (MonteCarloSummary, Option<(CircleData, FilterTrace)>);
+
+/// [`circle_monte_carlo`] as experiment `key` of `session`: `None` in a shard; with `first`,
+/// run 0's data and trace too (a merge runs run 0 again for them: same seed, same bits).
+pub fn circle_monte_carlo_in(
+    config: &CircleConfig,
+    key: &str,
+    first: bool,
+    session: &Session,
+) -> Result<Option<SummaryAndFirst>, Box<dyn std::error::Error>> {
     config.validate()?;
-    let mut acc = Accumulator::new(config.steps() + 1);
-    let (mut rate_nis, mut rate_n, mut fix_nis, mut fix_n) = (0.0, 0usize, 0.0, 0usize);
-    let mut first = None;
-    for run in 0..config.runs {
-        let seed = config.seed.wrapping_add(run as u64);
-        let data = simulate_circle(config, seed)?;
-        let prior = initial_prior(&data.truth[0], &config.initial, seed)?;
-        let trace = run_circle_filter(&data, config, prior)?;
-        acc.add(&trace);
+    let n = config.steps() + 1;
+    // The traces' sums, then the settled NIS sums and counts: θ̇², fixes.
+    let nis = trace_sums(n);
+    let mut kept = None;
+    let sums = session.sums(key, config.runs, nis + 4, |run, sums| {
+        let (data, trace) = circle_run(config, run)?;
+        add_trace(sums, 0, &trace);
+        let (mut rate_nis, mut rate_n, mut fix_nis, mut fix_n) = (0.0, 0usize, 0.0, 0usize);
         for (t, nis) in trace.times.iter().zip(&trace.rate_nis) {
             if *t >= config.settle_time {
                 rate_nis += nis;
@@ -282,28 +332,35 @@ pub fn circle_monte_carlo(
                 fix_n += 1;
             }
         }
-        if run == 0 {
-            first = Some((data, trace));
+        sums.add_slice(nis, &[rate_nis, rate_n as f64, fix_nis, fix_n as f64]);
+        if first && run == 0 {
+            kept = Some((data, trace));
         }
-    }
-    let Some((data, trace)) = first else {
-        return Err(Error::InvalidParameter {
-            parameter: Parameter::SampleCount,
-            value: 0.0,
-        });
+        Ok(())
+    })?;
+    let Some(sums) = sums else {
+        return Ok(None);
     };
+    let kept = match kept {
+        Some(k) => Some(k),
+        None if first => Some(circle_run(config, 0)?),
+        None => None,
+    };
+    // The step times (the same in every run).
+    let times: Vec<f64> = (0..n).map(|i| i as f64 * config.dt).collect();
+    let acc = Accumulator::from_sums(&sums, 0, n, config.runs);
     let summary = MonteCarloSummary {
         filter: config.filter,
         process: config.process,
         runs: config.runs,
-        settled: acc.stats(&data.times, config.settle_time, config.t_end),
-        second_half: acc.stats(&data.times, config.t_end / 2.0, config.t_end),
-        mean_rate_nis: rate_nis / rate_n.max(1) as f64,
-        mean_fix_nis: fix_nis / fix_n.max(1) as f64,
+        settled: acc.stats(&times, config.settle_time, config.t_end),
+        second_half: acc.stats(&times, config.t_end / 2.0, config.t_end),
+        mean_rate_nis: sums.value(nis) / sums.value(nis + 1).max(1.0),
+        mean_fix_nis: sums.value(nis + 2) / sums.value(nis + 3).max(1.0),
         rms_over_time: acc.rms_over_time(),
         sqrt_p_over_time: acc.sqrt_p_over_time(),
     };
-    Ok((summary, data, trace))
+    Ok(Some((summary, kept)))
 }
 
 /// What [`circle_experiment`] returns.
@@ -339,8 +396,24 @@ pub struct CircleResult {
 /// on run 0's data.
 ///
 /// Errors: invalid configuration, filter errors.
-pub fn circle_experiment(config: &CircleConfig) -> Result<CircleResult> {
-    let (mc, data, trace) = circle_monte_carlo(config)?;
+pub fn circle_experiment(
+    config: &CircleConfig,
+) -> Result<CircleResult, Box<dyn std::error::Error>> {
+    Ok(sharding::whole(circle_experiment_in(
+        config,
+        &Session::whole(),
+    )?)?)
+}
+
+/// [`circle_experiment`] in `session`: `None` in a shard.
+pub fn circle_experiment_in(
+    config: &CircleConfig,
+    session: &Session,
+) -> Result<Option<CircleResult>, Box<dyn std::error::Error>> {
+    let Some((mc, first)) = circle_monte_carlo_in(config, "main", true, session)? else {
+        return Ok(None);
+    };
+    let (data, trace) = sharding::whole(first)?;
     let wrong_prior = initial_prior(&data.truth[0], &InitialConditions::wrong(), config.seed)?;
     let wrong = run_circle_filter(&data, config, wrong_prior)?;
     let deviation = data
@@ -349,7 +422,7 @@ pub fn circle_experiment(config: &CircleConfig) -> Result<CircleResult> {
         .map(|x| ((x[X].powi(2) + x[Y].powi(2)).sqrt() - config.circle_radius).abs())
         .fold(0.0, f64::max);
     let s = mc.settled;
-    Ok(CircleResult {
+    Ok(Some(CircleResult {
         config: *config,
         pos_sqrt_p_m: s.position_sqrt_p(),
         pos_rms_m: s.position_rms(),
@@ -362,7 +435,7 @@ pub fn circle_experiment(config: &CircleConfig) -> Result<CircleResult> {
         example_run: trace,
         wrong_ic_run: wrong,
         truth_circle_deviation_m: deviation,
-    })
+    }))
 }
 
 /// The same Monte Carlo (same data seeds, same ICs) for each (process, filter) pair: the
@@ -370,7 +443,17 @@ pub fn circle_experiment(config: &CircleConfig) -> Result<CircleResult> {
 /// second-order EKF and UKF.
 ///
 /// Errors: as [`circle_monte_carlo`].
-pub fn circle_variants(config: &CircleConfig) -> Result<Vec<MonteCarloSummary>> {
+pub fn circle_variants(
+    config: &CircleConfig,
+) -> Result<Vec<MonteCarloSummary>, Box<dyn std::error::Error>> {
+    sharding::whole(circle_variants_in(config, &Session::whole())?).map_err(Into::into)
+}
+
+/// [`circle_variants`] in `session`: `None` in a shard.
+pub fn circle_variants_in(
+    config: &CircleConfig,
+    session: &Session,
+) -> Result<Option<Vec<MonteCarloSummary>>, Box<dyn std::error::Error>> {
     let pairs = [
         (ProcessKind::Linear, FilterKind::Ekf),
         (ProcessKind::Linear, FilterKind::SecondOrderEkf),
@@ -378,7 +461,8 @@ pub fn circle_variants(config: &CircleConfig) -> Result<Vec<MonteCarloSummary>> 
         (ProcessKind::Nonlinear, FilterKind::SecondOrderEkf),
         (ProcessKind::Nonlinear, FilterKind::Ukf),
     ];
-    pairs
+    // Every variant runs (a shard runs its part of each: no short cut at the first `None`).
+    let summaries = pairs
         .iter()
         .map(|&(process, filter)| {
             let c = CircleConfig {
@@ -386,9 +470,11 @@ pub fn circle_variants(config: &CircleConfig) -> Result<Vec<MonteCarloSummary>> 
                 filter,
                 ..*config
             };
-            circle_monte_carlo(&c).map(|(s, _, _)| s)
+            let key = format!("{process:?} process, {filter:?}");
+            Ok(circle_monte_carlo_in(&c, &key, false, session)?.map(|(s, _)| s))
         })
-        .collect()
+        .collect::<Result<Vec<_>, Box<dyn std::error::Error>>>()?;
+    Ok(summaries.into_iter().collect())
 }
 
 /// One headline per variant of [`circle_variants`]: the settled velocity consistency
@@ -617,37 +703,66 @@ pub struct CircleSmoothing {
 pub fn circle_smoothing(
     config: &CircleConfig,
 ) -> core::result::Result<CircleSmoothing, Box<dyn std::error::Error>> {
+    Ok(sharding::whole(circle_smoothing_in(
+        config,
+        &Session::whole(),
+    )?)?)
+}
+
+/// Run `run` of the smoothed circle Monte Carlo.
+fn smoothing_run(
+    config: &CircleConfig,
+    run: usize,
+) -> core::result::Result<SmoothedCircleRun, Box<dyn std::error::Error>> {
+    let seed = config.seed.wrapping_add(run as u64);
+    let data = simulate_circle(config, seed)?;
+    let prior = initial_prior(&data.truth[0], &config.initial, seed)?;
+    smooth_circle_run(&data, config, prior)
+}
+
+/// [`circle_smoothing`] in `session`: `None` in a shard (a merge runs run 0 again for the
+/// example run: same seed, same bits).
+pub fn circle_smoothing_in(
+    config: &CircleConfig,
+    session: &Session,
+) -> core::result::Result<Option<CircleSmoothing>, Box<dyn std::error::Error>> {
     config.validate()?;
     let start = std::time::Instant::now();
     let steps = config.steps() + 1;
-    let (mut filtered, mut smoothed) = (Accumulator::new(steps), Accumulator::new(steps));
     let mut example = None;
-    let mut times = Vec::new();
-    for run in 0..config.runs {
-        let seed = config.seed.wrapping_add(run as u64);
-        let data = simulate_circle(config, seed)?;
-        let prior = initial_prior(&data.truth[0], &config.initial, seed)?;
-        let r = smooth_circle_run(&data, config, prior)?;
-        filtered.add(&r.filtered);
-        smoothed.add(&r.smoothed);
-        if run == 0 {
-            times = data.times;
-            example = Some(r);
-        }
-    }
-    let example = example.ok_or(Error::InvalidParameter {
-        parameter: Parameter::SampleCount,
-        value: 0.0,
-    })?;
-    Ok(CircleSmoothing {
+    let sums = session.sums(
+        "smoothing",
+        config.runs,
+        2 * trace_sums(steps),
+        |run, sums| {
+            let r = smoothing_run(config, run)?;
+            add_trace(sums, 0, &r.filtered);
+            add_trace(sums, trace_sums(steps), &r.smoothed);
+            if run == 0 {
+                example = Some(r);
+            }
+            Ok(())
+        },
+    )?;
+    let Some(sums) = sums else {
+        return Ok(None);
+    };
+    let example = match example {
+        Some(e) => e,
+        None => smoothing_run(config, 0)?,
+    };
+    let times = &example.filtered.times;
+    let filtered = Accumulator::from_sums(&sums, 0, steps, config.runs);
+    let smoothed = Accumulator::from_sums(&sums, trace_sums(steps), steps, config.runs);
+    Ok(Some(CircleSmoothing {
         runs: config.runs,
-        filtered: filtered.stats(&times, config.settle_time, config.t_end),
-        smoothed: smoothed.stats(&times, config.settle_time, config.t_end),
+        filtered: filtered.stats(times, config.settle_time, config.t_end),
+        smoothed: smoothed.stats(times, config.settle_time, config.t_end),
         filtered_rms_over_time: filtered.rms_over_time(),
         smoothed_rms_over_time: smoothed.rms_over_time(),
         example,
         wall_s: start.elapsed().as_secs_f64(),
-    })
+    }))
 }
 
 impl CircleSmoothing {
@@ -842,12 +957,45 @@ fn plot_band(
 
 /// Runs the experiment (quick or full), prints its tables, writes its figures.
 pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
+    Ok(sharding::whole(run_in(quick, &Session::whole())?)?)
+}
+
+/// The example body as `session` says (whole, one shard of its seven Monte Carlos: `None`, or
+/// the merge of the shards); `--stats` gets each Monte Carlo's settled statistics and its
+/// curves over time.
+pub fn run_in(
+    quick: bool,
+    session: &Session,
+) -> Result<Option<Output>, Box<dyn std::error::Error>> {
     let config = if quick {
         CircleConfig::quick()
     } else {
         CircleConfig::paper()
     };
-    let r = circle_experiment(&config)?;
+    let r = circle_experiment_in(&config, session)?;
+    let variants = circle_variants_in(&config, session)?;
+    let smoothing = circle_smoothing_in(&config, session)?;
+    let (Some(r), Some(variants), Some(smoothing)) = (r, variants, smoothing) else {
+        return Ok(None);
+    };
+    for (key, s) in std::iter::once(("main".to_string(), &r.monte_carlo)).chain(
+        variants
+            .iter()
+            .map(|s| (format!("{:?} process, {:?}", s.process, s.filter), s)),
+    ) {
+        session.summary(&key, &summary_stats(s));
+    }
+    let mut stats = Vec::new();
+    for t in [&smoothing.filtered, &smoothing.smoothed] {
+        stats.extend(t.sqrt_p.iter().chain(&t.rms));
+    }
+    for v in [
+        &smoothing.filtered_rms_over_time,
+        &smoothing.smoothed_rms_over_time,
+    ] {
+        stats.extend(v.iter().flat_map(|x| x.iter().copied()));
+    }
+    session.summary("smoothing", &stats);
     let mc = &r.monte_carlo;
     println!(
         "Boje section 4: R = {} m, circle {} m, t_end = {} s, h = {} s, σ_a = {} m/s², σ_xy = {} m, σ_θ = {} rad, fixes every {} s",
@@ -911,7 +1059,6 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
     }
 
     // Stretch: θ inside f.
-    let variants = circle_variants(&config)?;
     println!();
     println!(
         "same data, {} runs each: settled rms/√P (velocity ratios ≈ 1 mean consistent)",
@@ -1027,7 +1174,6 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
             Err(e) => eprintln!("figure failed: {e}"),
         }
     }
-    let smoothing = circle_smoothing(&config)?;
     println!();
     smoothing.table();
     println!("{}", smoothing.headline());
@@ -1045,5 +1191,19 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
     };
     let mut headlines = r.headlines();
     headlines.push(smoothing.headline());
-    Ok(Output { json, headlines })
+    Ok(Some(Output { json, headlines }))
+}
+
+/// A Monte Carlo's results for `--stats`: settled and second-half √P and RMS, mean NIS, and
+/// the RMS and mean √P at each step.
+fn summary_stats(s: &MonteCarloSummary) -> Vec<f64> {
+    let mut v = Vec::new();
+    for t in [&s.settled, &s.second_half] {
+        v.extend(t.sqrt_p.iter().chain(&t.rms));
+    }
+    v.extend([s.mean_rate_nis, s.mean_fix_nis]);
+    for curve in [&s.rms_over_time, &s.sqrt_p_over_time] {
+        v.extend(curve.iter().flat_map(|x| x.iter().copied()));
+    }
+    v
 }

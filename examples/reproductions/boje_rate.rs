@@ -6,9 +6,12 @@
 //! `cargo run --release --example boje_rate [-- --json] [-- --quick]`
 
 use crate::common::{Headline, Output, Series, line_plot};
+use crate::exact_sum::ExactSums;
+use crate::sharding::{self, Session};
 use estim::core::error::Result;
 use estim::core::nalgebra::{Matrix1, Vector1, Vector4};
 use estim::core::{Error, Gaussian, Parameter};
+use estim::filters::monte_carlo::run_seed;
 use estim::filters::{Ekf, Estimator, Predict, Update};
 use estim::models::boje::geometry::{STANDARD_GRAVITY, invert, sensor_signals};
 use estim::models::boje::rate::{
@@ -147,12 +150,27 @@ pub struct RateResult {
 ///
 /// Errors: runs, steps ≤ burn-in, or non-positive parameters (reported as invalid sample
 /// count / non-finite values), and filter errors.
-pub fn rate_experiment(config: &RateConfig) -> Result<RateResult> {
+pub fn rate_experiment(
+    config: &RateConfig,
+) -> std::result::Result<RateResult, Box<dyn std::error::Error>> {
+    Ok(sharding::whole(rate_experiment_in(
+        config,
+        &Session::whole(),
+    )?)?)
+}
+
+/// [`rate_experiment`] in `session` (a whole run, a shard or a merge of its Monte Carlo runs):
+/// `None` in a shard.
+pub fn rate_experiment_in(
+    config: &RateConfig,
+    session: &Session,
+) -> std::result::Result<Option<RateResult>, Box<dyn std::error::Error>> {
     if config.runs == 0 || config.steps <= config.burn_in {
         return Err(Error::InvalidParameter {
             parameter: Parameter::SampleCount,
             value: config.runs.min(config.steps) as f64,
-        });
+        }
+        .into());
     }
     let (dt, rr) = (config.dt, config.half_separation);
     let sigma = config.sigma();
@@ -169,7 +187,9 @@ pub fn rate_experiment(config: &RateConfig) -> Result<RateResult> {
     let p_eq19_printed = steady_state_eq19_printed(dt, sigma, rr, c);
     let deg = |p: f64| p.sqrt().to_degrees();
 
-    let mc = simulate_scalar_ekf(config, lambda33, lambda44)?;
+    let Some(mc) = simulate_scalar_ekf(config, lambda33, lambda44, session)? else {
+        return Ok(None);
+    };
 
     let bandwidth = std::f64::consts::FRAC_PI_2 / dt;
     let accel_noise_mg = config.accel_density_ug * 1e-3 * bandwidth.sqrt();
@@ -178,7 +198,7 @@ pub fn rate_experiment(config: &RateConfig) -> Result<RateResult> {
     let ratio = (gyro_noise_deg_s / config.gyro_full_scale_deg_s)
         / (accel_noise_mg * 1e-3 / config.accel_full_scale_g);
 
-    Ok(RateResult {
+    Ok(Some(RateResult {
         config: *config,
         q,
         r,
@@ -203,7 +223,7 @@ pub fn rate_experiment(config: &RateConfig) -> Result<RateResult> {
         gyro_noise_deg_s,
         full_scale_rate_deg_s: full_scale.to_degrees(),
         noise_to_full_scale_ratio: ratio,
-    })
+    }))
 }
 
 struct ScalarMonteCarlo {
@@ -214,14 +234,26 @@ struct ScalarMonteCarlo {
     sqrt_p_first_run: Vec<f64>,
 }
 
-/// The scalar EKF at constant rate ω₀ on simulated accelerometer samples: for each step, the
-/// sample a = M(θᵢ)(0, 0, 0, ω₀²) + N(0, σ² I₄) (an object spinning in place), u = θ̈ = g3(a),
-/// y = θ̇² = g4(a) (independent: v and u channels); update with y, then predict with u.
-fn simulate_scalar_ekf(
+/// The sums over runs of the scalar EKF Monte Carlo ([`ExactSums`], so that shards merge to
+/// the bits of one process): the squared predicted error at each step, then over the
+/// post-burn-in steps of each run the squared predicted error, the squared filtered error and
+/// √P.
+fn scalar_sums(steps: usize) -> usize {
+    steps + 3
+}
+
+/// Run `run` of the scalar EKF at constant rate ω₀ on simulated accelerometer samples (seed
+/// `run_seed(config.seed, run)`, the Monte Carlo runner's): for each step, the sample a =
+/// M(θᵢ)(0, 0, 0, ω₀²) + N(0, σ² I₄) (an object spinning in place), u = θ̈ = g3(a), y = θ̇² =
+/// g4(a) (independent: v and u channels); update with y, then predict with u. Adds its terms
+/// to `sums` ([`scalar_sums`]) and gives √P at each step.
+fn scalar_run(
     config: &RateConfig,
     lambda33: f64,
     lambda44: f64,
-) -> Result<ScalarMonteCarlo> {
+    run: usize,
+    sums: &mut ExactSums,
+) -> Result<Vec<f64>> {
     let (dt, rr) = (config.dt, config.half_separation);
     let sigma = config.sigma();
     let omega = config.rate();
@@ -230,52 +262,84 @@ fn simulate_scalar_ekf(
     };
     let sensor = ScalarRateSquared { noise: lambda44 };
     let p0 = config.initial_std_deg_s.to_radians().powi(2);
-    let mut rng = StdRng::seed_from_u64(config.seed);
+    let mut rng = StdRng::seed_from_u64(run_seed(config.seed, run));
     let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
-    let mut sum_sq = vec![0.0; config.steps];
-    let mut sqrt_p_first_run = Vec::with_capacity(config.steps);
-    let (mut total_sq, mut total_sq_filtered, mut total_sqrt_p, mut count) =
-        (0.0, 0.0, 0.0, 0usize);
     let clean = Vector4::new(0.0, 0.0, 0.0, omega * omega);
-    for run in 0..config.runs {
-        let start = omega + p0.sqrt() * normal();
-        let mut filter = Ekf::new(Gaussian::new(Vector1::new(start), Matrix1::new(p0))?);
-        let mut theta = 0.0;
-        for i in 0..config.steps {
-            let mut a = sensor_signals(theta, &clean, rr);
-            for v in a.iter_mut() {
-                *v += sigma * normal();
-            }
-            let g = invert(theta, &a, rr);
-            filter.update(&sensor, &Vector1::new(g[3]))?;
-            let filtered_error = omega - filter.state()[0];
-            filter.predict(&process, &g[2], dt)?;
-            theta += omega * dt;
-            let e = omega - filter.state()[0];
-            sum_sq[i] += e * e;
-            let sqrt_p = filter.covariance()[(0, 0)].sqrt();
-            if run == 0 {
-                sqrt_p_first_run.push(sqrt_p);
-            }
-            if i >= config.burn_in {
-                total_sq += e * e;
-                total_sq_filtered += filtered_error * filtered_error;
-                total_sqrt_p += sqrt_p;
-                count += 1;
-            }
+    let start = omega + p0.sqrt() * normal();
+    let mut filter = Ekf::new(Gaussian::new(Vector1::new(start), Matrix1::new(p0))?);
+    let mut theta = 0.0;
+    let mut sqrt_p_over_time = Vec::with_capacity(config.steps);
+    let (mut total_sq, mut total_sq_filtered, mut total_sqrt_p) = (0.0, 0.0, 0.0);
+    for i in 0..config.steps {
+        let mut a = sensor_signals(theta, &clean, rr);
+        for v in a.iter_mut() {
+            *v += sigma * normal();
+        }
+        let g = invert(theta, &a, rr);
+        filter.update(&sensor, &Vector1::new(g[3]))?;
+        let filtered_error = omega - filter.state()[0];
+        filter.predict(&process, &g[2], dt)?;
+        theta += omega * dt;
+        let e = omega - filter.state()[0];
+        sums.add(i, e * e);
+        let sqrt_p = filter.covariance()[(0, 0)].sqrt();
+        sqrt_p_over_time.push(sqrt_p);
+        if i >= config.burn_in {
+            total_sq += e * e;
+            total_sq_filtered += filtered_error * filtered_error;
+            total_sqrt_p += sqrt_p;
         }
     }
-    let n = count as f64;
-    Ok(ScalarMonteCarlo {
-        rms_predicted: (total_sq / n).sqrt(),
-        rms_filtered: (total_sq_filtered / n).sqrt(),
-        mean_sqrt_p: total_sqrt_p / n,
-        rms_over_time: sum_sq
-            .iter()
-            .map(|s| (s / config.runs as f64).sqrt())
+    sums.add_slice(config.steps, &[total_sq, total_sq_filtered, total_sqrt_p]);
+    Ok(sqrt_p_over_time)
+}
+
+/// The scalar EKF Monte Carlo of `config.runs` runs ([`scalar_run`]) through `session`:
+/// `None` in a shard.
+fn simulate_scalar_ekf(
+    config: &RateConfig,
+    lambda33: f64,
+    lambda44: f64,
+    session: &Session,
+) -> std::result::Result<Option<ScalarMonteCarlo>, Box<dyn std::error::Error>> {
+    let mut first = None;
+    let sums = session.sums(
+        "runs",
+        config.runs,
+        scalar_sums(config.steps),
+        |run, sums| {
+            let sqrt_p = scalar_run(config, lambda33, lambda44, run, sums)?;
+            if run == 0 {
+                first = Some(sqrt_p);
+            }
+            Ok(())
+        },
+    )?;
+    let Some(sums) = sums else {
+        return Ok(None);
+    };
+    // A merge ran no run here: run 0 again for its √P (same seed, same bits).
+    let sqrt_p_first_run = match first {
+        Some(s) => s,
+        None => scalar_run(
+            config,
+            lambda33,
+            lambda44,
+            0,
+            &mut ExactSums::new(scalar_sums(config.steps)),
+        )?,
+    };
+    let s = config.steps;
+    let n = (config.runs * (config.steps - config.burn_in)) as f64;
+    Ok(Some(ScalarMonteCarlo {
+        rms_predicted: (sums.value(s) / n).sqrt(),
+        rms_filtered: (sums.value(s + 1) / n).sqrt(),
+        mean_sqrt_p: sums.value(s + 2) / n,
+        rms_over_time: (0..s)
+            .map(|i| (sums.value(i) / config.runs as f64).sqrt())
             .collect(),
         sqrt_p_first_run,
-    })
+    }))
 }
 
 impl RateResult {
@@ -327,13 +391,32 @@ impl RateResult {
 }
 
 /// Runs the experiment (quick or full), prints its tables, writes its figures.
-pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
+pub fn run(quick: bool) -> std::result::Result<Output, Box<dyn std::error::Error>> {
+    Ok(sharding::whole(run_in(quick, &Session::whole())?)?)
+}
+
+/// The example body as `session` says (whole, one shard: `None`, or the merge of the shards);
+/// `--stats` gets the Monte Carlo's results (RMS predicted and filtered, mean √P, and the RMS
+/// at each step).
+pub fn run_in(
+    quick: bool,
+    session: &Session,
+) -> std::result::Result<Option<Output>, Box<dyn std::error::Error>> {
     let config = if quick {
         RateConfig::quick()
     } else {
         RateConfig::paper()
     };
-    let r = rate_experiment(&config)?;
+    let Some(r) = rate_experiment_in(&config, session)? else {
+        return Ok(None);
+    };
+    let mut stats = vec![
+        r.rate_rms_simulated_deg_s,
+        r.rate_rms_filtered_simulated_deg_s,
+        r.rate_sqrt_p_simulated_deg_s,
+    ];
+    stats.extend(&r.rms_over_time_deg_s);
+    session.summary("runs", &stats);
     println!(
         "Boje section 3: R = {} m, Δt = {} s, σ = {} mg = {:.6} m/s², ω₀ = {} °/s",
         config.half_separation,
@@ -450,5 +533,5 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
         })
     };
     let headlines = r.headlines();
-    Ok(Output { json, headlines })
+    Ok(Some(Output { json, headlines }))
 }

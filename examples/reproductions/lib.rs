@@ -13,6 +13,7 @@ pub mod boje_lambda;
 pub mod boje_moments;
 pub mod boje_rate;
 pub mod consistency;
+pub mod exact_sum;
 pub mod flight_ins;
 pub mod heading_wrap;
 pub mod large_state;

@@ -7,6 +7,10 @@
 //!
 //! `cargo run --release --example lv2_fusion [-- --quick] [-- --json]`
 //!
+//! The χ² Monte Carlo also runs in shards (`--shard I/N --out FILE`, `--merge FILE...`,
+//! `--stats FILE`; `sharding`): its readings come in seeded batches whose sums (counts of the
+//! χ² at the CDF's points included) merge to the bits of one process.
+//!
 //! Figures: `target/figures/lv2_error_ellipses.svg` (1σ ellipses of (x̂, ŷ) with and without
 //! each axis), `target/figures/lv2_chi2_cdf.svg` (Monte Carlo χ² CDF against χ²₁, fault-free
 //! and with a biased x axis).
@@ -14,6 +18,9 @@
 use core::f64::consts::SQRT_2;
 
 use crate::common::{Headline, Output, Series, equal_axes_plot, line_plot};
+use crate::exact_sum::ExactSums;
+use crate::sharding::{self, Session, shard_runs};
+use estim::filters::monte_carlo::run_seed;
 use estim::models::lv2::simulate::{RotatingAcceleration, SensorArray, sample_xyq};
 use estim::models::lv2::stats::{chi2_1_cdf, chi2_1_power, chi2_quantile_upper, chi2_sf};
 use estim::models::lv2::xyq::{
@@ -57,6 +64,7 @@ impl Lv2Config {
             false_alarm: 1e-3,
             monte_carlo: MonteCarloConfig {
                 runs: 1_000_000,
+                batch: 1_000,
                 seed: 2004,
                 truth: Vector2::new(1.0, 0.5),
                 bias: 0.08,
@@ -94,7 +102,11 @@ impl Default for Lv2Config {
 pub struct MonteCarloConfig {
     /// Number of readings.
     pub runs: usize,
-    /// RNG seed.
+    /// Readings per seeded batch, at most: the readings are split evenly into
+    /// ⌈runs/batch⌉ batches, batch b drawn from its own stream seeded `run_seed(seed, b)` (the
+    /// Monte Carlo runner's), so that shards of batches run apart.
+    pub batch: usize,
+    /// Master seed.
     pub seed: u64,
     /// The true (x, y) (m/s²); the statistics do not depend on it.
     pub truth: Vector2<f64>,
@@ -304,63 +316,147 @@ pub struct MonteCarloResult {
     pub cdf: Vec<CdfPoint>,
 }
 
-/// Runs the χ² Monte Carlo: `config.runs` seeded readings at `config.truth`, fused by eq 6.
-/// Errors: invalid σ's.
-pub fn monte_carlo(
-    sigmas: &XyqSigmas,
-    config: &MonteCarloConfig,
-    false_alarm: f64,
-) -> Result<MonteCarloResult, FusionError> {
-    let sigmas = XyqSigmas::new(sigmas.x, sigmas.y, sigmas.q)?;
-    let c = Eq6Coefficients::new(&sigmas);
-    let threshold = chi2_quantile_upper(false_alarm, 1);
-    let mut rng = StdRng::seed_from_u64(config.seed);
-    let truth = config.truth;
-    let b = config.bias;
-    let biases = [
+/// The sums over batches of the χ² Monte Carlo ([`ExactSums`]): Σe (2), Σeeᵀ (xx, xy, yy),
+/// Σχ², Σ(χ²)², alarms, detections per biased axis (3), Σ of the biased estimates' errors
+/// (3 × 2), then at each CDF point the count of fault-free χ² ≤ it, then of x-biased ones.
+const SUM_E: usize = 0;
+const SUM_EE: usize = 2;
+const SUM_CHI2: usize = 5;
+const SUM_CHI2_SQ: usize = 6;
+const ALARMS: usize = 7;
+const DETECTIONS: usize = 8;
+const FAULT_ERR: usize = 11;
+const CDF: usize = 17;
+
+/// The biases put on one axis at a time.
+fn biases(b: f64) -> [(char, [f64; 3]); 3] {
+    [
         ('x', [b, 0.0, 0.0]),
         ('y', [0.0, b, 0.0]),
         ('q', [0.0, 0.0, b]),
-    ];
-    let runs = config.runs.max(2);
-    let mut chi2_clean = Vec::with_capacity(runs);
-    let mut chi2_x_fault = Vec::with_capacity(runs);
+    ]
+}
+
+/// Batch `batch` of the χ² Monte Carlo: its readings (seed `run_seed(config.seed, batch)`),
+/// their sums in reading order, added to `sums`.
+fn monte_carlo_batch(
+    sigmas: &XyqSigmas,
+    config: &MonteCarloConfig,
+    threshold: f64,
+    grid: &[f64],
+    batch: usize,
+    sums: &mut ExactSums,
+) {
+    let c = Eq6Coefficients::new(sigmas);
+    let mut rng = StdRng::seed_from_u64(run_seed(config.seed, batch));
+    let truth = config.truth;
+    let biases = biases(config.bias);
+    let readings = shard_runs(batch, config.runs.div_ceil(config.batch), config.runs);
     let (mut sum_e, mut sum_ee) = (Vector2::zeros(), Matrix2::zeros());
+    let (mut sum_chi2, mut sum_chi2_sq) = (0.0, 0.0);
     let mut alarms = 0usize;
     let mut detections = [0usize; 3];
     let mut fault_err = [Vector2::<f64>::zeros(); 3];
-    for _ in 0..runs {
-        let clean = sample_xyq(&truth, &sigmas, [0.0; 3], &mut rng);
+    // Histograms over the CDF grid: bin j counts the χ² in (grid[j−1], grid[j]].
+    let mut hist = vec![0usize; 2 * (grid.len() + 1)];
+    let (clean_hist, x_hist) = hist.split_at_mut(grid.len() + 1);
+    for _ in readings {
+        let clean = sample_xyq(&truth, sigmas, [0.0; 3], &mut rng);
         let e = Vector2::new(c.x_hat(&clean), c.y_hat(&clean)) - truth;
         sum_e += e;
         sum_ee += e * e.transpose();
-        let chi2 = parity_chi2(&clean, &sigmas);
+        let chi2 = parity_chi2(&clean, sigmas);
         alarms += usize::from(chi2 > threshold);
-        chi2_clean.push(chi2);
+        sum_chi2 += chi2;
+        sum_chi2_sq += chi2 * chi2;
+        clean_hist[grid.partition_point(|v| *v < chi2)] += 1;
         for (k, (_, bias)) in biases.iter().enumerate() {
             let r = XyqReading {
                 x: clean.x + bias[0],
                 y: clean.y + bias[1],
                 q: clean.q + bias[2],
             };
-            let chi2 = parity_chi2(&r, &sigmas);
+            let chi2 = parity_chi2(&r, sigmas);
             detections[k] += usize::from(chi2 > threshold);
             fault_err[k] += Vector2::new(c.x_hat(&r), c.y_hat(&r)) - truth;
             if k == 0 {
-                chi2_x_fault.push(chi2);
+                x_hist[grid.partition_point(|v| *v < chi2)] += 1;
             }
         }
     }
-    let nf = runs as f64;
-    let mean_error = sum_e / nf;
-    let empirical_covariance = (sum_ee - mean_error * mean_error.transpose() * nf) / (nf - 1.0);
-    let chi2_mean = chi2_clean.iter().sum::<f64>() / nf;
-    let chi2_variance = chi2_clean
-        .iter()
-        .map(|v| (v - chi2_mean).powi(2))
-        .sum::<f64>()
-        / (nf - 1.0);
+    sums.add_slice(SUM_E, sum_e.as_slice());
+    sums.add_slice(SUM_EE, &[sum_ee[(0, 0)], sum_ee[(0, 1)], sum_ee[(1, 1)]]);
+    sums.add_slice(SUM_CHI2, &[sum_chi2, sum_chi2_sq, alarms as f64]);
+    for k in 0..3 {
+        sums.add(DETECTIONS + k, detections[k] as f64);
+        sums.add_slice(FAULT_ERR + 2 * k, fault_err[k].as_slice());
+    }
+    // Counts of χ² ≤ grid[i]: the bins up to i.
+    for (offset, h) in [(CDF, &*clean_hist), (CDF + grid.len(), &*x_hist)] {
+        let mut below = 0usize;
+        for (i, n) in h[..grid.len()].iter().enumerate() {
+            below += n;
+            sums.add(offset + i, below as f64);
+        }
+    }
+}
+
+/// Runs the χ² Monte Carlo: `config.runs` seeded readings at `config.truth`, fused by eq 6.
+/// Errors: invalid σ's.
+pub fn monte_carlo(
+    sigmas: &XyqSigmas,
+    config: &MonteCarloConfig,
+    false_alarm: f64,
+) -> Result<MonteCarloResult, Box<dyn std::error::Error>> {
+    Ok(sharding::whole(monte_carlo_in(
+        sigmas,
+        config,
+        false_alarm,
+        &Session::whole(),
+    )?)?)
+}
+
+/// [`monte_carlo`] in `session`: the batches ([`MonteCarloConfig::batch`]) are its runs
+/// (whole, a shard of them: `None`, or the merge of the shards).
+pub fn monte_carlo_in(
+    sigmas: &XyqSigmas,
+    config: &MonteCarloConfig,
+    false_alarm: f64,
+    session: &Session,
+) -> Result<Option<MonteCarloResult>, Box<dyn std::error::Error>> {
+    let sigmas = XyqSigmas::new(sigmas.x, sigmas.y, sigmas.q)?;
+    let threshold = chi2_quantile_upper(false_alarm, 1);
+    let config = MonteCarloConfig {
+        runs: config.runs.max(2),
+        batch: config.batch.max(1),
+        ..*config
+    };
+    let b = config.bias;
+    let biases = biases(b);
+    let runs = config.runs;
     let s1 = sigmas.s1();
+    let shift_x = b / s1.sqrt();
+    let top = (shift_x.abs() + 3.5).powi(2).max(1.5 * threshold);
+    let points = config.cdf_points.max(2);
+    let grid: Vec<f64> = (0..points)
+        .map(|i| top * i as f64 / (points - 1) as f64)
+        .collect();
+    let batches = runs.div_ceil(config.batch);
+    let Some(sums) = session.sums("readings", batches, CDF + 2 * points, |batch, sums| {
+        monte_carlo_batch(&sigmas, &config, threshold, &grid, batch, sums);
+        Ok(())
+    })?
+    else {
+        return Ok(None);
+    };
+    let nf = runs as f64;
+    let v = |i: usize| sums.value(i);
+    let mean_error = Vector2::new(v(SUM_E), v(SUM_E + 1)) / nf;
+    let sum_ee = Matrix2::new(v(SUM_EE), v(SUM_EE + 1), v(SUM_EE + 1), v(SUM_EE + 2));
+    let empirical_covariance = (sum_ee - mean_error * mean_error.transpose() * nf) / (nf - 1.0);
+    let chi2_mean = v(SUM_CHI2) / nf;
+    // Σ(χ² − mean)² = Σ(χ²)² − n mean²: χ²₁ has E(χ²)² = 3 against mean² = 1, no cancellation.
+    let chi2_variance = (v(SUM_CHI2_SQ) - nf * chi2_mean * chi2_mean) / (nf - 1.0);
     let faults = biases
         .iter()
         .enumerate()
@@ -371,9 +467,9 @@ pub fn monte_carlo(
                 axis: *axis,
                 bias: b,
                 parity_shift: shift,
-                detection_rate: detections[k] as f64 / nf,
+                detection_rate: v(DETECTIONS + k) / nf,
                 predicted_rate: chi2_1_power(shift, threshold),
-                mean_error: fault_err[k] / nf,
+                mean_error: Vector2::new(v(FAULT_ERR + 2 * k), v(FAULT_ERR + 2 * k + 1)) / nf,
                 predicted_mean_error: Vector2::new(
                     bias[0] - sigmas.x * sigmas.x * p / s1,
                     bias[1] - sigmas.y * sigmas.y * p / s1,
@@ -381,39 +477,32 @@ pub fn monte_carlo(
             }
         })
         .collect::<Vec<_>>();
-    chi2_clean.sort_by(f64::total_cmp);
-    chi2_x_fault.sort_by(f64::total_cmp);
-    let shift_x = faults[0].parity_shift;
-    let top = (shift_x.abs() + 3.5).powi(2).max(1.5 * threshold);
-    let points = config.cdf_points.max(2);
-    let ecdf = |sorted: &[f64], v: f64| sorted.partition_point(|s| *s <= v) as f64 / nf;
-    let cdf = (0..points)
-        .map(|i| {
-            let v = top * i as f64 / (points - 1) as f64;
-            CdfPoint {
-                chi2: v,
-                empirical: ecdf(&chi2_clean, v),
-                theory: chi2_1_cdf(v, 0.0),
-                empirical_biased: ecdf(&chi2_x_fault, v),
-                theory_biased: chi2_1_cdf(v, shift_x),
-            }
+    let cdf = grid
+        .iter()
+        .enumerate()
+        .map(|(i, &chi2)| CdfPoint {
+            chi2,
+            empirical: v(CDF + i) / nf,
+            theory: chi2_1_cdf(chi2, 0.0),
+            empirical_biased: v(CDF + points + i) / nf,
+            theory_biased: chi2_1_cdf(chi2, shift_x),
         })
         .collect();
-    Ok(MonteCarloResult {
+    Ok(Some(MonteCarloResult {
         runs,
         dof: 1,
         false_alarm,
         threshold,
         chi2_mean,
         chi2_variance,
-        false_alarm_rate: alarms as f64 / nf,
+        false_alarm_rate: v(ALARMS) / nf,
         mean_error,
         empirical_covariance,
         predicted_covariance: xyq::covariance(&sigmas),
         covariance_without_q: Matrix2::new(sigmas.x.powi(2), 0.0, 0.0, sigmas.y.powi(2)),
         faults,
         cdf,
-    })
+    }))
 }
 
 /// Errors of one way of fusing over the saturation run.
@@ -571,13 +660,35 @@ pub struct Lv2Results {
 }
 
 /// Runs the three experiments. Errors: invalid configuration.
-pub fn run_experiment(config: &Lv2Config) -> Result<Lv2Results, FusionError> {
-    Ok(Lv2Results {
+pub fn run_experiment(config: &Lv2Config) -> Result<Lv2Results, Box<dyn std::error::Error>> {
+    Ok(sharding::whole(run_experiment_in(
+        config,
+        &Session::whole(),
+    )?)?)
+}
+
+/// [`run_experiment`] in `session`: the χ² Monte Carlo whole, a shard of it (then nothing
+/// else runs: `None`) or the merge of the shards.
+pub fn run_experiment_in(
+    config: &Lv2Config,
+    session: &Session,
+) -> Result<Option<Lv2Results>, Box<dyn std::error::Error>> {
+    let example = fusion_example(&config.reading, &config.sigmas, config.false_alarm)?;
+    let Some(monte_carlo) = monte_carlo_in(
+        &config.sigmas,
+        &config.monte_carlo,
+        config.false_alarm,
+        session,
+    )?
+    else {
+        return Ok(None);
+    };
+    Ok(Some(Lv2Results {
         config: config.clone(),
-        example: fusion_example(&config.reading, &config.sigmas, config.false_alarm)?,
-        monte_carlo: monte_carlo(&config.sigmas, &config.monte_carlo, config.false_alarm)?,
+        example,
+        monte_carlo,
         saturation: saturation_run(&config.sigmas, &config.saturation, config.false_alarm)?,
-    })
+    }))
 }
 
 /// The note's claims next to what estim computes.
@@ -715,12 +826,34 @@ fn sd_rho(p: &Matrix2<f64>) -> (f64, f64, f64) {
 
 /// Runs the experiment (quick or full), prints its tables, writes its figures.
 pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
+    Ok(sharding::whole(run_in(quick, &Session::whole())?)?)
+}
+
+/// The example body as `session` says (whole, one shard of the χ² Monte Carlo: `None`, or the
+/// merge of the shards); `--stats` gets the Monte Carlo's statistics.
+pub fn run_in(
+    quick: bool,
+    session: &Session,
+) -> Result<Option<Output>, Box<dyn std::error::Error>> {
     let cfg = if quick {
         Lv2Config::quick()
     } else {
         Lv2Config::full()
     };
-    let res = run_experiment(&cfg)?;
+    let Some(res) = run_experiment_in(&cfg, session)? else {
+        return Ok(None);
+    };
+    let mc = &res.monte_carlo;
+    let mut stats = vec![mc.chi2_mean, mc.chi2_variance, mc.false_alarm_rate];
+    stats.extend(mc.mean_error.iter().chain(&mc.empirical_covariance));
+    for f in &mc.faults {
+        stats.push(f.detection_rate);
+        stats.extend(&f.mean_error);
+    }
+    for c in &mc.cdf {
+        stats.extend([c.empirical, c.empirical_biased]);
+    }
+    session.summary("readings", &stats);
     let ex = &res.example;
     let r = ex.reading;
     let s = ex.sigmas;
@@ -982,5 +1115,5 @@ pub fn run(quick: bool) -> Result<Output, Box<dyn std::error::Error>> {
         json
     };
     let headlines = headlines(&res);
-    Ok(Output { json, headlines })
+    Ok(Some(Output { json, headlines }))
 }

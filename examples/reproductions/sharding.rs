@@ -26,12 +26,19 @@
 //! bit), shard I of N runs the contiguous runs [`shard_runs`], and the merge hands back every
 //! run's record in run order, so that the example's own sums over runs see the same numbers
 //! in the same order as one process. [`Session::summary`] puts its results in `--stats`.
+//!
+//! An example whose statistics are sums over runs of many numbers per run (a curve per step,
+//! say) calls [`Session::sums`]: each run adds its terms into [`ExactSums`], whose values do
+//! not depend on the order of the additions, so a shard file holds the shard's sums (their
+//! exact partials) rather than every run's terms, and the merge adds them to the bits of one
+//! process.
 
 use std::cell::RefCell;
 use std::fmt;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+use crate::exact_sum::{ExactSums, SumsState};
 use estim::filters::ValidationError;
 use estim::filters::monte_carlo::{EnsembleStats, MonteCarlo, MonteCarloError, Recorder, Shard};
 use serde::de::DeserializeOwned;
@@ -219,6 +226,9 @@ struct ShardFile {
     /// The hand-looped experiments (absent in files of runner-only examples).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     records: Vec<Records>,
+    /// The experiments summed over runs ([`Session::sums`]; absent if none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    sums: Vec<SumsState>,
 }
 
 /// The runs of shard `index` of `count` of `runs` runs: `index·runs/count ..
@@ -247,6 +257,8 @@ pub struct Session {
     records: RefCell<Vec<Records>>,
     /// Whole and merge: the hand-looped experiments' results ([`Session::summary`]), as bits.
     summaries: RefCell<Vec<(String, Vec<u64>)>>,
+    /// Shard mode: the summed experiments run so far; whole and merge: their keys (empty sums).
+    sums: RefCell<Vec<SumsState>>,
 }
 
 impl Session {
@@ -264,6 +276,7 @@ impl Session {
             stats: RefCell::new(Vec::new()),
             records: RefCell::new(Vec::new()),
             summaries: RefCell::new(Vec::new()),
+            sums: RefCell::new(Vec::new()),
         }
     }
 
@@ -289,6 +302,7 @@ impl Session {
             stats: RefCell::new(Vec::new()),
             records: RefCell::new(Vec::new()),
             summaries: RefCell::new(Vec::new()),
+            sums: RefCell::new(Vec::new()),
         })
     }
 
@@ -437,6 +451,96 @@ impl Session {
         Ok(Some(merged))
     }
 
+    /// The experiment `key` (unique within the example) of `runs` runs whose statistics are
+    /// sums over runs: `run(i, sums)` adds run i's terms to `sums` (`len` of them). In a
+    /// whole run, every run's terms summed; in a shard, its runs' ([`shard_runs`]) are kept for
+    /// [`finish`](Self::finish) (the sums' exact state, not the terms) and the result is
+    /// `None`; in a merge, the shard files' sums added (`run` is not called). The values
+    /// ([`ExactSums::value`]) do not depend on the order of the additions, so the merge gives
+    /// the whole run's bits. Errors: `run`'s, and shards of another run count or layout, with
+    /// runs missing, or corrupt.
+    pub fn sums(
+        &self,
+        key: &str,
+        runs: usize,
+        len: usize,
+        mut run: impl FnMut(usize, &mut ExactSums) -> Result<(), Box<dyn std::error::Error>>,
+    ) -> Result<Option<ExactSums>, Box<dyn std::error::Error>> {
+        if self.sums.borrow().iter().any(|r| r.key == key) {
+            return Err(ShardError::new(format!("experiment '{key}' run twice")).into());
+        }
+        let mut sums = ExactSums::new(len);
+        let (first, count) = match &self.args.mode {
+            Mode::Whole => {
+                for i in 0..runs {
+                    run(i, &mut sums)?;
+                }
+                (0, runs)
+            }
+            Mode::Shard { index, count, .. } => {
+                let range = shard_runs(*index, *count, runs);
+                for i in range.clone() {
+                    run(i, &mut sums)?;
+                }
+                self.sums.borrow_mut().push(SumsState {
+                    key: key.to_string(),
+                    runs,
+                    first: range.start,
+                    count: range.len(),
+                    sums: sums.to_bits(),
+                });
+                return Ok(None);
+            }
+            Mode::Merge { .. } => {
+                let mut done = 0;
+                for f in &self.loaded {
+                    let r = f.sums.iter().find(|r| r.key == key).ok_or_else(|| {
+                        ShardError::new(format!(
+                            "shard {} of {} has no experiment '{key}' (written by another \
+                             version of the example?)",
+                            f.index, f.example
+                        ))
+                    })?;
+                    if r.runs != runs || r.first != done || r.sums.len() != len {
+                        return Err(ShardError::new(format!(
+                            "shard {} of experiment '{key}' holds runs {}..{} of {} in {} sums, \
+                             this merge expects runs from {done} of {runs} in {len} sums",
+                            f.index,
+                            r.first,
+                            r.first + r.count,
+                            r.runs,
+                            r.sums.len()
+                        ))
+                        .into());
+                    }
+                    let part = ExactSums::from_bits(&r.sums).ok_or_else(|| {
+                        ShardError::new(format!(
+                            "shard {} of experiment '{key}': corrupt sums",
+                            f.index
+                        ))
+                    })?;
+                    sums.merge(&part);
+                    done += r.count;
+                }
+                if done != runs {
+                    return Err(ShardError::new(format!(
+                        "the shards of experiment '{key}' hold {done} of its {runs} runs"
+                    ))
+                    .into());
+                }
+                (0, runs)
+            }
+        };
+        self.sums.borrow_mut().push(SumsState {
+            key: key.to_string(),
+            runs,
+            first,
+            count,
+            sums: Vec::new(),
+        });
+        Ok(Some(sums))
+    }
+
     /// The results of the hand-looped experiment `key`, for `--stats` (written as the bits
     /// of each `f64`, exact, infinities and NaNs too); nothing in a shard.
     pub fn summary(&self, key: &str, values: &[f64]) {
@@ -499,9 +603,11 @@ impl Session {
             Mode::Shard { index, count, out } => {
                 let experiments = self.written.borrow().clone();
                 let records = self.records.borrow().clone();
+                let sums = self.sums.borrow().clone();
                 let runs: usize = experiments.iter().map(|e| e.shard.runs()).sum::<usize>()
-                    + records.iter().map(|r| r.bits.len()).sum::<usize>();
-                let n = experiments.len() + records.len();
+                    + records.iter().map(|r| r.bits.len()).sum::<usize>()
+                    + sums.iter().map(|r| r.count).sum::<usize>();
+                let n = experiments.len() + records.len() + sums.len();
                 let file = ShardFile {
                     format: FORMAT.to_string(),
                     example: self.example.clone(),
@@ -510,6 +616,7 @@ impl Session {
                     count: *count,
                     experiments,
                     records,
+                    sums,
                 };
                 write_json(out, &file)?;
                 println!(
@@ -537,6 +644,15 @@ impl Session {
                         .records
                         .iter()
                         .find(|r| done.iter().all(|d| d.key != r.key))
+                {
+                    return Err(ShardError::new(format!(
+                        "the shard files hold experiment '{}', which this run of {} does not have",
+                        r.key, self.example
+                    )));
+                }
+                let done = self.sums.borrow();
+                if let Some(f) = self.loaded.first()
+                    && let Some(r) = f.sums.iter().find(|r| done.iter().all(|d| d.key != r.key))
                 {
                     return Err(ShardError::new(format!(
                         "the shard files hold experiment '{}', which this run of {} does not have",

@@ -16,6 +16,7 @@ use estim_reproductions::boje_moments;
 use estim_reproductions::boje_rate;
 use estim_reproductions::common;
 use estim_reproductions::consistency;
+use estim_reproductions::exact_sum;
 use estim_reproductions::flight_ins;
 use estim_reproductions::heading_wrap;
 use estim_reproductions::large_state;

@@ -1,9 +1,12 @@
 //! The examples' `--shard I/N --out FILE` / `--merge FILE...` flags (`sharding`): parsing, and
 //! shard files through a session on a tiny Monte Carlo (one slot, 40 runs: milliseconds), and
-//! through a hand-looped example's per-run records (`Session::records`).
+//! through a hand-looped example's per-run records (`Session::records`), and through the
+//! examples whose sums over runs are exact (`Session::sums`: boje_rate, lv2_fusion,
+//! boje_circle, each on a few short runs).
 
 use std::path::PathBuf;
 
+use crate::exact_sum::{ExactSum, ExactSums};
 use crate::sharding::{Args, Mode, Session, parse};
 use estim::filters::ValidationError;
 use estim::filters::monte_carlo::{MonteCarlo, Recorder};
@@ -246,8 +249,8 @@ fn an_example_without_shards_refuses_the_flags_instead_of_running_whole() {
     use crate::sharding::refuse;
     assert!(
         refuse(
-            "boje_rate",
-            "one stream",
+            "large_state",
+            "no Monte Carlo",
             parse(["--quick", "--json"]).unwrap()
         )
         .is_ok()
@@ -258,15 +261,168 @@ fn an_example_without_shards_refuses_the_flags_instead_of_running_whole() {
         &["--stats", "s"],
     ] {
         let message = refuse(
-            "boje_rate",
-            "one stream",
+            "large_state",
+            "no Monte Carlo",
             parse(args.iter().copied()).unwrap(),
         )
         .unwrap_err()
         .to_string();
         assert!(
-            message.contains("boje_rate does not take --shard/--merge/--stats: one stream"),
+            message.contains("large_state does not take --shard/--merge/--stats: no Monte Carlo"),
             "{args:?}: {message}"
         );
     }
+}
+
+/// The exact sum is correctly rounded whatever the order: Python's `math.fsum` test values
+/// (ties to even across partials, cancellation; the last is Σ 1/n, n ≤ 1000, to the last bit),
+/// each summed forwards, backwards and split in two merged halves.
+#[test]
+fn exact_sums_are_correctly_rounded_in_any_order() {
+    let p = |e: i32| 2f64.powi(e);
+    let harmonic: Vec<f64> = (1..=1000).map(|n| 1.0 / n as f64).collect();
+    let cases: [(Vec<f64>, f64); 7] = [
+        (vec![p(53), -0.5, -p(-54)], p(53) - 1.0),
+        (vec![p(53), 1.0, p(-100)], p(53) + 2.0),
+        (vec![p(53) + 10.0, 1.0, p(-100)], p(53) + 12.0),
+        (vec![p(53) - 4.0, 0.5, p(-54)], p(53) - 3.0),
+        (vec![1e100, 1.0, -1e100, 1e-100, 1e50, -1.0, -1e50], 1e-100),
+        (vec![0.1; 10], 1.0),
+        (harmonic, f64::from_bits(0x401D_F11F_45F4_E61A)),
+    ];
+    for (terms, want) in cases {
+        let sum = |xs: &mut dyn Iterator<Item = &f64>| {
+            let mut s = ExactSum::default();
+            xs.for_each(|x| s.add(*x));
+            s
+        };
+        let (a, b) = terms.split_at(terms.len() / 2);
+        let mut split = sum(&mut b.iter());
+        split.merge(&sum(&mut a.iter().rev()));
+        for s in [sum(&mut terms.iter()), sum(&mut terms.iter().rev()), split] {
+            assert_eq!(s.value().to_bits(), want.to_bits(), "{terms:?}");
+        }
+    }
+    // Random terms of mixed sizes and signs on the grid 2⁻⁹⁰ (k·2^(e−90), k < 2⁵³, e < 40): the
+    // exact sum in i128 fixed point, rounded once (int → float casts round to nearest even),
+    // is the reference; every order and split must give its bits.
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(39);
+    for _ in 0..50 {
+        let ks: Vec<i128> = (0..300)
+            .map(|_| {
+                let k = rng.random_range(-(1i128 << 53)..1i128 << 53);
+                k << rng.random_range(0..40)
+            })
+            .collect();
+        let terms: Vec<f64> = ks.iter().map(|k| *k as f64 * p(-90)).collect();
+        let want = ks.iter().sum::<i128>() as f64 * p(-90);
+        let mut forward = ExactSum::default();
+        terms.iter().for_each(|x| forward.add(*x));
+        let (mut back, mut odd) = (ExactSum::default(), ExactSum::default());
+        for (i, x) in terms.iter().enumerate().rev() {
+            if i % 2 == 0 {
+                back.add(*x)
+            } else {
+                odd.add(*x)
+            }
+        }
+        back.merge(&odd);
+        assert_eq!(forward.value().to_bits(), want.to_bits());
+        assert_eq!(back.value().to_bits(), want.to_bits());
+    }
+    // Non-finite terms are summed apart, as IEEE does.
+    let mut s = ExactSums::new(2);
+    for (i, x) in [(0, 1.0), (0, f64::INFINITY), (1, f64::INFINITY), (1, -1.0)] {
+        s.add(i, x);
+    }
+    assert_eq!(s.values(), [f64::INFINITY, f64::INFINITY]);
+    s.add(1, f64::NEG_INFINITY);
+    assert!(s.value(1).is_nan());
+}
+
+/// `body` (an example body's results through a session: their `Debug`, every f64 exact) whole and as the merge of 3 shards (files given in shuffled order): the results and
+/// the `--stats` bytes must be equal, bit for bit.
+fn shards_merge_to_the_whole_run(
+    name: &str,
+    body: impl Fn(&Session) -> Result<Option<String>, Box<dyn std::error::Error>>,
+) {
+    let run = |args: &[&str]| -> Option<String> {
+        let args = parse(args.iter().copied()).unwrap();
+        let s = Session::new(name, "--quick", args).unwrap();
+        let out = body(&s).unwrap();
+        s.finish().unwrap();
+        out
+    };
+    let files: Vec<String> = (0..3)
+        .map(|i| temp(&format!("{name}{i}.json")).display().to_string())
+        .collect();
+    let (whole_stats, merged_stats) = (temp(&format!("{name}-w")), temp(&format!("{name}-m")));
+    let whole = run(&["--stats", &whole_stats.display().to_string()]).unwrap();
+    for (i, f) in files.iter().enumerate() {
+        assert_eq!(run(&["--shard", &format!("{i}/3"), "--out", f]), None);
+    }
+    let stats = merged_stats.display().to_string();
+    let merged = run(&[
+        "--merge", &files[2], &files[0], &files[1], "--stats", &stats,
+    ])
+    .unwrap();
+    assert_eq!(merged, whole, "{name}");
+    assert_eq!(
+        std::fs::read(&merged_stats).unwrap(),
+        std::fs::read(&whole_stats).unwrap(),
+        "{name}"
+    );
+    for f in files
+        .iter()
+        .map(PathBuf::from)
+        .chain([whole_stats, merged_stats])
+    {
+        let _ = std::fs::remove_file(f);
+    }
+}
+
+/// boje_rate, lv2_fusion and boje_circle, each on a few short runs (tens of milliseconds):
+/// their shards merge to the whole run bit for bit.
+#[test]
+fn examples_with_exact_sums_merge_to_their_whole_run_bit_for_bit() {
+    use crate::boje_circle::{circle_monte_carlo_in, circle_smoothing_in};
+    use crate::boje_rate::{RateConfig, rate_experiment_in};
+    use crate::lv2_fusion::{Lv2Config, monte_carlo_in};
+    use estim::models::boje::CircleConfig;
+
+    let rate = RateConfig {
+        runs: 5,
+        steps: 1_100,
+        ..RateConfig::paper()
+    };
+    shards_merge_to_the_whole_run("boje_rate", |s| {
+        let r = rate_experiment_in(&rate, s)?;
+        if let Some(r) = &r {
+            s.summary("runs", &r.rms_over_time_deg_s);
+        }
+        Ok(r.map(|r| format!("{r:?}")))
+    });
+    let mut lv2 = Lv2Config::quick();
+    lv2.monte_carlo.runs = 4_500;
+    shards_merge_to_the_whole_run("lv2_fusion", |s| {
+        let mc = monte_carlo_in(&lv2.sigmas, &lv2.monte_carlo, lv2.false_alarm, s)?;
+        if let Some(mc) = &mc {
+            s.summary("readings", &[mc.chi2_mean, mc.chi2_variance]);
+        }
+        Ok(mc.map(|m| format!("{m:?}")))
+    });
+    let circle = CircleConfig {
+        runs: 4,
+        t_end: 3.0,
+        ..CircleConfig::paper()
+    };
+    shards_merge_to_the_whole_run("boje_circle", |s| {
+        let mc = circle_monte_carlo_in(&circle, "main", true, s)?;
+        let smoothed = circle_smoothing_in(&circle, s)?;
+        Ok(mc.zip(smoothed).map(|(m, mut sm)| {
+            sm.wall_s = 0.0;
+            format!("{m:?} {sm:?}")
+        }))
+    });
 }

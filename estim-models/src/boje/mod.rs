@@ -121,7 +121,7 @@
 //!
 //! | quantity | paper | estim |
 //! |---|---|---|
-//! | rate std at 80 °/s, R = 0.1 m | 0.24 °/s (eq 19) | 0.3352 °/s (eq 18 = eq 17 iterated); scalar EKF Monte Carlo 0.334 °/s |
+//! | rate std at 80 °/s, R = 0.1 m | 0.24 °/s (eq 19) | 0.3352 °/s (eq 18 = eq 17 iterated); scalar EKF Monte Carlo 0.336 °/s |
 //! | full-scale rate; accel noise; gyro noise; ratio | 740 °/s; 1.4 mg; 0.63 °/s; ≈ 10 | 739.8 °/s; 1.38 mg; 0.627 °/s; 9.66 |
 //! | position std (§4) | around 0.5 m | √P 0.50 m (x 0.47, y 0.54), RMS error 0.48 m (50 runs) |
 //! | heading std (§4) | 0.01 rad | √P 0.0113 rad, RMS error 0.0107 rad |
