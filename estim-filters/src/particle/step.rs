@@ -206,7 +206,7 @@ where
                     })
                 });
                 w.error = error;
-                w.lse = lse_partial(out);
+                w.lse = lse_partial(out, &mut w.terms);
             },
         );
         self.sensors = sensors;
@@ -279,7 +279,7 @@ where
     pub(crate) fn normaliser(&mut self, values: &[T]) -> Result<T> {
         let count = values.len();
         for_states(parallel(count), &mut self.chunks, |c, w| {
-            w.lse = lse_partial(&values[range(c, count)]);
+            w.lse = lse_partial(&values[range(c, count)], &mut w.terms);
         });
         let total = lse_combine(self.chunks.iter().map(|w| w.lse));
         if total.is_finite() {
@@ -292,8 +292,13 @@ where
         }
     }
 
-    /// log Wᵢ = `self.log_w[i]` − `total` into `log_weights` and Wᵢ = exp(log Wᵢ) (in f64)
-    /// into `weights`, by chunks.
+    /// log Wᵢ = vᵢ − `total` into `log_weights` and Wᵢ = eᵢ exp(mₐ − `total`) (in f64) into
+    /// `weights`, by chunks, where vᵢ = `self.log_w[i]` and eᵢ = exp(vᵢ − mₐ), mₐ are the terms
+    /// and chunk maxima that the log-sum-exp of those values (the last [`weigh`](Self::weigh)
+    /// or [`normaliser`](Self::normaliser), `total`) left: one `exp` per particle for the
+    /// normaliser and the weights together. Wᵢ equals exp(log Wᵢ) to a few ulps; it underflows
+    /// to 0 only where exp(log Wᵢ) would be below the smallest normal f64 (the log-weights
+    /// keep such particles alive).
     pub(crate) fn normalise(&mut self, total: T, log_weights: &mut [T], weights: &mut [f64]) {
         let log_w = &self.log_w;
         let count = log_w.len();
@@ -304,14 +309,26 @@ where
             CHUNK,
             weights,
             CHUNK,
-            |c, _, lw, w| {
-                let start = c * CHUNK;
-                for (k, (lw, w)) in lw.iter_mut().zip(w.iter_mut()).enumerate() {
-                    *lw = log_w[start + k] - total;
-                    *w = to_f64(*lw).exp();
+            |c, w, lw, wt| {
+                let values = &log_w[c * CHUNK..];
+                let scale = to_f64(w.lse.0 - total).exp();
+                for ((lw, wt), (&v, &e)) in lw.iter_mut().zip(wt).zip(values.iter().zip(&w.terms)) {
+                    *lw = v - total;
+                    *wt = e * scale;
                 }
             },
         );
+    }
+
+    /// Wᵢ = eᵢ exp(mₐ − `total`) into `self.weights` from the terms of the last
+    /// [`normaliser`](Self::normaliser) pass, whose result is `total` (see
+    /// [`normalise`](Self::normalise)).
+    pub(crate) fn weights_from_terms(&mut self, total: T) {
+        self.weights.clear();
+        for w in &self.chunks {
+            let scale = to_f64(w.lse.0 - total).exp();
+            self.weights.extend(w.terms.iter().map(|&e| e * scale));
+        }
     }
 }
 
