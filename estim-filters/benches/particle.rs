@@ -188,7 +188,8 @@ impl<const D: usize> Hand<D> {
             &self.w,
             &mut rng,
             &mut self.ancestors,
-        );
+        )
+        .expect("normalised weights");
         for (j, &a) in self.ancestors.iter().enumerate() {
             let mut rng = ParticleRng::stream(SEED, self.step, j as u64);
             let e: [f64; D] = std::array::from_fn(|_| StandardNormal.sample(&mut rng));

@@ -175,7 +175,7 @@ where
             self.scheme,
             seed,
             step,
-        );
+        )?;
         // Propagate the chosen particles.
         work.propagate_all(&cloud.particles, process, input, dt, seed, step)?;
         // Second stage; predictive weights ∝ 1/η_aⱼ for the report's moments.

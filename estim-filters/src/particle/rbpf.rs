@@ -449,7 +449,7 @@ where
                 &mut rng,
                 &mut work.ancestors,
                 &mut work.scratch,
-            );
+            )?;
         }
         let (n, _) = state.nonlinear.shape_generic();
         let stage = Stage::Prediction;

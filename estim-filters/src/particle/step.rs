@@ -84,6 +84,7 @@ where
 
     /// Ancestors from the normalised weights `weights` (resampled by `scheme` from the stream
     /// (seed, step, RESAMPLE) if `resample`, else the identity).
+    /// Errors: those of [`resample`](super::resample) (never for a filter's own weights).
     pub(crate) fn ancestors_from(
         ancestors: &mut [usize],
         scratch: &mut Vec<f64>,
@@ -92,14 +93,15 @@ where
         scheme: super::Resampling,
         seed: u64,
         step: u64,
-    ) {
+    ) -> Result<()> {
         if resample {
             let mut rng = ParticleRng::stream(seed, step, RESAMPLE);
-            resample_with(scheme, weights, &mut rng, ancestors, scratch);
+            resample_with(scheme, weights, &mut rng, ancestors, scratch)
         } else {
             for (i, a) in ancestors.iter_mut().enumerate() {
                 *a = i;
             }
+            Ok(())
         }
     }
 
@@ -743,7 +745,7 @@ where
             self.scheme,
             self.seed,
             step,
-        );
+        )?;
         work.propagate_all(&self.cloud.particles, process, input, dt, self.seed, step)?;
         // Committed: nothing below fails.
         core::mem::swap(&mut self.cloud.particles, &mut self.work.next);

@@ -6,7 +6,9 @@
 //! z-test whose false-failure rate (for a fresh seed) is stated beside it.
 
 use estim_core::nalgebra::{Matrix1, U1, Vector1};
-use estim_core::{Error, Gaussian, LinearMeasurement, LinearProcess, MeasurementModel, Quantity};
+use estim_core::{
+    Error, Gaussian, LinearMeasurement, LinearProcess, MeasurementModel, Parameter, Quantity, Stage,
+};
 use estim_filters::particle::{
     MeasurementLikelihood, NonGaussian, ParticleFilter, ParticleRng, ResampleWhen, Resampling,
     resample,
@@ -185,7 +187,8 @@ fn offspring_counts_have_the_right_mean_and_variance_ordering() {
                 &weights,
                 &mut ParticleRng::stream(3, r, 0),
                 &mut ancestors,
-            );
+            )
+            .unwrap();
             for &a in &ancestors {
                 counts[a][r as usize] += 1.0;
             }
@@ -222,6 +225,66 @@ fn offspring_counts_have_the_right_mean_and_variance_ordering() {
                 "{scheme:?}: total variance {total_var} > {bound}"
             );
         }
+    }
+}
+
+/// `resample` on bad weights: typed errors with the ancestors untouched, never a panic;
+/// unnormalised weights are normalised (weights × 4, exact in binary, draw the same ancestors
+/// bit for bit for every scheme).
+#[test]
+fn resample_normalises_weights_and_refuses_bad_ones() {
+    let weights = [0.05, 0.3, 0.0, 0.15, 0.125, 0.2, 0.1, 0.075];
+    let scaled = weights.map(|w| 4.0 * w);
+    for scheme in [
+        Resampling::Multinomial,
+        Resampling::Stratified,
+        Resampling::Systematic,
+        Resampling::Residual,
+    ] {
+        let (mut a, mut b) = ([0; 8], [0; 8]);
+        resample(scheme, &weights, &mut ParticleRng::stream(5, 1, 0), &mut a).unwrap();
+        resample(scheme, &scaled, &mut ParticleRng::stream(5, 1, 0), &mut b).unwrap();
+        assert_eq!(a, b, "{scheme:?}");
+        let bad_weights: [(&[f64], Error); 6] = [
+            (
+                &[],
+                Error::InvalidParameter {
+                    parameter: Parameter::SampleCount,
+                    value: 0.0,
+                },
+            ),
+            (
+                &[0.5, -0.25, 0.75],
+                Error::InvalidParameter {
+                    parameter: Parameter::Weight,
+                    value: -0.25,
+                },
+            ),
+            (&[0.0, 0.0], degenerate()),
+            (&[f64::NAN, 1.0], degenerate()),
+            (&[f64::INFINITY, 1.0], degenerate()),
+            (&[f64::MAX, f64::MAX], degenerate()),
+        ];
+        for (bad, error) in bad_weights {
+            let mut ancestors = [7; 8];
+            let mut rng = ParticleRng::stream(5, 1, 0);
+            assert_eq!(
+                resample(scheme, bad, &mut rng, &mut ancestors),
+                Err(error),
+                "{scheme:?} {bad:?}"
+            );
+            assert_eq!(ancestors, [7; 8]);
+        }
+        // Nothing to draw: nothing checked.
+        assert!(resample(scheme, &[], &mut ParticleRng::stream(5, 1, 0), &mut []).is_ok());
+    }
+}
+
+/// The error of a weight set with no mass (NaN, infinite, overflowing or all zero).
+fn degenerate() -> Error {
+    Error::NonFinite {
+        stage: Stage::Prediction,
+        quantity: Quantity::Weights,
     }
 }
 
