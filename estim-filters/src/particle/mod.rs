@@ -118,7 +118,7 @@ pub use noise::{
     ProcessSampler,
 };
 pub use own_noise::NonGaussianFilter;
-pub use pmmh::{MAX_PMMH_ITERATIONS, PmmhChain, particle_log_likelihood, pmmh};
+pub use pmmh::{MAX_PMMH_ITERATIONS, PmmhChain, PmmhError, particle_log_likelihood, pmmh};
 pub use rbpf::{
     ConditionalMeasurement, ConditionalTransition, ConditionallyLinearMeasurement,
     ConditionallyLinearProcess, RaoBlackwellised, RaoBlackwellisedSnapshot,

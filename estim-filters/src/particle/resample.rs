@@ -277,16 +277,22 @@ pub(crate) fn effective_sample_size<T: estim_core::Real>(log_weights: &[T]) -> f
 }
 
 /// log Σᵢ exp(vᵢ) of unnormalised log-weights, in one serial pass ([`log_sum_exp`]), or the
-/// typed error of a degenerate weight set (a NaN, or every weight zero: no particle explains
-/// the measurement).
-pub(crate) fn normaliser<T: estim_core::Real>(log_w: &[T]) -> estim_core::error::Result<T> {
+/// typed error of a degenerate weight set: every weight zero (no particle explains the
+/// measurement, [`Quantity::Weights`]), or a NaN or +∞ (a bug in the model,
+/// [`Quantity::FunctionValue`]).
+pub(crate) fn normaliser<T: estim_core::Real>(log_w: &[T]) -> Result<T> {
     let total = log_sum_exp(log_w);
     if total.is_finite() {
         Ok(total)
     } else {
-        Err(estim_core::Error::NonFinite {
-            stage: estim_core::Stage::Update,
-            quantity: estim_core::Quantity::Weights,
+        let quantity = if total == -T::one() / T::zero() {
+            Quantity::Weights
+        } else {
+            Quantity::FunctionValue
+        };
+        Err(Error::NonFinite {
+            stage: Stage::Update,
+            quantity,
         })
     }
 }

@@ -599,8 +599,9 @@ struct Sums<'a, T: Real> {
 }
 
 /// log p(z | x) for the particle `x`, adding its residual and R with weight `v` (if positive)
-/// to `sums`. Errors: h(x) of the wrong length, a NaN or +∞ log-density, a non-finite or
-/// (Gaussian path) not positive definite R.
+/// to `sums`. Errors: h(x) of the wrong length, a NaN or +∞ log-density (a bug in the model,
+/// e.g. h(x) NaN: [`Quantity::FunctionValue`], told apart from the [`Quantity::Weights`] of a
+/// measurement no particle explains), a non-finite or (Gaussian path) not positive definite R.
 #[inline(always)]
 fn log_density<T, N, M, H>(
     ms: &mut SensorScratch<T, M>,
@@ -663,7 +664,7 @@ where
     if nan || log_g == T::one() / T::zero() {
         return Err(Error::NonFinite {
             stage: Stage::Update,
-            quantity: Quantity::Weights,
+            quantity: Quantity::FunctionValue,
         });
     }
     if v > T::zero() {
@@ -768,7 +769,9 @@ where
     /// measurements size their per-chunk buffers at the first update with that length (and
     /// when R changes), then allocate nothing. On error (non-finite z, h(x) of the
     /// wrong length, R not finite or, on the Gaussian path, not positive definite, a NaN or
-    /// +∞ log-density, every weight zero) the filter is unchanged.
+    /// +∞ log-density — h(x) NaN included — with [`Quantity::FunctionValue`], every weight
+    /// zero — a reading no particle explains — with [`Quantity::Weights`]) the filter is
+    /// unchanged.
     ///
     /// ```
     /// use estim_core::nalgebra::{Matrix1, Vector1};

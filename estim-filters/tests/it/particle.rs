@@ -369,10 +369,34 @@ fn bad_input_gives_typed_errors_and_leaves_the_filter_unchanged() {
     assert!(weights(&e), "{e:?}");
     assert_eq!(pf, before);
 
+    // A NaN log-density is a bug in the model, not a measurement no particle explains.
     let e = pf.update_with(
         &NonGaussian(Bounded { a: 0.1, nan: true }),
         &Vector1::new(0.0),
     );
+    assert_eq!(
+        e.err(),
+        Some(Error::NonFinite {
+            stage: Stage::Update,
+            quantity: Quantity::FunctionValue
+        })
+    );
+    assert_eq!(pf, before);
+    let nan_h = LinearMeasurement {
+        observation: Matrix1::new(f64::NAN),
+        noise: Matrix1::new(1.0),
+    };
+    let e = pf.update(&nan_h, &Vector1::new(0.0));
+    assert_eq!(
+        e.err(),
+        Some(Error::NonFinite {
+            stage: Stage::Update,
+            quantity: Quantity::FunctionValue
+        })
+    );
+    assert_eq!(pf, before);
+    // A Gaussian reading 10³⁰⁰ away: every log-weight −∞ (r² overflows), no NaN.
+    let e = pf.update(&sensor, &Vector1::new(1e300));
     assert!(weights(&e), "{e:?}");
     assert_eq!(pf, before);
 
