@@ -754,6 +754,22 @@ fn checkpoints_resume_bit_identically_and_reject_corrupt_input() {
     assert!(corrupt(
         &|v| v["trigger"] = serde_json::json!({ "EssBelow": 2.0 })
     ));
+    // The stored weights must agree with the log-weights (to √ε relative).
+    assert!(corrupt(&|v| v["weights"][3] = serde_json::json!(0.5)));
+    assert!(corrupt(&|v| v["weights"][3] = serde_json::json!(-0.0625)));
+    assert!(corrupt(&|v| {
+        v["weights"].as_array_mut().unwrap().pop();
+    }));
+    // A checkpoint written before the weights were stored reads with Wᵢ = exp(log Wᵢ): the
+    // same log-weights, and an ESS equal to the stored weights' to round-off (each weight
+    // within a few ulps times |log Wᵢ| ≤ 20 here; 1e-12 relative leaves margin).
+    let at_save: ParticleFilter<f64, U1> = serde_json::from_value(saved.clone()).unwrap();
+    let mut old = saved.clone();
+    old.as_object_mut().unwrap().remove("weights");
+    let old: ParticleFilter<f64, U1> = serde_json::from_value(old).unwrap();
+    assert_eq!(old.log_weights(), at_save.log_weights());
+    let (a, b) = (old.effective_sample_size(), at_save.effective_sample_size());
+    assert!((a - b).abs() <= 1e-12 * b, "{a} vs {b}");
     // The wrong state dimension for a dynamic-size filter: a shape error, not a panic.
     let dynamic: ParticleFilter<f64, Dyn> = ParticleFilter::new(prior.into_dyn(), 8, 1).unwrap();
     let mut v = serde_json::to_value(&dynamic).unwrap();
