@@ -649,7 +649,8 @@ fn particle_filter_runs_through_the_monte_carlo_runner() {
     let (process, sensor, prior) = ar1();
     let (runs, steps, count) = (5, 10, 200);
     // One run: the truth x, the filter's x̂ and P, and its update report, per step.
-    let run = |seed: u64| -> Result<Vec<(f64, f64, f64, UpdateReport<f64, U1>)>, Error> {
+    type Step = (f64, f64, f64, UpdateReport<f64, U1>);
+    let run = |seed: u64| -> Result<Vec<Step>, Error> {
         let mut g = crate::common::rng(seed);
         let mut x = crate::common::normal(&mut g);
         let mut pf = ParticleFilter::new(prior.clone(), count, seed)?;
