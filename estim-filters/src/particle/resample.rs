@@ -130,18 +130,20 @@ pub(crate) fn resample_with(
             value: 0.0,
         });
     }
-    // One pass for the sum (which the inverse CDF needs anyway) and the smallest weight. A NaN
-    // or ±∞ weight makes the sum NaN or infinite.
-    let (total, least) = weights
-        .iter()
-        .fold((0.0, f64::INFINITY), |(s, l): (f64, f64), &w| {
-            (s + w, l.min(w))
-        });
-    if least < 0.0 {
-        return Err(Error::InvalidParameter {
-            parameter: Parameter::Weight,
-            value: least,
-        });
+    // The sum (which the inverse CDF needs anyway): a NaN or ±∞ weight makes it NaN or
+    // infinite. A negative weight has its sign bit set: the OR of all the bits (a vectorised
+    // integer pass) shows one, and only then (−0.0 sets it too, and is valid) is the most
+    // negative weight looked for.
+    let total: f64 = weights.iter().sum();
+    let bits = weights.iter().fold(0u64, |b, w| b | w.to_bits());
+    if bits >> 63 == 1 {
+        let least = weights.iter().fold(f64::INFINITY, |l, &w| l.min(w));
+        if least < 0.0 {
+            return Err(Error::InvalidParameter {
+                parameter: Parameter::Weight,
+                value: least,
+            });
+        }
     }
     if !(total.is_finite() && total > 0.0) {
         return Err(Error::NonFinite {
