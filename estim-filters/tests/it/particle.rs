@@ -275,6 +275,17 @@ fn resample_normalises_weights_and_refuses_bad_ones() {
             );
             assert_eq!(ancestors, [7; 8]);
         }
+        // −0.0 has its sign bit set but is a valid weight (zero).
+        let mut c = [0; 8];
+        let signed_zero = weights.map(|w| if w == 0.0 { -0.0 } else { w });
+        resample(
+            scheme,
+            &signed_zero,
+            &mut ParticleRng::stream(5, 1, 0),
+            &mut c,
+        )
+        .unwrap();
+        assert_eq!(a, c, "{scheme:?}");
         // Nothing to draw: nothing checked.
         assert!(resample(scheme, &[], &mut ParticleRng::stream(5, 1, 0), &mut []).is_ok());
     }
