@@ -28,14 +28,19 @@ use super::step::Factored;
 pub(crate) const CHUNK: usize = 512;
 
 /// The smallest particle count whose loops run on rayon's pool (feature `parallel`): below it
-/// the fork-join overhead (five loops a step) outweighs the work (≈ 0.03–0.04 µs of CPU per
-/// particle-step for a 1-D model). Measured on a shared 2-core machine (growth model, 1 and 2
-/// threads alternating, 6 repetitions, medians, load 3.6–5.5): 2 threads took 1.80, 1.48 and
-/// 1.13 times the wall-clock of 1 thread at N = 1024, 2048 and 4096 (and 2.2, 1.7, 1.4 times
-/// the CPU), 1.01–1.03 times at 8192 to 32768, 0.89 times at 65536; so the pool is used from
-/// 8192, where it stops costing wall-clock. On an idle machine the crossover is likely lower.
-/// Serial and parallel runs give the same bits.
-pub const PARALLEL_MIN: usize = 8192;
+/// the fork-join overhead (five loops a step, and the serial resampling) outweighs the work
+/// (≈ 0.03–0.04 µs of CPU per particle-step for a 1-D model). Measured on a 2-core machine
+/// (growth model, 1 and 2 threads alternating, medians of wall-clock, 2 threads / 1 thread):
+///
+/// | N | 1024 | 2048 | 4096 | 8192 | 16384 | 32768 | 65536 |
+/// |---|---:|---:|---:|---:|---:|---:|---:|
+/// | idle (load < 1.3, 7 runs) | 1.71 | 1.42 | 1.11 | 1.14 | 1.06 | 0.86 | 0.79 |
+/// | shared (load 3.6–5.5, 6 runs) | 1.80 | 1.48 | 1.13 | 1.01 | 1.03 | 1.01 | 0.89 |
+///
+/// so the pool is used from 32768 particles, the first count where the second thread pays on
+/// the idle machine and does not cost on the busy one. Serial and parallel runs give the same
+/// bits.
+pub const PARALLEL_MIN: usize = 32768;
 
 /// Whether the loops over `count` particles run on rayon's pool.
 #[inline]
