@@ -85,6 +85,8 @@ pub enum Parameter {
     UnscentedKappa,
     /// Number of Monte Carlo samples (at least 2).
     SampleCount,
+    /// A particle weight (must be ≥ 0; the weights need not sum to 1).
+    Weight,
     /// Forgetting factor γ of a fading-memory estimator (0 < γ ≤ 1).
     ForgettingFactor,
     /// A gating threshold (must be finite and > 0).
@@ -231,6 +233,7 @@ impl fmt::Display for Parameter {
             Parameter::UnscentedBeta => "unscented beta",
             Parameter::UnscentedKappa => "unscented kappa",
             Parameter::SampleCount => "sample count",
+            Parameter::Weight => "particle weight",
             Parameter::ForgettingFactor => "forgetting factor",
             Parameter::GateThreshold => "gate threshold",
             Parameter::GateProbability => "gate probability",

@@ -9,7 +9,7 @@
 //! `predict` + `update` in a rayon pool of 1 or 2 threads; the pool matters only with the
 //! `parallel` feature and N ≥ [`PARALLEL_MIN`]), and `hand` — a hand-written loop of the same
 //! algorithm on one thread: the same counter-based streams, resampling every step by the same
-//! systematic scheme, the same log-domain weights and weighted moments, specialised to the model
+//! systematic scheme, the same log-domain weights (one `exp` per particle, as the library) and weighted moments, specialised to the model
 //! (no trait calls, no error checks, Q's factor and R's inverse computed once). The library
 //! resamples every step too (`ResampleWhen::Always`), so both do the same work.
 //!
@@ -188,7 +188,8 @@ impl<const D: usize> Hand<D> {
             &self.w,
             &mut rng,
             &mut self.ancestors,
-        );
+        )
+        .expect("normalised weights");
         for (j, &a) in self.ancestors.iter().enumerate() {
             let mut rng = ParticleRng::stream(SEED, self.step, j as u64);
             let e: [f64; D] = std::array::from_fn(|_| StandardNormal.sample(&mut rng));
@@ -206,16 +207,17 @@ impl<const D: usize> Hand<D> {
             *lw = uniform + log_density(&self.x[i * D..i * D + D]);
             max = max.max(*lw);
         }
-        let total = max
-            + self
-                .log_w
-                .iter()
-                .map(|&l| (l - max).exp())
-                .sum::<f64>()
-                .ln();
+        // One exp per particle: eᵢ = exp(ℓᵢ − max) kept, Wᵢ = eᵢ exp(max − total).
+        let mut sum = 0.0;
+        for (&lw, w) in self.log_w.iter().zip(&mut self.w) {
+            *w = (lw - max).exp();
+            sum += *w;
+        }
+        let total = max + sum.ln();
+        let scale = (max - total).exp();
         for (lw, w) in self.log_w.iter_mut().zip(&mut self.w) {
             *lw -= total;
-            *w = lw.exp();
+            *w *= scale;
         }
         self.mean = [0.0; D];
         for (i, &w) in self.w.iter().enumerate() {

@@ -23,7 +23,6 @@ use estim_core::{Alloc, ProcessModel, Quantity, Real, Stage, error::Result};
 use super::ParticleFilter;
 use super::chunks::{CHUNK, first_error, for_chunks1, parallel, with_state};
 use super::noise::{AdditiveGaussian, ParticleMeasurement, ParticleProcess};
-use super::resample::to_f64;
 use super::step::Work;
 use crate::gaussian_filter::ensure_time_step;
 use crate::report::UpdateReport;
@@ -167,9 +166,7 @@ where
         let first = work.normaliser(&log_w);
         work.log_w = log_w;
         let first = first?;
-        work.weights.clear();
-        work.weights
-            .extend(work.log_w.iter().map(|&l| to_f64(l - first).exp()));
+        work.weights_from_terms(first);
         Work::<T, N>::ancestors_from(
             &mut work.ancestors,
             &mut work.scratch,
@@ -178,7 +175,7 @@ where
             self.scheme,
             seed,
             step,
-        );
+        )?;
         // Propagate the chosen particles.
         work.propagate_all(&cloud.particles, process, input, dt, seed, step)?;
         // Second stage; predictive weights ∝ 1/η_aⱼ for the report's moments.

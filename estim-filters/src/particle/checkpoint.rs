@@ -1,9 +1,12 @@
 //! Checkpoints (feature `serde`): a [`ParticleFilter`] serialises its configuration (seed,
 //! resampling scheme and trigger) and everything its steps change (particles, log-weights,
-//! random step counter, moments, running log-likelihood), and resumes bit-identically. On the
-//! way in every shape must agree, every number be finite (log-weights may be −∞, not NaN or
-//! +∞) and the log-weights normalised (log Σ Wᵢ = 0 to √ε): a typed error otherwise, never a
-//! panic.
+//! random step counter, moments, running log-likelihood, and the weights Wᵢ in f64, which the
+//! update derives from its log-sum-exp terms rather than as exp(log Wᵢ)), and resumes
+//! bit-identically. On the way in every shape must agree, every number be finite (log-weights
+//! may be −∞, not NaN or +∞), the log-weights normalised (log Σ Wᵢ = 0 to √ε) and each weight
+//! within √ε (relative) of exp(log Wᵢ): a typed error otherwise, never a panic. A checkpoint
+//! without weights (written before they were stored) is read with Wᵢ = exp(log Wᵢ), and then
+//! resumes to within round-off, not bit for bit.
 //!
 //! ```
 //! use estim_core::nalgebra::{Matrix1, Vector1, U1};
@@ -40,12 +43,14 @@ use super::{ParticleFilter, ParticleSnapshot, ResampleWhen, Resampling, check_tr
 /// What a checkpoint holds, borrowed to write it or owned when read.
 #[derive(Serialize, Deserialize)]
 #[serde(rename = "ParticleFilter")]
-struct Fields<Pa, L, V, C, T> {
+struct Fields<Pa, L, W, V, C, T> {
     seed: u64,
     resampling: Resampling,
     trigger: ResampleWhen,
     particles: Pa,
     log_weights: L,
+    #[serde(default)]
+    weights: W,
     step: u64,
     state: V,
     covariance: C,
@@ -68,6 +73,7 @@ where
             trigger: self.when,
             particles: &c.particles,
             log_weights: &c.log_weights,
+            weights: Some(&c.weights),
             step: c.step,
             state: &c.mean,
             covariance: &c.covariance,
@@ -91,6 +97,7 @@ where
         type Checked<T, N> = Fields<
             ShapeChecked<T, N, Dyn>,
             Vec<T>,
+            Option<Vec<f64>>,
             ShapeChecked<T, N, U1>,
             ShapeChecked<T, N, N>,
             T,
@@ -102,6 +109,7 @@ where
             trigger: f.trigger,
             particles: f.particles.0,
             log_weights: f.log_weights,
+            weights: f.weights,
             step: f.step,
             state: f.state.0,
             covariance: f.covariance.0,
@@ -110,16 +118,19 @@ where
         validate(&f).map_err(D::Error::custom)?;
         let (n, _) = f.state.shape_generic();
         let count = f.log_weights.len();
+        let stored = f.weights.is_some();
         let mut cloud = ParticleSnapshot {
             particles: f.particles,
             log_weights: f.log_weights,
-            weights: Vec::with_capacity(count),
+            weights: f.weights.unwrap_or_else(|| Vec::with_capacity(count)),
             step: f.step,
             mean: f.state,
             covariance: f.covariance,
             log_likelihood: f.log_likelihood,
         };
-        cloud.refresh_weights();
+        if !stored {
+            cloud.refresh_weights();
+        }
         Ok(ParticleFilter {
             seed: f.seed,
             scheme: f.resampling,
@@ -131,7 +142,8 @@ where
 }
 
 /// A checkpoint as read.
-type Owned<T, N> = Fields<OMatrix<T, N, Dyn>, Vec<T>, OVector<T, N>, OMatrix<T, N, N>, T>;
+type Owned<T, N> =
+    Fields<OMatrix<T, N, Dyn>, Vec<T>, Option<Vec<f64>>, OVector<T, N>, OMatrix<T, N, N>, T>;
 
 /// The checks on a checkpoint read back (see the module documentation).
 fn validate<T: Real, N: Dim>(f: &Owned<T, N>) -> Result<(), Error>
@@ -165,6 +177,18 @@ where
     let total = super::log_sum_exp(&f.log_weights);
     if bad || !(total.abs() <= T::default_epsilon().sqrt()) {
         return Err(weights_error);
+    }
+    if let Some(weights) = &f.weights {
+        // Both are the true weight to a relative error ≈ ε |log Wᵢ| ≤ 745 ε (far below √ε);
+        // below the smallest normal f64 either may have underflowed.
+        let tolerance = super::resample::to_f64(T::default_epsilon().sqrt());
+        let agrees = |(&w, &lw): (&f64, &T)| {
+            let exact = super::resample::to_f64(lw).exp();
+            w >= 0.0 && (w - exact).abs() <= tolerance * w.max(exact) + f64::MIN_POSITIVE
+        };
+        if weights.len() != count || !weights.iter().zip(&f.log_weights).all(agrees) {
+            return Err(weights_error);
+        }
     }
     if !all_finite(&OVector::<T, estim_core::nalgebra::U1>::new(
         f.log_likelihood,

@@ -11,6 +11,8 @@
 //!
 //! A log-sum-exp over chunks: chunk c holds mₐ = max of its values and sₐ = Σ exp(vᵢ − mₐ);
 //! then m = maxₐ mₐ and log Σ exp(vᵢ) = m + log Σₐ sₐ exp(mₐ − m), the sum in chunk order.
+//! The chunk keeps its terms eᵢ = exp(vᵢ − mₐ), so the normalised weights are
+//! Wᵢ = eᵢ exp(mₐ − log Σ exp(v)) with one `exp` per chunk, not a second one per particle.
 
 use core::marker::PhantomData;
 
@@ -18,6 +20,7 @@ use estim_core::alloc::{DimAlloc, SizeFamily};
 use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
 use estim_core::{Alloc, Error, Real};
 
+use super::resample::to_f64;
 use super::step::Factored;
 
 /// Particles per chunk. The bits of a step depend on it (the order of the partial sums), so
@@ -25,11 +28,19 @@ use super::step::Factored;
 pub(crate) const CHUNK: usize = 512;
 
 /// The smallest particle count whose loops run on rayon's pool (feature `parallel`): below it
-/// the fork-join overhead (a few µs per loop, five loops a step) outweighs the work (≈ 0.1 µs
-/// per particle-step, so 4096 particles are ≈ 0.4 ms a step). An estimate, not yet a
-/// measured crossover (BENCHMARKS.md, "Particle filter"). Serial and parallel runs give the
-/// same bits.
-pub const PARALLEL_MIN: usize = 4096;
+/// the fork-join overhead (five loops a step, and the serial resampling) outweighs the work
+/// (≈ 0.03–0.04 µs of CPU per particle-step for a 1-D model). Measured on a 2-core machine
+/// (growth model, 1 and 2 threads alternating, medians of wall-clock, 2 threads / 1 thread):
+///
+/// | N | 1024 | 2048 | 4096 | 8192 | 16384 | 32768 | 65536 |
+/// |---|---:|---:|---:|---:|---:|---:|---:|
+/// | idle (load < 1.3, 7 runs) | 1.71 | 1.42 | 1.11 | 1.14 | 1.06 | 0.86 | 0.79 |
+/// | shared (load 3.6–5.5, 6 runs) | 1.80 | 1.48 | 1.13 | 1.01 | 1.03 | 1.01 | 0.89 |
+///
+/// so the pool is used from 32768 particles, the first count where the second thread pays on
+/// the idle machine and does not cost on the busy one. Serial and parallel runs give the same
+/// bits.
+pub const PARALLEL_MIN: usize = 32768;
 
 /// Whether the loops over `count` particles run on rayon's pool.
 #[inline]
@@ -119,23 +130,31 @@ where
     for_chunks1(par, states, &mut units, 1, |c, s, _| f(c, s));
 }
 
-/// A chunk's log-sum-exp partial: (mₐ, sₐ) with sₐ = Σ exp(vᵢ − mₐ); (−∞, 0) if every value
+/// A chunk's log-sum-exp partial: (mₐ, sₐ) with sₐ = Σ eᵢ, eᵢ = exp(vᵢ − mₐ) (in f64, then
+/// sₐ rounded to T), the terms eᵢ written to `terms` (for the normalised weights, see
+/// [`Work::normalise`](super::step::Work::normalise)); (−∞, 0) and zero terms if every value
 /// is −∞ or the chunk is empty. The values are never NaN (the callers reject NaN first).
+/// `terms` is reserved for [`CHUNK`] values at construction, so this allocates nothing.
 #[inline]
-pub(crate) fn lse_partial<T: Real>(values: &[T]) -> (T, T) {
+pub(crate) fn lse_partial<T: Real>(values: &[T], terms: &mut Vec<f64>) -> (T, T) {
     let mut max = -T::one() / T::zero();
     for &v in values {
         if v > max {
             max = v;
         }
     }
+    terms.clear();
     if !max.is_finite() {
+        terms.resize(values.len(), 0.0);
         return (max, T::zero());
     }
-    (
-        max,
-        values.iter().fold(T::zero(), |s, &v| s + (v - max).exp()),
-    )
+    let mut sum = 0.0;
+    terms.extend(values.iter().map(|&v| {
+        let e = to_f64(v - max).exp();
+        sum += e;
+        e
+    }));
+    (max, estim_core::scalar::real(sum))
 }
 
 /// Combines the partials in order: log Σ exp(vᵢ) = m + log Σₐ sₐ exp(mₐ − m).
@@ -226,6 +245,8 @@ pub(crate) struct ChunkWork<T: Real> {
     pub(crate) total_v: T,
     /// The chunk's log-sum-exp partial (see [`lse_partial`]).
     pub(crate) lse: (T, T),
+    /// The terms eᵢ = exp(vᵢ − mₐ) of that partial (see [`lse_partial`]).
+    pub(crate) terms: Vec<f64>,
     /// The first error of the chunk's loop, in particle order.
     pub(crate) error: Option<Error>,
 }
@@ -239,6 +260,7 @@ impl<T: Real> ChunkWork<T> {
             sums: Vec::with_capacity(RESERVED_M * (1 + 2 * RESERVED_M)),
             total_v: T::zero(),
             lse: (T::zero(), T::zero()),
+            terms: Vec::with_capacity(CHUNK),
             error: None,
         }
     }
@@ -410,14 +432,32 @@ mod tests {
     fn chunked_log_sum_exp_matches_the_direct_one() {
         let values: Vec<f64> = (0..1500).map(|i| -0.01 * i as f64).collect();
         let direct = super::super::log_sum_exp(&values);
-        let parts: Vec<_> = values.chunks(CHUNK).map(lse_partial).collect();
+        let mut terms = vec![vec![]; 3];
+        let parts: Vec<_> = values
+            .chunks(CHUNK)
+            .zip(&mut terms)
+            .map(|(v, t)| lse_partial(v, t))
+            .collect();
         let chunked = lse_combine(parts.iter().copied());
         // The same sum regrouped into 3 chunks: equal to a few ulps of a value of order 5.
         assert!((chunked - direct).abs() < 1e-13, "{chunked} vs {direct}");
+        // The terms times exp(mₐ − total) are the normalised weights exp(vᵢ − total), to a
+        // few ulps: each exp argument is rounded (relative error of the exp ≤ ε |argument|),
+        // then the exps and the product (3 ε); 4 times that bound leaves margin.
+        for ((v, t), (m, _)) in values.chunks(CHUNK).zip(&terms).zip(&parts) {
+            let scale = (m - chunked).exp();
+            for (&v, &e) in v.iter().zip(t) {
+                let w = (v - chunked).exp();
+                let bound = 4.0 * f64::EPSILON * (3.0 + (v - chunked).abs() + (m - chunked).abs());
+                assert!((e * scale - w).abs() <= bound * w, "{} vs {w}", e * scale);
+            }
+        }
         let dead = [f64::NEG_INFINITY; 4];
+        let mut t = vec![1.0];
         assert_eq!(
-            lse_combine([lse_partial(&dead)].into_iter()),
+            lse_combine([lse_partial(&dead, &mut t)].into_iter()),
             f64::NEG_INFINITY
         );
+        assert_eq!(t, [0.0; 4]);
     }
 }

@@ -207,7 +207,7 @@ where
             self.scheme,
             seed,
             step,
-        );
+        )?;
         let uniform = -estim_core::scalar::real::<T>(count as f64).ln();
         // First pass, by chunks: propose into `next`; log W̄ⱼ + log p(x⁺ | x) − log q into
         // `log_eta`.

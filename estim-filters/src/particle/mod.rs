@@ -118,7 +118,7 @@ pub use noise::{
     ProcessSampler,
 };
 pub use own_noise::NonGaussianFilter;
-pub use pmmh::{MAX_PMMH_ITERATIONS, PmmhChain, particle_log_likelihood, pmmh};
+pub use pmmh::{MAX_PMMH_ITERATIONS, PmmhChain, PmmhError, particle_log_likelihood, pmmh};
 pub use rbpf::{
     ConditionalMeasurement, ConditionalTransition, ConditionallyLinearMeasurement,
     ConditionallyLinearProcess, RaoBlackwellised, RaoBlackwellisedSnapshot,
@@ -156,8 +156,9 @@ where
 {
     pub(crate) particles: OMatrix<T, N, Dyn>,
     pub(crate) log_weights: Vec<T>,
-    /// Wᵢ = exp(log Wᵢ) in f64 (a function of the log-weights, kept for the ESS, resampling
-    /// and the moments).
+    /// Wᵢ in f64, for the ESS, resampling and the moments: exp(log Wᵢ) to a few ulps (an
+    /// update derives them from its log-sum-exp terms, one `exp` per particle; see
+    /// `Work::normalise`), so checkpoints store them.
     pub(crate) weights: Vec<f64>,
     pub(crate) step: u64,
     pub(crate) mean: OVector<T, N>,
@@ -189,7 +190,7 @@ where
         self.log_likelihood = other.log_likelihood;
     }
 
-    /// Wᵢ = exp(log Wᵢ) from the log-weights (for a checkpoint read back).
+    /// Wᵢ = exp(log Wᵢ) from the log-weights (for a checkpoint written without weights).
     #[cfg(any(feature = "serde", test))]
     pub(crate) fn refresh_weights(&mut self) {
         self.weights.clear();

@@ -28,6 +28,30 @@ pub struct PmmhChain {
     pub accepted: usize,
 }
 
+/// A [`pmmh`] chain stopped by an error: the iteration, what failed, and the chain as it stood
+/// before that iteration (its states θ₀..θᵢ₋₁, unchanged by the failed proposal; empty for
+/// iteration 0, the settings and the start). Resuming from the chain's last state with the same
+/// seed does not give the same draws (iteration numbers restart); the partial chain is for
+/// inspection.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("PMMH iteration {iteration}: {error}")]
+pub struct PmmhError {
+    /// The iteration whose proposal failed (0: the settings or the start).
+    pub iteration: usize,
+    /// What failed: e.g. [`Error::NonFinite`] with [`Quantity::FunctionValue`] for a model that
+    /// gave NaN (a bug in the model, not a likelihood of zero).
+    pub error: Error,
+    /// The chain up to iteration − 1.
+    pub chain: PmmhChain,
+}
+
+impl From<PmmhError> for Error {
+    /// The error alone (the iteration and the partial chain dropped).
+    fn from(e: PmmhError) -> Self {
+        e.error
+    }
+}
+
 impl PmmhChain {
     /// The fraction of proposals accepted (0 for a chain of no iterations).
     pub fn acceptance_rate(&self) -> f64 {
@@ -69,14 +93,16 @@ impl PmmhChain {
 /// Runs `iterations` steps of PMMH (above) from `start` with random-walk scale `scale`
 /// (L, d × d; the proposal is θ + L ε), prior log-density `log_prior` (−∞ outside the
 /// support: such a proposal is rejected without running the filter) and log-likelihood
-/// estimate `log_likelihood(θ, seed)` (`Ok(−∞)` for a likelihood of zero; any error stops the
-/// chain and is returned).
+/// estimate `log_likelihood(θ, seed)` (`Ok(−∞)` for a likelihood of zero, which rejects the
+/// proposal; any error stops the chain and is returned with its iteration).
 ///
-/// Errors: `iterations` above [`MAX_PMMH_ITERATIONS`] ([`Parameter::StepCount`]); `scale`
-/// not d × d ([`Error::DimensionMismatch`]) or not finite; a start whose prior or likelihood
-/// is not finite ([`Error::NonFinite`] with [`Quantity::Mean`] for θ, [`Quantity::Weights`]
-/// for its likelihood: a chain cannot start where the posterior is zero); an estimate that is
-/// NaN or +∞ ([`Quantity::Weights`]).
+/// Errors ([`PmmhError`]: the iteration, the error, the chain before that iteration):
+/// `iterations` above [`MAX_PMMH_ITERATIONS`] ([`Parameter::StepCount`]); `scale` not d × d
+/// ([`Error::DimensionMismatch`]) or not finite; a start whose prior or likelihood is not
+/// finite ([`Error::NonFinite`] with [`Quantity::Mean`] for θ, [`Quantity::Weights`] for its
+/// likelihood: a chain cannot start where the posterior is zero); a prior that is NaN or +∞
+/// ([`Quantity::Mean`]); an estimate that is NaN or +∞ ([`Quantity::Weights`]); an error of
+/// the closure (with [`particle_log_likelihood`]: a model giving NaN, [`Quantity::FunctionValue`]).
 ///
 /// ```
 /// use estim_core::nalgebra::{DMatrix, DVector, Matrix1, Vector1};
@@ -101,7 +127,7 @@ impl PmmhChain {
 /// assert_eq!(chain.samples.ncols(), 201);
 /// assert!(chain.samples.iter().all(|t| t.abs() < 1.0)); // never leaves the prior's support
 /// assert!(chain.acceptance_rate() > 0.05);
-/// # Ok::<(), estim_core::Error>(())
+/// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub fn pmmh<P, L>(
     start: &DVector<f64>,
@@ -110,34 +136,31 @@ pub fn pmmh<P, L>(
     seed: u64,
     mut log_prior: P,
     mut log_likelihood: L,
-) -> Result<PmmhChain>
+) -> core::result::Result<PmmhChain, PmmhError>
 where
     P: FnMut(&DVector<f64>) -> f64,
     L: FnMut(&DVector<f64>, u64) -> Result<f64>,
 {
     let d = start.nrows();
-    if iterations > MAX_PMMH_ITERATIONS {
-        return Err(Error::InvalidParameter {
-            parameter: Parameter::StepCount,
-            value: iterations as f64,
-        });
-    }
-    estim_core::checks::ensure_shape(scale, d, d, Stage::Construction, Quantity::Covariance)?;
-    estim_core::checks::ensure_finite(scale, Stage::Construction, Quantity::Covariance)?;
-    estim_core::checks::ensure_finite(start, Stage::Construction, Quantity::Mean)?;
-    let not_finite = |quantity| Error::NonFinite {
-        stage: Stage::Construction,
-        quantity,
+    let at_start = |error| PmmhError {
+        iteration: 0,
+        error,
+        chain: PmmhChain {
+            samples: DMatrix::zeros(d, 0),
+            log_likelihoods: Vec::new(),
+            accepted: 0,
+        },
     };
     let mut current = start.clone();
-    let mut current_prior = log_prior(&current);
-    if !current_prior.is_finite() {
-        return Err(not_finite(Quantity::Mean));
-    }
-    let mut current_ll = checked(log_likelihood(&current, evaluation_seed(seed, 0))?)?;
-    if current_ll == f64::NEG_INFINITY {
-        return Err(not_finite(Quantity::Weights));
-    }
+    let (mut current_prior, mut current_ll) = chain_start(
+        start,
+        scale,
+        iterations,
+        seed,
+        &mut log_prior,
+        &mut log_likelihood,
+    )
+    .map_err(at_start)?;
     let mut samples = DMatrix::zeros(d, iterations + 1);
     samples.set_column(0, &current);
     let mut log_likelihoods = Vec::with_capacity(iterations + 1);
@@ -156,14 +179,34 @@ where
         let prior = log_prior(&proposal);
         #[allow(clippy::eq_op)] // NaN is the one value unequal to itself
         let nan = prior != prior;
-        if nan || prior == f64::INFINITY {
-            return Err(Error::NonFinite {
+        let evaluated = if nan || prior == f64::INFINITY {
+            Err(Error::NonFinite {
                 stage: Stage::Update,
                 quantity: Quantity::Mean,
-            });
-        }
-        if prior > f64::NEG_INFINITY {
-            let ll = checked(log_likelihood(&proposal, evaluation_seed(seed, step))?)?;
+            })
+        } else if prior > f64::NEG_INFINITY {
+            log_likelihood(&proposal, evaluation_seed(seed, step))
+                .and_then(checked)
+                .map(Some)
+        } else {
+            Ok(None)
+        };
+        let evaluated = match evaluated {
+            Ok(evaluated) => evaluated,
+            Err(error) => {
+                // The chain before this iteration: its first i columns.
+                return Err(PmmhError {
+                    iteration: i,
+                    error,
+                    chain: PmmhChain {
+                        samples: samples.columns(0, i).into_owned(),
+                        log_likelihoods,
+                        accepted,
+                    },
+                });
+            }
+        };
+        if let Some(ll) = evaluated {
             let log_ratio = ll + prior - current_ll - current_prior;
             let u = ParticleRng::stream(seed, step, 1).uniform();
             if u.ln() < log_ratio {
@@ -181,6 +224,44 @@ where
         log_likelihoods,
         accepted,
     })
+}
+
+/// Checks the settings and the start; its log prior and log-likelihood estimate.
+fn chain_start<P, L>(
+    start: &DVector<f64>,
+    scale: &DMatrix<f64>,
+    iterations: usize,
+    seed: u64,
+    log_prior: &mut P,
+    log_likelihood: &mut L,
+) -> Result<(f64, f64)>
+where
+    P: FnMut(&DVector<f64>) -> f64,
+    L: FnMut(&DVector<f64>, u64) -> Result<f64>,
+{
+    let d = start.nrows();
+    if iterations > MAX_PMMH_ITERATIONS {
+        return Err(Error::InvalidParameter {
+            parameter: Parameter::StepCount,
+            value: iterations as f64,
+        });
+    }
+    estim_core::checks::ensure_shape(scale, d, d, Stage::Construction, Quantity::Covariance)?;
+    estim_core::checks::ensure_finite(scale, Stage::Construction, Quantity::Covariance)?;
+    estim_core::checks::ensure_finite(start, Stage::Construction, Quantity::Mean)?;
+    let not_finite = |quantity| Error::NonFinite {
+        stage: Stage::Construction,
+        quantity,
+    };
+    let prior = log_prior(start);
+    if !prior.is_finite() {
+        return Err(not_finite(Quantity::Mean));
+    }
+    let ll = checked(log_likelihood(start, evaluation_seed(seed, 0))?)?;
+    if ll == f64::NEG_INFINITY {
+        return Err(not_finite(Quantity::Weights));
+    }
+    Ok((prior, ll))
 }
 
 /// The seed passed to the likelihood estimate of iteration `step`.
@@ -205,8 +286,10 @@ fn checked(value: f64) -> Result<f64> {
 /// The bootstrap particle filter's log-likelihood estimate log p̂(z₁..T) over `readings`
 /// (`count` particles from `prior`, seeded by `seed`; before each reading a prediction through
 /// `process` with `input` over `dt`), in f64 for [`pmmh`]. A reading that no particle
-/// explains (every weight zero, or a NaN weight: [`Quantity::Weights`]) gives `Ok(−∞)`, a
-/// likelihood estimate of 0 that [`pmmh`] rejects; other errors are returned.
+/// explains (every weight zero: [`Error::NonFinite`] with [`Quantity::Weights`] from the
+/// update) gives `Ok(−∞)`, a likelihood estimate of 0 that [`pmmh`] rejects. Other errors are
+/// returned, among them a model that gives NaN (h(x) or the log-density:
+/// [`Quantity::FunctionValue`]), which is a bug to fix, not a parameter to reject.
 ///
 /// ```
 /// use estim_core::nalgebra::{Matrix1, Vector1};

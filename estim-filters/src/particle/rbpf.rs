@@ -117,8 +117,23 @@ where
 /// x = (xn, xl) (dimension `DimSum<Nn, Nl>`): [`Estimator`] (the mixture moments),
 /// [`Rollback`](crate::Rollback) (bit-exact), [`Predict`] (the process also names its input on
 /// the joint state, [`ProcessInput`](crate::ProcessInput)) and [`Update`], so it runs in the
-/// fusion driver and the sequence functions; serde checkpoints (feature `serde`). Not yet: a cross-covariance Qln between wn and wl
-/// (decorrelate the model first, Schön et al. §III-B).
+/// fusion driver and the sequence functions; serde checkpoints (feature `serde`). Not yet: a
+/// cross-covariance Qln between wn and wl (decorrelate the model first, Schön et al. §III-B).
+///
+/// **Allocations at runtime sizes.** With `Dyn` parts a step allocates per particle, and the
+/// [`InPlace`](estim_core::in_place::InPlace) opt-in of the Gaussian filters cannot carry it:
+/// [`ConditionallyLinearProcess`] and [`ConditionallyLinearMeasurement`] return their pieces
+/// ([`ConditionalTransition`]: fn, An, Qn, fl, Al, Ql; [`ConditionalMeasurement`]: h, C, R) by
+/// value, and `InPlace` has slots only for a whole-state model's f, Q, Jacobian and residual,
+/// not for these six; and each particle's Kalman steps run on a `LinearMeasurement` (An, Qn)
+/// and a `LinearProcess` (Al, I, Ql) built from those pieces, with the products An x̂l and
+/// An Pl Anᵀ and the factor of An Pl Anᵀ + Qn formed as new matrices. Making that
+/// allocation-free would take an in-place form of both traits (a method writing the pieces
+/// into buffers the filter keeps) and per-particle Kalman steps on borrowed pieces: new
+/// public API, which the one-method-per-capability model traits do not have. What a user does
+/// today: give the parts static sizes (`Vector2`, `Matrix2x3`, … with `Nn`, `Nl` type-level),
+/// and every step after construction allocates nothing (tested); the sizes of a
+/// Rao-Blackwellised split are usually small and known at compile time.
 ///
 /// The moments: x̂n = Σ Wⁱ xnⁱ, Pn their weighted covariance; x̂l = Σ Wⁱ x̂lⁱ and
 /// Pl = Σ Wⁱ (Plⁱ + (x̂lⁱ − x̂l)(x̂lⁱ − x̂l)ᵀ) (the mixture's covariance).
@@ -449,7 +464,7 @@ where
                 &mut rng,
                 &mut work.ancestors,
                 &mut work.scratch,
-            );
+            )?;
         }
         let (n, _) = state.nonlinear.shape_generic();
         let stage = Stage::Prediction;

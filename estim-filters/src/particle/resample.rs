@@ -16,6 +16,9 @@
 //! The uniforms are compared against the running sum scaled by the total, so round-off never
 //! selects a particle of weight zero.
 
+use estim_core::error::Result;
+use estim_core::{Error, Parameter, Quantity, Stage};
+
 use super::rng::ParticleRng;
 
 /// How the particle cloud is resampled.
@@ -69,14 +72,17 @@ impl Default for ResampleWhen {
     }
 }
 
-/// Draws `ancestors.len()` ancestor indices from the normalised `weights` by `scheme`, with
-/// uniforms from `rng`. Sorted ancestors for every scheme but [`Residual`](Resampling::Residual)
-/// (sorted within its deterministic and random parts).
+/// Draws `ancestors.len()` ancestor indices from `weights` by `scheme`, with uniforms from
+/// `rng`: aⱼ = i with probability Wᵢ / Σₖ Wₖ (the weights are normalised by their sum here, so
+/// they need not sum to 1). Sorted ancestors for every scheme but
+/// [`Residual`](Resampling::Residual) (sorted within its deterministic and random parts).
+/// With no ancestors to draw, nothing is checked or drawn.
 ///
-/// # Panics
-///
-/// If `weights` is empty and `ancestors` is not (a programmer error: the filters never
-/// resample an empty cloud).
+/// Errors (`ancestors` unchanged): no weights ([`Error::InvalidParameter`] with
+/// [`Parameter::SampleCount`]); a negative weight ([`Parameter::Weight`], the most negative
+/// one as the value); a NaN or infinite weight, a sum that overflows, or every weight zero
+/// ([`Error::NonFinite`] with [`Quantity::Weights`], at [`Stage::Prediction`], where the
+/// filters resample).
 ///
 /// ```
 /// use estim_filters::particle::{ParticleRng, Resampling, resample};
@@ -87,47 +93,81 @@ impl Default for ResampleWhen {
 /// // Systematic resampling gives each particle ⌊4 Wᵢ⌋ or ⌈4 Wᵢ⌉ offspring.
 /// assert_eq!(ancestors.iter().filter(|&&a| a == 0).count(), 2);
 /// assert!(!ancestors.contains(&1));
+/// // Unnormalised weights are normalised; bad ones are typed errors.
+/// resample(Resampling::Systematic, &[2.0, 0.0, 1.0, 1.0], &mut ParticleRng::stream(1, 0, 0), &mut ancestors)?;
+/// assert_eq!(ancestors.iter().filter(|&&a| a == 0).count(), 2);
+/// let mut rng = ParticleRng::stream(1, 0, 0);
+/// assert!(resample(Resampling::Systematic, &[], &mut rng, &mut ancestors).is_err());
+/// assert!(resample(Resampling::Systematic, &[0.5, -0.1], &mut rng, &mut ancestors).is_err());
+/// assert!(resample(Resampling::Systematic, &[0.0, 0.0], &mut rng, &mut ancestors).is_err());
+/// assert!(resample(Resampling::Systematic, &[f64::NAN, 1.0], &mut rng, &mut ancestors).is_err());
+/// # Ok::<(), estim_core::Error>(())
 /// ```
-#[track_caller]
 pub fn resample(
     scheme: Resampling,
     weights: &[f64],
     rng: &mut ParticleRng,
     ancestors: &mut [usize],
-) {
-    resample_with(scheme, weights, rng, ancestors, &mut Vec::new());
+) -> Result<()> {
+    resample_with(scheme, weights, rng, ancestors, &mut Vec::new())
 }
 
 /// [`resample`] with a scratch buffer the caller keeps (grown to at most N + M entries once).
-#[track_caller]
 pub(crate) fn resample_with(
     scheme: Resampling,
     weights: &[f64],
     rng: &mut ParticleRng,
     ancestors: &mut [usize],
     scratch: &mut Vec<f64>,
-) {
+) -> Result<()> {
     let m = ancestors.len();
     if m == 0 {
-        return;
+        return Ok(());
     }
-    assert!(!weights.is_empty(), "resample: no weights");
+    if weights.is_empty() {
+        return Err(Error::InvalidParameter {
+            parameter: Parameter::SampleCount,
+            value: 0.0,
+        });
+    }
+    // The sum (which the inverse CDF needs anyway): a NaN or ±∞ weight makes it NaN or
+    // infinite. A negative weight has its sign bit set: the OR of all the bits (a vectorised
+    // integer pass) shows one, and only then (−0.0 sets it too, and is valid) is the most
+    // negative weight looked for.
+    let total: f64 = weights.iter().sum();
+    let bits = weights.iter().fold(0u64, |b, w| b | w.to_bits());
+    if bits >> 63 == 1 {
+        let least = weights.iter().fold(f64::INFINITY, |l, &w| l.min(w));
+        if least < 0.0 {
+            return Err(Error::InvalidParameter {
+                parameter: Parameter::Weight,
+                value: least,
+            });
+        }
+    }
+    if !(total.is_finite() && total > 0.0) {
+        return Err(Error::NonFinite {
+            stage: Stage::Prediction,
+            quantity: Quantity::Weights,
+        });
+    }
     let mf = m as f64;
     match scheme {
         Resampling::Systematic => {
             let u = rng.uniform();
-            inverse_cdf(weights, ancestors, |j| (j as f64 + u) / mf);
+            inverse_cdf(weights, total, ancestors, |j| (j as f64 + u) / mf);
         }
         Resampling::Stratified => {
-            inverse_cdf(weights, ancestors, |j| (j as f64 + rng.uniform()) / mf);
+            inverse_cdf(weights, total, ancestors, |j| {
+                (j as f64 + rng.uniform()) / mf
+            });
         }
         Resampling::Multinomial => {
             scratch.clear();
             sorted_uniforms(m, rng, scratch);
-            inverse_cdf(weights, ancestors, |j| scratch[j]);
+            inverse_cdf(weights, total, ancestors, |j| scratch[j]);
         }
         Resampling::Residual => {
-            let total: f64 = weights.iter().sum();
             let mut filled = 0;
             scratch.clear();
             for (i, &w) in weights.iter().enumerate() {
@@ -142,10 +182,12 @@ pub(crate) fn resample_with(
                 let n = weights.len();
                 sorted_uniforms(rest, rng, scratch);
                 let (residuals, uniforms) = scratch.split_at(n);
-                inverse_cdf(residuals, &mut ancestors[filled..], |j| uniforms[j]);
+                let total = residuals.iter().sum();
+                inverse_cdf(residuals, total, &mut ancestors[filled..], |j| uniforms[j]);
             }
         }
     }
+    Ok(())
 }
 
 /// Appends m sorted uniforms to `out`: uⱼ = Sⱼ/Sₘ with Sⱼ = E₀ + … + Eⱼ, Eⱼ ~ Exp(1) i.i.d.
@@ -163,10 +205,14 @@ fn sorted_uniforms(m: usize, rng: &mut ParticleRng, out: &mut Vec<f64>) {
     }
 }
 
-/// aⱼ = min{i : Σₖ₍ᵢ Wₖ ≥ uⱼ · Σ W} for nondecreasing uⱼ in (0, 1).
+/// aⱼ = min{i : Σₖ₍ᵢ Wₖ ≥ uⱼ · Σ W} for nondecreasing uⱼ in (0, 1), `total` = Σ W.
 #[inline]
-fn inverse_cdf(weights: &[f64], ancestors: &mut [usize], mut u: impl FnMut(usize) -> f64) {
-    let total: f64 = weights.iter().sum();
+fn inverse_cdf(
+    weights: &[f64],
+    total: f64,
+    ancestors: &mut [usize],
+    mut u: impl FnMut(usize) -> f64,
+) {
     let last = weights.len() - 1;
     let (mut i, mut cumulative) = (0, weights[0]);
     for (j, a) in ancestors.iter_mut().enumerate() {
@@ -233,16 +279,22 @@ pub(crate) fn effective_sample_size<T: estim_core::Real>(log_weights: &[T]) -> f
 }
 
 /// log Σᵢ exp(vᵢ) of unnormalised log-weights, in one serial pass ([`log_sum_exp`]), or the
-/// typed error of a degenerate weight set (a NaN, or every weight zero: no particle explains
-/// the measurement).
-pub(crate) fn normaliser<T: estim_core::Real>(log_w: &[T]) -> estim_core::error::Result<T> {
+/// typed error of a degenerate weight set: every weight zero (no particle explains the
+/// measurement, [`Quantity::Weights`]), or a NaN or +∞ (a bug in the model,
+/// [`Quantity::FunctionValue`]).
+pub(crate) fn normaliser<T: estim_core::Real>(log_w: &[T]) -> Result<T> {
     let total = log_sum_exp(log_w);
     if total.is_finite() {
         Ok(total)
     } else {
-        Err(estim_core::Error::NonFinite {
-            stage: estim_core::Stage::Update,
-            quantity: estim_core::Quantity::Weights,
+        let quantity = if total == -T::one() / T::zero() {
+            Quantity::Weights
+        } else {
+            Quantity::FunctionValue
+        };
+        Err(Error::NonFinite {
+            stage: Stage::Update,
+            quantity,
         })
     }
 }

@@ -84,6 +84,7 @@ where
 
     /// Ancestors from the normalised weights `weights` (resampled by `scheme` from the stream
     /// (seed, step, RESAMPLE) if `resample`, else the identity).
+    /// Errors: those of [`resample`](super::resample) (never for a filter's own weights).
     pub(crate) fn ancestors_from(
         ancestors: &mut [usize],
         scratch: &mut Vec<f64>,
@@ -92,14 +93,15 @@ where
         scheme: super::Resampling,
         seed: u64,
         step: u64,
-    ) {
+    ) -> Result<()> {
         if resample {
             let mut rng = ParticleRng::stream(seed, step, RESAMPLE);
-            resample_with(scheme, weights, &mut rng, ancestors, scratch);
+            resample_with(scheme, weights, &mut rng, ancestors, scratch)
         } else {
             for (i, a) in ancestors.iter_mut().enumerate() {
                 *a = i;
             }
+            Ok(())
         }
     }
 
@@ -206,7 +208,7 @@ where
                     })
                 });
                 w.error = error;
-                w.lse = lse_partial(out);
+                w.lse = lse_partial(out, &mut w.terms);
             },
         );
         self.sensors = sensors;
@@ -279,7 +281,7 @@ where
     pub(crate) fn normaliser(&mut self, values: &[T]) -> Result<T> {
         let count = values.len();
         for_states(parallel(count), &mut self.chunks, |c, w| {
-            w.lse = lse_partial(&values[range(c, count)]);
+            w.lse = lse_partial(&values[range(c, count)], &mut w.terms);
         });
         let total = lse_combine(self.chunks.iter().map(|w| w.lse));
         if total.is_finite() {
@@ -292,8 +294,13 @@ where
         }
     }
 
-    /// log Wᵢ = `self.log_w[i]` − `total` into `log_weights` and Wᵢ = exp(log Wᵢ) (in f64)
-    /// into `weights`, by chunks.
+    /// log Wᵢ = vᵢ − `total` into `log_weights` and Wᵢ = eᵢ exp(mₐ − `total`) (in f64) into
+    /// `weights`, by chunks, where vᵢ = `self.log_w[i]` and eᵢ = exp(vᵢ − mₐ), mₐ are the terms
+    /// and chunk maxima that the log-sum-exp of those values (the last [`weigh`](Self::weigh)
+    /// or [`normaliser`](Self::normaliser), `total`) left: one `exp` per particle for the
+    /// normaliser and the weights together. Wᵢ equals exp(log Wᵢ) to a few ulps; it underflows
+    /// to 0 only where exp(log Wᵢ) would be below the smallest normal f64 (the log-weights
+    /// keep such particles alive).
     pub(crate) fn normalise(&mut self, total: T, log_weights: &mut [T], weights: &mut [f64]) {
         let log_w = &self.log_w;
         let count = log_w.len();
@@ -304,14 +311,26 @@ where
             CHUNK,
             weights,
             CHUNK,
-            |c, _, lw, w| {
-                let start = c * CHUNK;
-                for (k, (lw, w)) in lw.iter_mut().zip(w.iter_mut()).enumerate() {
-                    *lw = log_w[start + k] - total;
-                    *w = to_f64(*lw).exp();
+            |c, w, lw, wt| {
+                let values = &log_w[c * CHUNK..];
+                let scale = to_f64(w.lse.0 - total).exp();
+                for ((lw, wt), (&v, &e)) in lw.iter_mut().zip(wt).zip(values.iter().zip(&w.terms)) {
+                    *lw = v - total;
+                    *wt = e * scale;
                 }
             },
         );
+    }
+
+    /// Wᵢ = eᵢ exp(mₐ − `total`) into `self.weights` from the terms of the last
+    /// [`normaliser`](Self::normaliser) pass, whose result is `total` (see
+    /// [`normalise`](Self::normalise)).
+    pub(crate) fn weights_from_terms(&mut self, total: T) {
+        self.weights.clear();
+        for w in &self.chunks {
+            let scale = to_f64(w.lse.0 - total).exp();
+            self.weights.extend(w.terms.iter().map(|&e| e * scale));
+        }
     }
 }
 
@@ -580,8 +599,9 @@ struct Sums<'a, T: Real> {
 }
 
 /// log p(z | x) for the particle `x`, adding its residual and R with weight `v` (if positive)
-/// to `sums`. Errors: h(x) of the wrong length, a NaN or +∞ log-density, a non-finite or
-/// (Gaussian path) not positive definite R.
+/// to `sums`. Errors: h(x) of the wrong length, a NaN or +∞ log-density (a bug in the model,
+/// e.g. h(x) NaN: [`Quantity::FunctionValue`], told apart from the [`Quantity::Weights`] of a
+/// measurement no particle explains), a non-finite or (Gaussian path) not positive definite R.
 #[inline(always)]
 fn log_density<T, N, M, H>(
     ms: &mut SensorScratch<T, M>,
@@ -644,7 +664,7 @@ where
     if nan || log_g == T::one() / T::zero() {
         return Err(Error::NonFinite {
             stage: Stage::Update,
-            quantity: Quantity::Weights,
+            quantity: Quantity::FunctionValue,
         });
     }
     if v > T::zero() {
@@ -726,7 +746,7 @@ where
             self.scheme,
             self.seed,
             step,
-        );
+        )?;
         work.propagate_all(&self.cloud.particles, process, input, dt, self.seed, step)?;
         // Committed: nothing below fails.
         core::mem::swap(&mut self.cloud.particles, &mut self.work.next);
@@ -749,7 +769,9 @@ where
     /// measurements size their per-chunk buffers at the first update with that length (and
     /// when R changes), then allocate nothing. On error (non-finite z, h(x) of the
     /// wrong length, R not finite or, on the Gaussian path, not positive definite, a NaN or
-    /// +∞ log-density, every weight zero) the filter is unchanged.
+    /// +∞ log-density — h(x) NaN included — with [`Quantity::FunctionValue`], every weight
+    /// zero — a reading no particle explains — with [`Quantity::Weights`]) the filter is
+    /// unchanged.
     ///
     /// ```
     /// use estim_core::nalgebra::{Matrix1, Vector1};

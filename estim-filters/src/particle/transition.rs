@@ -182,14 +182,15 @@ where
     }
 }
 
-/// Checks a model's own log-density: NaN or +∞ is a typed error ([`Quantity::Weights`]).
+/// Checks a model's own log-density: NaN or +∞ is a typed error, a bug in the model
+/// ([`Quantity::FunctionValue`]).
 pub(crate) fn checked_log_density<T: Real>(value: T, stage: Stage) -> Result<T> {
     #[allow(clippy::eq_op)] // NaN is the one value unequal to itself
     let nan = value != value;
     if nan || value == T::one() / T::zero() {
         Err(Error::NonFinite {
             stage,
-            quantity: Quantity::Weights,
+            quantity: Quantity::FunctionValue,
         })
     } else {
         Ok(value)
@@ -233,7 +234,7 @@ pub(crate) fn checked_log_density<T: Real>(value: T, stage: Stage) -> Result<T> 
 ///
 /// Errors (at `stage`): a singular or indefinite Q ([`Error::NotPositiveDefinite`] with
 /// [`Quantity::ProcessNoise`]: that transition has no density); f(x) or Q of the wrong shape or
-/// not finite; a model density that is NaN or +∞ ([`Quantity::Weights`]).
+/// not finite; a model density that is NaN or +∞ ([`Quantity::FunctionValue`]).
 ///
 /// ```
 /// use estim_core::nalgebra::{Matrix2, Vector2};

@@ -6,12 +6,14 @@
 //! z-test whose false-failure rate (for a fresh seed) is stated beside it.
 
 use estim_core::nalgebra::{Matrix1, U1, Vector1};
-use estim_core::{Error, Gaussian, LinearMeasurement, LinearProcess, MeasurementModel, Quantity};
+use estim_core::{
+    Error, Gaussian, LinearMeasurement, LinearProcess, MeasurementModel, Parameter, Quantity, Stage,
+};
 use estim_filters::particle::{
     MeasurementLikelihood, NonGaussian, ParticleFilter, ParticleRng, ResampleWhen, Resampling,
     resample,
 };
-use estim_filters::{Estimator, KalmanFilter, Predict, Rollback, Update};
+use estim_filters::{Estimator, KalmanFilter, Predict, Rollback, Update, UpdateReport};
 
 use crate::particle_common::{
     ar1, assert_late_reading_replays_bit_identically, dyn_linear, mean_and_variance, readings,
@@ -185,7 +187,8 @@ fn offspring_counts_have_the_right_mean_and_variance_ordering() {
                 &weights,
                 &mut ParticleRng::stream(3, r, 0),
                 &mut ancestors,
-            );
+            )
+            .unwrap();
             for &a in &ancestors {
                 counts[a][r as usize] += 1.0;
             }
@@ -222,6 +225,77 @@ fn offspring_counts_have_the_right_mean_and_variance_ordering() {
                 "{scheme:?}: total variance {total_var} > {bound}"
             );
         }
+    }
+}
+
+/// `resample` on bad weights: typed errors with the ancestors untouched, never a panic;
+/// unnormalised weights are normalised (weights × 4, exact in binary, draw the same ancestors
+/// bit for bit for every scheme).
+#[test]
+fn resample_normalises_weights_and_refuses_bad_ones() {
+    let weights = [0.05, 0.3, 0.0, 0.15, 0.125, 0.2, 0.1, 0.075];
+    let scaled = weights.map(|w| 4.0 * w);
+    for scheme in [
+        Resampling::Multinomial,
+        Resampling::Stratified,
+        Resampling::Systematic,
+        Resampling::Residual,
+    ] {
+        let (mut a, mut b) = ([0; 8], [0; 8]);
+        resample(scheme, &weights, &mut ParticleRng::stream(5, 1, 0), &mut a).unwrap();
+        resample(scheme, &scaled, &mut ParticleRng::stream(5, 1, 0), &mut b).unwrap();
+        assert_eq!(a, b, "{scheme:?}");
+        let bad_weights: [(&[f64], Error); 6] = [
+            (
+                &[],
+                Error::InvalidParameter {
+                    parameter: Parameter::SampleCount,
+                    value: 0.0,
+                },
+            ),
+            (
+                &[0.5, -0.25, 0.75],
+                Error::InvalidParameter {
+                    parameter: Parameter::Weight,
+                    value: -0.25,
+                },
+            ),
+            (&[0.0, 0.0], degenerate()),
+            (&[f64::NAN, 1.0], degenerate()),
+            (&[f64::INFINITY, 1.0], degenerate()),
+            (&[f64::MAX, f64::MAX], degenerate()),
+        ];
+        for (bad, error) in bad_weights {
+            let mut ancestors = [7; 8];
+            let mut rng = ParticleRng::stream(5, 1, 0);
+            assert_eq!(
+                resample(scheme, bad, &mut rng, &mut ancestors),
+                Err(error),
+                "{scheme:?} {bad:?}"
+            );
+            assert_eq!(ancestors, [7; 8]);
+        }
+        // −0.0 has its sign bit set but is a valid weight (zero).
+        let mut c = [0; 8];
+        let signed_zero = weights.map(|w| if w == 0.0 { -0.0 } else { w });
+        resample(
+            scheme,
+            &signed_zero,
+            &mut ParticleRng::stream(5, 1, 0),
+            &mut c,
+        )
+        .unwrap();
+        assert_eq!(a, c, "{scheme:?}");
+        // Nothing to draw: nothing checked.
+        assert!(resample(scheme, &[], &mut ParticleRng::stream(5, 1, 0), &mut []).is_ok());
+    }
+}
+
+/// The error of a weight set with no mass (NaN, infinite, overflowing or all zero).
+fn degenerate() -> Error {
+    Error::NonFinite {
+        stage: Stage::Prediction,
+        quantity: Quantity::Weights,
     }
 }
 
@@ -306,10 +380,34 @@ fn bad_input_gives_typed_errors_and_leaves_the_filter_unchanged() {
     assert!(weights(&e), "{e:?}");
     assert_eq!(pf, before);
 
+    // A NaN log-density is a bug in the model, not a measurement no particle explains.
     let e = pf.update_with(
         &NonGaussian(Bounded { a: 0.1, nan: true }),
         &Vector1::new(0.0),
     );
+    assert_eq!(
+        e.err(),
+        Some(Error::NonFinite {
+            stage: Stage::Update,
+            quantity: Quantity::FunctionValue
+        })
+    );
+    assert_eq!(pf, before);
+    let nan_h = LinearMeasurement {
+        observation: Matrix1::new(f64::NAN),
+        noise: Matrix1::new(1.0),
+    };
+    let e = pf.update(&nan_h, &Vector1::new(0.0));
+    assert_eq!(
+        e.err(),
+        Some(Error::NonFinite {
+            stage: Stage::Update,
+            quantity: Quantity::FunctionValue
+        })
+    );
+    assert_eq!(pf, before);
+    // A Gaussian reading 10³⁰⁰ away: every log-weight −∞ (r² overflows), no NaN.
+    let e = pf.update(&sensor, &Vector1::new(1e300));
     assert!(weights(&e), "{e:?}");
     assert_eq!(pf, before);
 
@@ -545,10 +643,96 @@ fn filter_sequence_runs_a_particle_filter_and_restores_the_cloud() {
     assert_eq!(failing, start);
 }
 
+/// A particle filter through the Monte Carlo runner: 5 runs × 10 steps of the AR(1) model with
+/// N = 200 particles, each run's truth, readings and filter seeded by the run's seed. The
+/// runner's statistics at every step (mean error, error variance, mean filter variance, mean
+/// NEES, mean NIS and log-likelihood) equal those computed here from the same seeded runs,
+/// and the sharded and sequential runs equal `run` bit for bit.
+///
+/// Tolerance 1e-12 relative: the same five numbers per statistic, summed here in run order and
+/// by the runner in its own order and formula (a running mean), agree to a few ulps; a wrong
+/// slot, run or seed changes them at the 1e-2 level.
+#[test]
+fn particle_filter_runs_through_the_monte_carlo_runner() {
+    use estim_filters::Recorder;
+    use estim_filters::monte_carlo::MonteCarlo;
+
+    let (process, sensor, prior) = ar1();
+    let (runs, steps, count) = (5, 10, 200);
+    // One run: the truth x, the filter's x̂ and P, and its update report, per step.
+    type Step = (f64, f64, f64, UpdateReport<f64, U1>);
+    let run = |seed: u64| -> Result<Vec<Step>, Error> {
+        let mut g = crate::common::rng(seed);
+        let mut x = crate::common::normal(&mut g);
+        let mut pf = ParticleFilter::new(prior.clone(), count, seed)?;
+        (0..steps)
+            .map(|_| {
+                x = 0.9 * x + 0.5f64.sqrt() * crate::common::normal(&mut g);
+                let z = x + crate::common::normal(&mut g);
+                pf.predict(&process, &(), 1.0)?;
+                let report = pf.update(&sensor, &Vector1::new(z))?;
+                Ok((x, pf.state()[0], pf.covariance()[(0, 0)], report))
+            })
+            .collect()
+    };
+    let realization = |_: usize, seed: u64, rec: &mut Recorder| {
+        for (k, (x, mean, var, report)) in run(seed)?.iter().enumerate() {
+            let p = Matrix1::new(*var);
+            rec.record_estimate(k, &Vector1::new(*x), &Vector1::new(*mean), &p)?;
+            rec.record_innovation(k, report)?;
+        }
+        Ok(())
+    };
+    let mc = MonteCarlo::new(runs, steps).unwrap().with_seed(31);
+    let stats = mc.run(realization).unwrap();
+
+    // By hand, from the same seeds.
+    let mut values = vec![vec![]; steps];
+    for r in 0..runs {
+        for (k, (x, mean, var, report)) in run(mc.run_seed(r)).unwrap().into_iter().enumerate() {
+            values[k].push([x, mean, var, report.nis, report.log_likelihood]);
+        }
+    }
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(b.abs()).max(1e-300);
+    let rf = runs as f64;
+    for (k, slot) in stats.slots.iter().enumerate() {
+        let v = &values[k];
+        let errors: Vec<f64> = v.iter().map(|[x, mean, ..]| x - mean).collect();
+        let mean_error = errors.iter().sum::<f64>() / rf;
+        let error_var = errors.iter().map(|e| (e - mean_error).powi(2)).sum::<f64>() / (rf - 1.0);
+        let mean_var = v.iter().map(|s| s[2]).sum::<f64>() / rf;
+        let nees = v.iter().map(|s| (s[0] - s[1]).powi(2) / s[2]).sum::<f64>() / rf;
+        let nis = v.iter().map(|s| s[3]).sum::<f64>() / rf;
+        let ll = v.iter().map(|s| s[4]).sum::<f64>() / rf;
+        let e = slot.estimate.as_ref().unwrap();
+        let i = slot.innovation.as_ref().unwrap();
+        assert_eq!((e.samples, i.samples), (runs, runs));
+        for (name, got, want) in [
+            ("mean error", e.mean_error[0], mean_error),
+            ("error variance", e.error_covariance[(0, 0)], error_var),
+            ("mean variance", e.mean_covariance[(0, 0)], mean_var),
+            ("mean NEES", e.mean_nees, nees),
+            ("mean NIS", i.mean_nis, nis),
+            ("mean log-likelihood", i.mean_log_likelihood, ll),
+        ] {
+            assert!(
+                close(got, want),
+                "step {k} {name}: runner {got}, by hand {want}"
+            );
+        }
+    }
+    let shards = (0..2)
+        .map(|s| mc.run_shard(s, 2, realization))
+        .collect::<Result<Vec<_>, _>>()
+        .unwrap();
+    assert_eq!(mc.merge_shards(shards).unwrap(), stats);
+    assert_eq!(mc.run_sequential(realization).unwrap(), stats);
+}
+
 /// A checkpoint resumes bit-identically (serde_json with `float_roundtrip`), and a corrupt one
 /// is an error, not a panic: unnormalised weights, a weight count that disagrees with the
-/// particles, zero particles, a non-number particle, an invalid trigger, a state of the wrong
-/// dimension.
+/// particles, zero particles, a non-number particle, an invalid trigger, stored weights that
+/// disagree with the log-weights, a state of the wrong dimension.
 #[cfg(feature = "serde")]
 #[test]
 fn checkpoints_resume_bit_identically_and_reject_corrupt_input() {
@@ -582,6 +766,22 @@ fn checkpoints_resume_bit_identically_and_reject_corrupt_input() {
     assert!(corrupt(
         &|v| v["trigger"] = serde_json::json!({ "EssBelow": 2.0 })
     ));
+    // The stored weights must agree with the log-weights (to √ε relative).
+    assert!(corrupt(&|v| v["weights"][3] = serde_json::json!(0.5)));
+    assert!(corrupt(&|v| v["weights"][3] = serde_json::json!(-0.0625)));
+    assert!(corrupt(&|v| {
+        v["weights"].as_array_mut().unwrap().pop();
+    }));
+    // A checkpoint written before the weights were stored reads with Wᵢ = exp(log Wᵢ): the
+    // same log-weights, and an ESS equal to the stored weights' to round-off (each weight
+    // within a few ulps times |log Wᵢ| ≤ 20 here; 1e-12 relative leaves margin).
+    let at_save: ParticleFilter<f64, U1> = serde_json::from_value(saved.clone()).unwrap();
+    let mut old = saved.clone();
+    old.as_object_mut().unwrap().remove("weights");
+    let old: ParticleFilter<f64, U1> = serde_json::from_value(old).unwrap();
+    assert_eq!(old.log_weights(), at_save.log_weights());
+    let (a, b) = (old.effective_sample_size(), at_save.effective_sample_size());
+    assert!((a - b).abs() <= 1e-12 * b, "{a} vs {b}");
     // The wrong state dimension for a dynamic-size filter: a shape error, not a panic.
     let dynamic: ParticleFilter<f64, Dyn> = ParticleFilter::new(prior.into_dyn(), 8, 1).unwrap();
     let mut v = serde_json::to_value(&dynamic).unwrap();

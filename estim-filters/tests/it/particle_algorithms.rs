@@ -733,7 +733,7 @@ fn pmmh_bad_input_gives_typed_errors() {
     let flat = |_: &DVector<f64>| 0.0;
     let ll = |theta: &DVector<f64>, _: u64| Ok(-theta[0] * theta[0]);
     assert!(matches!(
-        pmmh(&start, &DMatrix::from_element(2, 2, 0.1), 10, 1, flat, ll),
+        pmmh(&start, &DMatrix::from_element(2, 2, 0.1), 10, 1, flat, ll).map_err(Error::from),
         Err(Error::DimensionMismatch { .. })
     ));
     assert!(matches!(
@@ -744,7 +744,8 @@ fn pmmh_bad_input_gives_typed_errors() {
             1,
             flat,
             ll
-        ),
+        )
+        .map_err(Error::from),
         Err(Error::NonFinite { .. })
     ));
     let nowhere = |_: &DVector<f64>| f64::NEG_INFINITY;
@@ -757,7 +758,8 @@ fn pmmh_bad_input_gives_typed_errors() {
             nowhere,
             ll
         )
-        .err(),
+        .err()
+        .map(|e| e.error),
         Some(Error::NonFinite {
             stage: Stage::Construction,
             quantity: Quantity::Mean
@@ -765,7 +767,9 @@ fn pmmh_bad_input_gives_typed_errors() {
     );
     let nan = |_: &DVector<f64>, _: u64| Ok(f64::NAN);
     assert_eq!(
-        pmmh(&start, &DMatrix::from_element(1, 1, 0.1), 10, 1, flat, nan).err(),
+        pmmh(&start, &DMatrix::from_element(1, 1, 0.1), 10, 1, flat, nan)
+            .err()
+            .map(|e| e.error),
         Some(Error::NonFinite {
             stage: Stage::Update,
             quantity: Quantity::Weights
@@ -779,12 +783,120 @@ fn pmmh_bad_input_gives_typed_errors() {
             1,
             flat,
             ll
-        ),
+        )
+        .map_err(Error::from),
         Err(Error::InvalidParameter {
             parameter: Parameter::StepCount,
             ..
         })
     ));
+}
+
+/// PMMH tells a likelihood of zero from a model bug. AR(1) coefficient θ, prior uniform on
+/// (−1, 1), 8 readings, 20 particles, 200 iterations from θ = 0.3.
+///
+/// - Above θ = 0.6 the closure's readings end with one at 10³⁰⁰ that no particle explains
+///   (every log-weight −∞, the step's [`Quantity::Weights`] error): the estimate is `Ok(−∞)`,
+///   the proposal rejected, and the chain runs to the end without visiting θ > 0.6.
+/// - Above θ = 0.6 the sensor's gain is NaN instead (a bug in the model: h(x) NaN, the
+///   step's [`Quantity::FunctionValue`] error): the chain stops at that iteration i with the
+///   error, and the chain it returns is, bit for bit, the one a run of i − 1 iterations gives.
+#[test]
+fn pmmh_rejects_unexplained_readings_and_stops_on_a_nan_model() {
+    let zs = readings(8, 5);
+    let good: Vec<Vector1<f64>> = zs.iter().map(|&z| Vector1::new(z)).collect();
+    let mut unexplained = good.clone();
+    unexplained.push(Vector1::new(1e300));
+    let (_, sensor, prior) = ar1();
+    let (start, scale) = (
+        DVector::from_element(1, 0.3),
+        DMatrix::from_element(1, 1, 0.3),
+    );
+    let uniform = |theta: &DVector<f64>| {
+        if theta[0].abs() < 1.0 {
+            0.0
+        } else {
+            f64::NEG_INFINITY
+        }
+    };
+    let process = |theta: f64| LinearProcess::without_input(Matrix1::new(theta), Matrix1::new(0.5));
+
+    // The step's error, then the estimate, for the unexplained reading.
+    let mut pf = ParticleFilter::new(prior.clone(), 20, 1).unwrap();
+    pf.predict(&process(0.3), &(), 1.0).unwrap();
+    assert_eq!(
+        pf.update(&sensor, &Vector1::new(1e300)).err(),
+        Some(Error::NonFinite {
+            stage: Stage::Update,
+            quantity: Quantity::Weights
+        })
+    );
+    let zero = particle_log_likelihood(
+        &prior,
+        &process(0.3),
+        &(),
+        1.0,
+        &sensor,
+        &unexplained,
+        20,
+        1,
+    );
+    assert_eq!(zero, Ok(f64::NEG_INFINITY));
+
+    let mut refused = 0;
+    let chain = pmmh(&start, &scale, 200, 9, uniform, |theta, seed| {
+        let readings = if theta[0] > 0.6 {
+            refused += 1;
+            &unexplained
+        } else {
+            &good
+        };
+        particle_log_likelihood(
+            &prior,
+            &process(theta[0]),
+            &(),
+            1.0,
+            &sensor,
+            readings,
+            20,
+            seed,
+        )
+    })
+    .unwrap();
+    assert!(refused > 0, "no proposal above 0.6: the test tests nothing");
+    assert_eq!(chain.samples.ncols(), 201);
+    assert!(chain.samples.iter().all(|&t| t <= 0.6));
+    assert!(chain.log_likelihoods.iter().all(|l| l.is_finite()));
+
+    let nan_model = |theta: &DVector<f64>, seed: u64| {
+        let gain = if theta[0] > 0.6 { f64::NAN } else { 1.0 };
+        let sensor = LinearMeasurement {
+            observation: Matrix1::new(gain),
+            noise: Matrix1::new(1.0),
+        };
+        particle_log_likelihood(
+            &prior,
+            &process(theta[0]),
+            &(),
+            1.0,
+            &sensor,
+            &good,
+            20,
+            seed,
+        )
+    };
+    let stopped = pmmh(&start, &scale, 200, 9, uniform, nan_model).unwrap_err();
+    assert_eq!(
+        stopped.error,
+        Error::NonFinite {
+            stage: Stage::Update,
+            quantity: Quantity::FunctionValue
+        }
+    );
+    let i = stopped.iteration;
+    assert!(i >= 1 && stopped.chain.samples.ncols() == i, "{i}");
+    let before = pmmh(&start, &scale, i - 1, 9, uniform, nan_model).unwrap();
+    assert_eq!(stopped.chain, before);
 }
 
 /// x⁺ = 0.9 x + w (Q = 0.5) read by a sharp sensor z = x + v (R = 0.05): the bootstrap
