@@ -58,6 +58,12 @@
 //!   CV model with zero acceleration rows and σ² of acceleration process noise (the tests
 //!   check this).
 //!
+//! Scope: the [`Imm`](super::Imm) (IMM or GPB1 mixing) with its checkpoints, the step
+//! traits and so the fusion driver. Not (yet) the [`ImmSmoother`](super::ImmSmoother), which
+//! needs each mode's prediction cross-covariance carried through the map
+//! ([`PredictCrossModes`](super::PredictCrossModes)), nor [`Gpb2`](super::Gpb2) and
+//! [`GaussianSum`](super::GaussianSum), whose hypotheses are one filter type in a `Vec`.
+//!
 //! One embedded mode with the identity map is that filter bit for bit: lifting and
 //! projecting through the identity copy every entry, and the lifted measurement model
 //! evaluates h, its Jacobian and its Hessians at a copy of the same state. Checkpoints
@@ -585,10 +591,9 @@ where
 }
 
 /// A set of [`Embedded`] modes (a tuple of up to six, each of its own filter type and state
-/// size, all of one common state) as the modes of an [`Imm`](super::Imm),
-/// [`Gpb2`](super::Gpb2) or [`GaussianSum`](super::GaussianSum). The prediction takes the
-/// tuple of per-mode process models, each at its mode's own size; the update one measurement
-/// model of the common state.
+/// size, all of one common state) as the modes of an [`Imm`](super::Imm) (either
+/// [`Mixing`](super::Mixing)). The prediction takes the tuple of per-mode process models,
+/// each at its mode's own size; the update one measurement model of the common state.
 #[derive(Clone, Debug)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct EmbeddedModes<L>(pub L);

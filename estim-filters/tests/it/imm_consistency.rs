@@ -66,8 +66,8 @@ fn draw(seed: u64, steps: usize) -> Run {
 /// Var[eᵀP⁻¹e] under the IMM's own posterior, the mixture Σⱼ μⱼ N(x̂ⱼ, Pⱼ) whose moments are
 /// the combined (x̂, P). For e ~ N(m, Σ) and A = P⁻¹: E[q] = tr(AΣ) + mᵀAm and
 /// Var[q] = 2 tr(AΣAΣ) + 4 mᵀAΣAm (Mathai & Provost, *Quadratic Forms in Random Variables*,
-/// 1992); over the mixture, with
-/// mⱼ = x̂ⱼ − x̂, E[q²] = Σⱼ μⱼ (Varⱼ[q] + Eⱼ[q]²) and E[q] = tr(A P) = n (moment matching).
+/// 1992); over the mixture, with mⱼ = x̂ⱼ − x̂, E[q²] = Σⱼ μⱼ (Varⱼ[q] + Eⱼ[q]²) and
+/// E[q] = tr(A P) = n (moment matching).
 /// A single Gaussian (one mode, or all modes equal) gives 2n, the χ²ₙ variance.
 fn mixture_nees_variance(imm: &Imm<f64, U2, Vec<KalmanFilter<f64, U2>>>) -> f64 {
     let a = imm
