@@ -775,3 +775,72 @@ mod serde_impls {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! The map's index arithmetic against the matrix formulas of the module docs, with the
+    //! selection matrix Eₘ written out.
+
+    use estim_core::nalgebra::{Matrix1, Matrix1x3, Matrix2, Matrix3, Matrix3x2, U1, U2, U3};
+    use estim_core::nalgebra::{Vector1, Vector2, Vector3};
+
+    use super::*;
+
+    /// h(x) = x₀ x₁ + x₂², with its Jacobian and Hessian.
+    struct Bilinear;
+
+    impl MeasurementModel<f64, U3, U1> for Bilinear {
+        fn measure(&self, x: &Vector3<f64>) -> Vector1<f64> {
+            Vector1::new(x[0] * x[1] + x[2] * x[2])
+        }
+        fn measurement_noise(&self, x: &Vector3<f64>) -> Matrix1<f64> {
+            Matrix1::new(0.1 + x[1].abs())
+        }
+    }
+
+    impl MeasurementJacobian<f64, U3, U1> for Bilinear {
+        fn measurement_jacobian(&self, x: &Vector3<f64>) -> Matrix1x3<f64> {
+            Matrix1x3::new(x[1], x[0], 2.0 * x[2])
+        }
+    }
+
+    impl MeasurementHessian<f64, U3, U1> for Bilinear {
+        fn measurement_hessian(&self, _: &Vector3<f64>, _: usize) -> Option<Matrix3<f64>> {
+            Some(Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 2.0))
+        }
+    }
+
+    #[test]
+    fn lifting_projecting_and_the_lifted_model_are_the_selection_matrix_formulas() {
+        // Mode component 0 at common place 2, component 1 at place 0; place 1 defaults to
+        // N(5, 0.7).
+        let map = StateMap::<f64, U2, U3>::new(
+            &[2, 0],
+            Vector3::new(9.0, 5.0, 9.0),
+            Vector3::new(9.0, 0.7, 9.0),
+        )
+        .unwrap();
+        let e = Matrix3x2::new(0.0, 1.0, 0.0, 0.0, 1.0, 0.0);
+        let d = Vector3::new(0.0, 5.0, 0.0);
+        let rest = Matrix3::from_diagonal(&Vector3::new(0.0, 0.7, 0.0));
+        let (x, p) = (Vector2::new(1.5, -2.0), Matrix2::new(2.0, 0.3, 0.3, 1.0));
+        let (mut lx, mut lp) = (Vector3::zeros(), Matrix3::zeros());
+        map.lift_into(&x, &p, &mut lx, &mut lp);
+        // Selections and sums of one nonzero term: exact.
+        assert_eq!(lx, e * x + d);
+        assert_eq!(lp, e * p * e.transpose() + rest);
+        let back = map.project(&Gaussian::new_unchecked(lx, lp));
+        assert_eq!((back.mean(), back.covariance()), (&x, &p));
+        let lifted = LiftedMeasurement::new(&Bilinear, &map);
+        assert_eq!(lifted.measure(&x), Bilinear.measure(&lx));
+        assert_eq!(lifted.measurement_noise(&x), Matrix1::new(5.1));
+        assert_eq!(
+            lifted.measurement_jacobian(&x),
+            Bilinear.measurement_jacobian(&lx) * e
+        );
+        assert_eq!(
+            lifted.measurement_hessian(&x, 0),
+            Some(e.transpose() * Bilinear.measurement_hessian(&lx, 0).unwrap() * e)
+        );
+    }
+}
