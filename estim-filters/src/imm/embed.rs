@@ -59,10 +59,10 @@
 //!   check this).
 //!
 //! Scope: the [`Imm`](super::Imm) (IMM or GPB1 mixing) with its checkpoints, the step
-//! traits and so the fusion driver. Not (yet) the [`ImmSmoother`](super::ImmSmoother), which
-//! needs each mode's prediction cross-covariance carried through the map
-//! ([`PredictCrossModes`](super::PredictCrossModes)), nor [`Gpb2`](super::Gpb2) and
-//! [`GaussianSum`](super::GaussianSum), whose hypotheses are one filter type in a `Vec`.
+//! traits and so the fusion driver, and the [`ImmSmoother`](super::ImmSmoother) (each mode's
+//! prediction cross-covariance carried through its map: C = P Dₘᵀ (Dₘ P Dₘᵀ)⁻¹ Cₘ Eₘᵀ, exact
+//! for a Gaussian start). Not [`Gpb2`](super::Gpb2) and [`GaussianSum`](super::GaussianSum),
+//! whose hypotheses are one filter type in a `Vec`.
 //!
 //! One embedded mode with the identity map is that filter bit for bit: lifting and
 //! projecting through the identity copy every entry, and the lifted measurement model
@@ -73,7 +73,7 @@
 //! ```
 //! use estim_core::nalgebra::{DMatrix, DVector, Matrix1, Matrix1x3, Matrix2, Matrix3, U3, Vector1, Vector2, Vector3};
 //! use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
-//! use estim_filters::imm::{Embedded, EmbeddedModes, Imm, StateMap};
+//! use estim_filters::imm::{Embedded, EmbeddedModes, Imm, ImmSmoother, StateMap};
 //! use estim_filters::{Estimator, KalmanFilter};
 //!
 //! // Constant velocity [p, v] inside constant acceleration [p, v, a].
@@ -89,13 +89,18 @@
 //! let pi = DMatrix::from_row_slice(2, 2, &[0.95, 0.05, 0.05, 0.95]);
 //! let mut imm = Imm::new(modes, pi, DVector::from_element(2, 0.5))?;
 //! let sensor = LinearMeasurement { observation: Matrix1x3::new(1.0, 0.0, 0.0), noise: Matrix1::new(0.01) };
+//! let mut smoother = ImmSmoother::new(); // records the forward pass to smooth it after
 //! for k in 1..=15 {
-//!     imm.predict_modes(&(cv.clone(), ca.clone()), &(), 1.0)?;
+//!     smoother.predict(&mut imm, &(cv.clone(), ca.clone()), &(), 1.0)?; // imm.predict_modes + record
 //!     imm.update_modes(&sensor, &Vector1::new(0.5 * f64::from(k * k)))?; // it accelerates
 //! }
 //! assert!(imm.probabilities()[1] > 0.95); // the accelerating mode explains the data
 //! assert_eq!(imm.state().len(), 3); // the combined estimate is in the common state
 //! assert!((imm.state()[2] - 1.0).abs() < 0.1);
+//! let smoothed = smoother.smooth(&imm).map_err(|e| e.error)?;
+//! assert_eq!(smoothed.len(), 16);
+//! assert_eq!(smoothed[15].estimate.mean(), imm.state()); // the last one is the filter's
+//! assert!((smoothed[8].estimate.mean()[2] - 1.0).abs() < 0.1); // a = 1 all along
 //! // A map whose place list does not fit the mode is a typed error.
 //! let wrong = StateMap::<f64, estim_core::nalgebra::U2, U3>::new(&[0, 1, 2], Vector3::zeros(), Vector3::zeros());
 //! assert!(matches!(wrong, Err(estim_core::Error::DimensionMismatch { .. })));
@@ -109,6 +114,8 @@ use estim_core::{
 };
 
 use super::modes::{Modes, PredictModes, UpdateModes, no_mode};
+
+mod cross;
 use crate::report::UpdateReport;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
 
