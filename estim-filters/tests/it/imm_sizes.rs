@@ -25,6 +25,8 @@ type Modes = EmbeddedModes<(
     Embedded<f64, U6, U6, KalmanFilter<f64, U6>>,
 )>;
 
+type SixStates = (KalmanFilter<f64, U6>, KalmanFilter<f64, U6>);
+
 /// The default variance of the CV mode's accelerations when lifted.
 const SIGMA2: f64 = 0.3;
 const Q_CV: f64 = 0.01;
@@ -141,6 +143,19 @@ fn embedded_imm() -> Imm<f64, U6, Modes> {
     Imm::new(modes, pi(), mu0()).unwrap()
 }
 
+/// The independent route: an equal-size IMM of two 6-state KFs, the CV mode's prior written
+/// out with the accelerations at their default N(0, σ²) (its model is [`cv6_by_hand`]).
+fn reference_imm() -> Imm<f64, U6, SixStates> {
+    let cv6_prior = Gaussian::new(
+        Vector6::new(0.0, 1.0, 0.0, 0.0, 0.5, 0.0),
+        Matrix6::from_diagonal(&Vector6::new(4.0, 1.0, SIGMA2, 4.0, 1.0, SIGMA2)),
+    )
+    .unwrap();
+    let ca_prior = embedded_imm().modes().0.1.filter().estimate();
+    let modes = (KalmanFilter::new(cv6_prior), KalmanFilter::new(ca_prior));
+    Imm::new(modes, pi(), mu0()).unwrap()
+}
+
 /// A target straight at (1, 0.5) per step, then accelerating at (0.4, −0.3) from step 12,
 /// positions with noise variance 0.5 (seeded).
 fn readings(seed: u64, steps: usize) -> Vec<Vector2<f64>> {
@@ -159,17 +174,7 @@ fn readings(seed: u64, steps: usize) -> Vec<Vector2<f64>> {
 
 #[test]
 fn a_cv_mode_inside_a_ca_imm_is_the_hand_written_six_state_cv_with_zero_acceleration_rows() {
-    let mut embedded = embedded_imm();
-    // The independent route: both modes 6-state filters, the CV prior written out with the
-    // accelerations at their default N(0, σ²).
-    let cv6_prior = Gaussian::new(
-        Vector6::new(0.0, 1.0, 0.0, 0.0, 0.5, 0.0),
-        Matrix6::from_diagonal(&Vector6::new(4.0, 1.0, SIGMA2, 4.0, 1.0, SIGMA2)),
-    )
-    .unwrap();
-    let ca_prior = embedded.modes().0.1.filter().estimate();
-    let modes = (KalmanFilter::new(cv6_prior), KalmanFilter::new(ca_prior));
-    let mut reference = Imm::new(modes, pi(), mu0()).unwrap();
+    let (mut embedded, mut reference) = (embedded_imm(), reference_imm());
     assert_bitwise_eq(embedded.state(), reference.state(), "combined prior");
     let (models, models6) = ((cv4(), ca6()), (cv6_by_hand(), ca6()));
     let sensor = sensor();
@@ -464,15 +469,7 @@ fn a_checkpoint_resumes_bit_for_bit_and_an_edited_map_is_refused() {
 
 #[test]
 fn the_smoother_over_a_cv_mode_inside_a_ca_imm_is_the_hand_written_six_state_ones() {
-    let mut embedded = embedded_imm();
-    let cv6_prior = Gaussian::new(
-        Vector6::new(0.0, 1.0, 0.0, 0.0, 0.5, 0.0),
-        Matrix6::from_diagonal(&Vector6::new(4.0, 1.0, SIGMA2, 4.0, 1.0, SIGMA2)),
-    )
-    .unwrap();
-    let ca_prior = embedded.modes().0.1.filter().estimate();
-    let modes = (KalmanFilter::new(cv6_prior), KalmanFilter::new(ca_prior));
-    let mut reference = Imm::new(modes, pi(), mu0()).unwrap();
+    let (mut embedded, mut reference) = (embedded_imm(), reference_imm());
     let (models, models6) = ((cv4(), ca6()), (cv6_by_hand(), ca6()));
     let sensor = sensor();
     let (mut smoother, mut smoother6) = (ImmSmoother::new(), ImmSmoother::new());
