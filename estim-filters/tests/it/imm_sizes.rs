@@ -499,3 +499,72 @@ fn the_smoother_over_a_cv_mode_inside_a_ca_imm_is_the_hand_written_six_state_one
     // factorisations: measured 3.3e-15; 1e-12 is the forward test's bound.
     assert!(worst < 1e-12, "largest relative difference {worst:e}");
 }
+
+/// A copy with runtime sizes.
+fn dynamic<R: estim_core::nalgebra::Dim, C: estim_core::nalgebra::Dim>(
+    m: &estim_core::nalgebra::OMatrix<f64, R, C>,
+) -> DMatrix<f64>
+where
+    estim_core::nalgebra::DefaultAllocator: estim_core::nalgebra::allocator::Allocator<R, C>,
+{
+    DMatrix::from_column_slice(m.nrows(), m.ncols(), m.as_slice())
+}
+
+#[test]
+fn runtime_sizes_run_the_same_imm() {
+    let mut fixed = embedded_imm();
+    let runtime_mode = |g: Gaussian<f64, Dyn>, map: StateMap<f64, Dyn, Dyn>| {
+        Embedded::new(KalmanFilter::new(g), map).unwrap()
+    };
+    let runtime_map = |places: &[usize], variance: f64| {
+        let mut v = DVector::zeros(6);
+        (0..6)
+            .filter(|i| !places.contains(i))
+            .for_each(|i| v[i] = variance);
+        StateMap::new(places, DVector::zeros(6), v).unwrap()
+    };
+    let (cv, ca) = (
+        fixed.modes().0.0.filter().estimate(),
+        fixed.modes().0.1.filter().estimate(),
+    );
+    let gaussian = |mean: &[f64], covariance: DMatrix<f64>| {
+        Gaussian::new(DVector::from_column_slice(mean), covariance).unwrap()
+    };
+    let modes = EmbeddedModes((
+        runtime_mode(
+            gaussian(cv.mean().as_slice(), dynamic(cv.covariance())),
+            runtime_map(&[0, 1, 3, 4], SIGMA2),
+        ),
+        runtime_mode(
+            gaussian(ca.mean().as_slice(), dynamic(ca.covariance())),
+            runtime_map(&[0, 1, 2, 3, 4, 5], 0.0),
+        ),
+    ));
+    let mut runtime = Imm::new(modes, pi(), mu0()).unwrap();
+    let (cv4, ca6) = (cv4(), ca6());
+    let models = (
+        LinearProcess::without_input(dynamic(&cv4.0.transition), dynamic(&cv4.0.noise)),
+        LinearProcess::without_input(dynamic(&ca6.0.transition), dynamic(&ca6.0.noise)),
+    );
+    let fixed_sensor = sensor();
+    let sensor = LinearMeasurement::<f64, Dyn, U2> {
+        observation: estim_core::nalgebra::OMatrix::<f64, U2, Dyn>::from_column_slice(
+            fixed_sensor.observation.as_slice(),
+        ),
+        noise: fixed_sensor.noise,
+    };
+    for z in readings(37, 16) {
+        fixed
+            .predict_modes(&(cv4.clone(), ca6.clone()), &(), DT)
+            .unwrap();
+        runtime.predict_modes(&models, &(), DT).unwrap();
+        fixed.update_modes(&fixed_sensor, &z).unwrap();
+        runtime.update_modes(&sensor, &z).unwrap();
+        // The same arithmetic through nalgebra's runtime-size kernels: round-off only, a few
+        // ulps a step (1e-12 as in the equivalence test above).
+        let scale = fixed.covariance().amax().max(fixed.state().amax());
+        assert!((dynamic(fixed.state()) - runtime.state()).amax() <= 1e-12 * scale);
+        assert!((dynamic(fixed.covariance()) - runtime.covariance()).amax() <= 1e-12 * scale);
+        assert!((fixed.probabilities() - runtime.probabilities()).amax() <= 1e-12);
+    }
+}
