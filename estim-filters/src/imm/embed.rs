@@ -1,7 +1,7 @@
 //! Modes of different state sizes: each mode filter runs in its own state, and the
 //! multiple-model estimator mixes and combines in a common state through maps the user gives
-//! (Bar-Shalom, Li & Kirubarajan §11.6.6 with state augmentation; MATLAB's `trackingIMM`
-//! `ModelConversionFcn`).
+//! (the IMM of Bar-Shalom, Li & Kirubarajan §11.6.6 over modes augmented to one state, as
+//! MATLAB's `trackingIMM` does through its `ModelConversionFcn`).
 //!
 //! A [`StateMap`] says where each of a mode's nₘ components sits in the common state of n
 //! components (an injective index list, e.g. a constant-velocity mode's [px, vx, py, vy]
