@@ -114,10 +114,10 @@ use estim_core::{
 };
 
 use super::modes::{Modes, PredictModes, UpdateModes, no_mode};
-
-mod cross;
 use crate::report::UpdateReport;
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback, Update};
+
+mod cross;
 
 /// Where a mode's `Nm` components sit in the common state of `N` components, and the default
 /// mean and variance of the common components the mode lacks (see the [module docs](self)).
