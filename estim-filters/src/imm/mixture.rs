@@ -110,6 +110,8 @@ pub(crate) fn bayes_in_logs<T: Real>(
         stage: Stage::Update,
         quantity: Quantity::ModeProbabilities,
     };
+    // Plain slices: nalgebra's element iterators cost more than these few entries.
+    let (mu, log_likelihoods) = (mu.as_mut_slice(), log_likelihoods.as_mut_slice());
     // NaN (and +∞, a degenerate innovation covariance) is refused; −∞ is an impossible z.
     if (log_likelihoods.iter()).any(|&l| !l.is_finite() && !(l < T::zero())) {
         return Err(refused);
@@ -164,13 +166,14 @@ where
 {
     let mut moments = RunningMoments::<T, M>::new(rows);
     let mut applied = false;
-    for (i, &w) in prior.iter().enumerate() {
+    let logs = log_likelihoods.as_mut_slice();
+    for (i, (&w, log)) in prior.as_slice().iter().zip(logs.iter_mut()).enumerate() {
         if w == T::zero() {
-            log_likelihoods[i] = -(T::one() / T::zero());
+            *log = -(T::one() / T::zero());
             continue;
         }
         update(i, report)?;
-        log_likelihoods[i] = report.log_likelihood;
+        *log = report.log_likelihood;
         applied |= report.applied();
         moments.add(w, &report.innovation, &report.innovation_covariance);
     }
