@@ -69,6 +69,10 @@ pub enum Quantity {
     /// A particle filter's (log-)weights: a NaN weight, or all weights zero (a measurement
     /// that no particle explains).
     Weights,
+    /// The map between a multiple-model estimator's mode state and its common state (the
+    /// mode's components' places in the common state, and the default mean and variance of
+    /// the components the mode lacks).
+    StateMap,
 }
 
 /// A parameter that failed validation.
@@ -222,6 +226,7 @@ impl fmt::Display for Quantity {
             Quantity::ModeProbabilities => "mode probabilities",
             Quantity::TransitionMatrix => "transition matrix",
             Quantity::Weights => "particle weights",
+            Quantity::StateMap => "mode state map",
         })
     }
 }

@@ -45,6 +45,10 @@
 //! (a late measurement rolls μ back too), the Monte Carlo runner and the sequence functions;
 //! with the `serde` feature it checkpoints and resumes bit for bit.
 //!
+//! Modes of different state sizes (a constant-velocity mode inside a constant-acceleration
+//! state, say) mix and combine in a common state through maps the user gives: see [`embed`]
+//! ([`EmbeddedModes`] of [`Embedded`] filters, each with its [`StateMap`]).
+//!
 //! The IMM is an approximation: it merges the mᵏ mode histories into m Gaussians at each step
 //! (the exact posterior is a mixture of mᵏ). The tests (`tests/it/imm.rs`) measure that error
 //! against the enumeration of every mode sequence.
@@ -85,6 +89,7 @@
 
 #[cfg(feature = "serde")]
 mod checkpoint;
+pub mod embed;
 mod gaussian_sum;
 mod gpb2;
 mod mixture;
@@ -94,6 +99,7 @@ pub mod smoother;
 use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::{Alloc, Error, Gaussian, Quantity, Real, Stage, error::Result};
 
+pub use embed::{Embedded, EmbeddedModes, LiftedMeasurement, StateMap};
 pub use gaussian_sum::GaussianSum;
 pub use gpb2::{Gpb2, Gpb2Snapshot};
 pub use modes::{ModeModels, Modes, PredictModes, UpdateModes};

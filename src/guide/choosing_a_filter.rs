@@ -68,7 +68,10 @@
 //!   ([`NonGaussianFilter`](crate::filters::particle::NonGaussianFilter)).
 //! - [`Imm`](crate::filters::imm::Imm) (and GPB1, GPB2, the static bank) for a target that
 //!   switches between models: each mode is any filter of this family with its own process
-//!   model, mixed through a Markov transition matrix. [`ImmSmoother`](crate::filters::imm::ImmSmoother)
+//!   model, mixed through a Markov transition matrix. Modes may have different state sizes
+//!   (a constant-velocity mode inside a constant-acceleration state) through maps you give
+//!   ([`EmbeddedModes`](crate::filters::imm::EmbeddedModes), see
+//!   [`imm::embed`](crate::filters::imm::embed)). [`ImmSmoother`](crate::filters::imm::ImmSmoother)
 //!   smooths a recorded IMM run (see [smoothing](super::smoothing)); the
 //!   `manoeuvring_target` example compares a CV KF, a CT EKF and a CV/CT IMM on a target that
 //!   turns (RMSE, NEES, mode probabilities against the true mode, the smoother's gain).

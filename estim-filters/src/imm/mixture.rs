@@ -101,6 +101,7 @@ pub(crate) fn predict_probabilities<T: Real>(
 /// their ratios. Returns ln Σⱼ c̄ⱼ exp(ℓⱼ), the log-likelihood of the measurement under the
 /// mixture. A NaN ℓ, or no mode with both c̄ⱼ > 0 and ℓⱼ > −∞ (the measurement impossible
 /// under every mode that can be active), is an error and leaves `mu` unchanged.
+/// `log_likelihoods` is overwritten (with the unnormalised weights on success).
 pub(crate) fn bayes_in_logs<T: Real>(
     mu: &mut DVector<T>,
     log_likelihoods: &mut DVector<T>,
@@ -109,6 +110,8 @@ pub(crate) fn bayes_in_logs<T: Real>(
         stage: Stage::Update,
         quantity: Quantity::ModeProbabilities,
     };
+    // Plain slices: nalgebra's element iterators cost more than these few entries.
+    let (mu, log_likelihoods) = (mu.as_mut_slice(), log_likelihoods.as_mut_slice());
     // NaN (and +∞, a degenerate innovation covariance) is refused; −∞ is an impossible z.
     if (log_likelihoods.iter()).any(|&l| !l.is_finite() && !(l < T::zero())) {
         return Err(refused);
@@ -128,11 +131,16 @@ pub(crate) fn bayes_in_logs<T: Real>(
     if !max.is_finite() {
         return Err(refused);
     }
-    let sum = log_likelihoods
-        .iter()
-        .fold(T::zero(), |acc, &l| acc + (l - max).exp());
-    for (p, &l) in mu.iter_mut().zip(log_likelihoods.iter()) {
-        *p = (l - max).exp() / sum;
+    // exp(ℓⱼ + ln c̄ⱼ − max) once per mode, kept in the buffer (which the caller reuses as
+    // scratch) for the division: the same values and the same order of the sum as taking
+    // them twice, m calls of exp fewer.
+    let mut sum = T::zero();
+    for l in log_likelihoods.iter_mut() {
+        *l = (*l - max).exp();
+        sum += *l;
+    }
+    for (p, &w) in mu.iter_mut().zip(log_likelihoods.iter()) {
+        *p = w / sum;
     }
     Ok(max + sum.ln())
 }
@@ -158,13 +166,14 @@ where
 {
     let mut moments = RunningMoments::<T, M>::new(rows);
     let mut applied = false;
-    for (i, &w) in prior.iter().enumerate() {
+    let logs = log_likelihoods.as_mut_slice();
+    for (i, (&w, log)) in prior.as_slice().iter().zip(logs.iter_mut()).enumerate() {
         if w == T::zero() {
-            log_likelihoods[i] = -(T::one() / T::zero());
+            *log = -(T::one() / T::zero());
             continue;
         }
         update(i, report)?;
-        log_likelihoods[i] = report.log_likelihood;
+        *log = report.log_likelihood;
         applied |= report.applied();
         moments.add(w, &report.innovation, &report.innovation_covariance);
     }

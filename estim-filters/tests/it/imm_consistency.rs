@@ -2,12 +2,13 @@
 //! very model the IMM assumes (the mode sequence from its Markov chain Π, each step through
 //! the current mode's linear model and noise, the prior from the IMM's prior), so the IMM's
 //! mean and covariance approximate the posterior's and its μ the posterior mode
-//! probabilities. Against it: the per-step NEES averaged over the runs has mean n within its
-//! bound at every step, the mode probabilities are calibrated within a binomial bound, and
-//! each single-mode filter (the quiet and the manoeuvring model alone) is outside the bound.
+//! probabilities. Against it: the per-step NEES averaged over the runs is inside its 95 % band
+//! at a binomial lower bound's number of steps, the mode probabilities are calibrated within a
+//! binomial bound, and each single-mode filter (the quiet and the manoeuvring model alone) is
+//! inside its χ² band at far fewer steps.
 
-use estim_core::nalgebra::{Vector1, Vector2};
-use estim_filters::consistency::nees;
+use estim_core::nalgebra::{U2, Vector1, Vector2};
+use estim_filters::consistency::{ChiSquareBand, nees};
 use estim_filters::imm::Imm;
 use estim_filters::{Estimator, KalmanFilter, Predict, Update};
 use rand::Rng;
@@ -62,51 +63,68 @@ fn draw(seed: u64, steps: usize) -> Run {
     run
 }
 
-/// The per-step NEES of one filter over the runs: Σ ε and Σ ε² at each step.
-#[derive(Clone)]
-struct Nees {
-    sum: Vec<f64>,
-    squares: Vec<f64>,
+/// Var[eᵀP⁻¹e] under the IMM's own posterior, the mixture Σⱼ μⱼ N(x̂ⱼ, Pⱼ) whose moments are
+/// the combined (x̂, P). For e ~ N(m, Σ) and A = P⁻¹: E[q] = tr(AΣ) + mᵀAm and
+/// Var[q] = 2 tr(AΣAΣ) + 4 mᵀAΣAm (Mathai & Provost, *Quadratic Forms in Random Variables*,
+/// 1992); over the mixture, with mⱼ = x̂ⱼ − x̂, E[q²] = Σⱼ μⱼ (Varⱼ[q] + Eⱼ[q]²) and
+/// E[q] = tr(A P) = n (moment matching).
+/// A single Gaussian (one mode, or all modes equal) gives 2n, the χ²ₙ variance.
+fn mixture_nees_variance(imm: &Imm<f64, U2, Vec<KalmanFilter<f64, U2>>>) -> f64 {
+    let a = imm
+        .covariance()
+        .try_inverse()
+        .expect("P is positive definite");
+    let second_moment: f64 = (0..2)
+        .map(|j| {
+            let mode = imm.mode_estimate(j);
+            let m = mode.mean() - imm.state();
+            let a_sigma = a * mode.covariance();
+            let mean = a_sigma.trace() + (m.transpose() * a * m)[0];
+            let variance =
+                2.0 * (a_sigma * a_sigma).trace() + 4.0 * (m.transpose() * a_sigma * a * m)[0];
+            imm.probabilities()[j] * (variance + mean * mean)
+        })
+        .sum();
+    second_moment - 4.0
 }
 
-impl Nees {
-    fn new(steps: usize) -> Self {
-        Self {
-            sum: vec![0.0; steps],
-            squares: vec![0.0; steps],
+/// P(X < k) for X ~ Binomial(trials, p).
+fn binomial_below(k: usize, trials: usize, p: f64) -> f64 {
+    let mut choose = 1.0;
+    let mut total = 0.0;
+    for i in 0..k.min(trials + 1) {
+        if i > 0 {
+            choose *= (trials + 1 - i) as f64 / i as f64;
         }
+        total += choose * p.powi(i as i32) * (1.0 - p).powi((trials - i) as i32);
     }
-
-    fn add(&mut self, k: usize, e: f64) {
-        self.sum[k] += e;
-        self.squares[k] += e * e;
-    }
-
-    /// The average ε̄ₖ over the runs and the t statistic (ε̄ₖ − n) / (sₖ / √R), sₖ the
-    /// sample standard deviation of εₖ.
-    fn at(&self, k: usize, runs: usize, n: f64) -> (f64, f64) {
-        let r = runs as f64;
-        let mean = self.sum[k] / r;
-        let variance = (self.squares[k] - r * mean * mean) / (r - 1.0);
-        (mean, (mean - n) / (variance / r).sqrt())
-    }
+    total
 }
 
 /// R = 300 runs of 20 steps (about 0.2 s in debug) from the matched truth (see [`draw`]).
 ///
-/// NEES. For the exact posterior mean and covariance, E[eᵀP⁻¹e | data] = tr(P⁻¹ P) = n
-/// whatever the posterior's shape, so ε̄ₖ (the average over the R independent runs) has mean
-/// n = 2; but it is χ²_{nR}/R only if the errors are Gaussian, and here they are a mixture
-/// (the manoeuvring mode's tail). So the test is the central limit one: at every step
-/// |ε̄ₖ − n| ≤ z sₖ/√R with sₖ the sample standard deviation of εₖ and z = 3.48, the
-/// two-sided 1 − 0.01/(2·20) normal quantile (Bonferroni over the 20 steps, whatever their
-/// correlation: the chance of any false failure ≤ 1 %). Measured: the IMM's worst |t| is
-/// 2.08 (ε̄ₖ 1.69–2.48). The χ²_{nR}/R band at the same confidence, [1.62, 2.43], holds at 19
-/// of the 20 steps: ε̄ₖ = 2.48 at k = 18 is outside it but only 1.79 of its measured standard
-/// deviations above n, the mixture's heavier tail, not a bias (the mean of ε̄ₖ over the steps
-/// is 1.99). Each single-mode filter fails the same test at every step from k = 5 on (after
-/// the prior's influence): the quiet one alone is overconfident (ε̄ₖ 21–43, t ≥ 6.1), the
-/// manoeuvring one alone too cautious (ε̄ₖ 1.23–1.56, t ≤ −4.2).
+/// NEES, per step, with the 95 % two-sided band. ε̄ₖ is the average of εₖ = eₖᵀPₖ⁻¹eₖ over
+/// the R independent runs. For a filter whose errors are Gaussian with covariance P (a
+/// single Kalman filter on its own model) R ε̄ₖ ~ χ²_{nR}: the band is χ²_{nR}/R,
+/// [1.780, 2.233] here (n = 2). The IMM's posterior is a mixture, not a Gaussian: εₖ still
+/// has mean n (E[eᵀP⁻¹e | data] = tr(P⁻¹P) whatever the shape), but a larger variance, which
+/// the IMM itself predicts from its modes (see [`mixture_nees_variance`]). Its band is
+/// therefore n ± 1.96 √(V̄ₖ/R) with V̄ₖ the average over the runs of that predicted variance
+/// (normal by the central limit theorem over 300 runs; for χ²₆₀₀/300 the same construction
+/// gives [1.774, 2.226] against the exact [1.780, 2.233]). V̄ₖ is 4.5–10.3 here against χ²₂'s
+/// 4 (the sample variance of εₖ over the runs, 4.4–21.5 with mean 10.4 over the steps, agrees
+/// with it within its own heavy-tailed scatter), which is why the IMM's ε̄ₖ (1.69–2.48) falls
+/// outside the χ² band at 6 of the 20 steps: that band assumes Gaussian errors.
+///
+/// A consistent estimator is inside its band at each step with probability 0.95. If the
+/// steps were independent the count inside would be Binomial(20, 0.95), with P(count < 16) =
+/// 0.26 %: the test asserts at least 16. (The steps share the runs, so the counts are
+/// positively correlated and the real false-failure rate is somewhat higher.) Each
+/// single-mode filter, inside its χ² band at most at the first 5 steps (the prior's
+/// influence), is far below the bound: the quiet one alone is overconfident (ε̄ₖ 2.4–43), the
+/// manoeuvring one alone too cautious (1.2–1.7). Measured: the IMM inside its band at 19 of
+/// the 20 steps (outside at k = 18, ε̄ = 2.48 against 2.36), inside the χ² band at 14; the
+/// quiet and the manoeuvring filter inside the χ² band at 0 steps each.
 ///
 /// Calibration. The last step of each run gives one (μ₂, true mode) pair per run:
 /// independent pairs, so among the runs where μ₂ falls in a bin, the count of runs truly in
@@ -117,11 +135,13 @@ impl Nees {
 fn on_its_own_model_the_imm_is_consistent_and_calibrated() {
     const RUNS: usize = 300;
     const STEPS: usize = 20;
-    const Z: f64 = 3.48;
     let models: [Process; 2] = QS.map(cv);
     let sensor = position(R);
-    let mut imm_nees = Nees::new(STEPS);
-    let mut single_nees = [Nees::new(STEPS), Nees::new(STEPS)];
+    // Per step: Σ ε over the runs for the IMM and the two single filters, and Σ of the
+    // IMM's predicted NEES variance.
+    let mut imm_nees = [0.0; STEPS];
+    let mut predicted_variance = [0.0; STEPS];
+    let mut single_nees = [[0.0; STEPS]; 2];
     let mut last = Vec::with_capacity(RUNS);
     for seed in 0..RUNS as u64 {
         let run = draw(1000 + seed, STEPS);
@@ -132,36 +152,41 @@ fn on_its_own_model_the_imm_is_consistent_and_calibrated() {
             let z = Vector1::new(run.measurements[k]);
             imm.predict_modes(&models, &u0(), DT).unwrap();
             imm.update_modes(&sensor, &z).unwrap();
-            imm_nees.add(
-                k,
-                nees(&(imm.state() - run.states[k]), imm.covariance()).unwrap(),
-            );
+            imm_nees[k] += nees(&(imm.state() - run.states[k]), imm.covariance()).unwrap();
+            predicted_variance[k] += mixture_nees_variance(&imm);
             for (f, (model, sum)) in singles.iter_mut().zip(models.iter().zip(&mut single_nees)) {
                 f.predict(model, &u0(), DT).unwrap();
                 f.update(&sensor, &z).unwrap();
-                sum.add(
-                    k,
-                    nees(&(f.state() - run.states[k]), f.covariance()).unwrap(),
-                );
+                sum[k] += nees(&(f.state() - run.states[k]), f.covariance()).unwrap();
             }
         }
         last.push((imm.probabilities()[1], run.modes[STEPS - 1]));
     }
-    for k in 0..STEPS {
-        let (mean, t) = imm_nees.at(k, RUNS, 2.0);
-        assert!(t.abs() <= Z, "IMM step {k}: NEES {mean}, t = {t}");
-        if k >= 5 {
-            let (quiet, t_quiet) = single_nees[0].at(k, RUNS, 2.0);
-            let (loud, t_loud) = single_nees[1].at(k, RUNS, 2.0);
-            assert!(
-                t_quiet > Z,
-                "quiet filter step {k}: NEES {quiet}, t = {t_quiet}"
-            );
-            assert!(
-                t_loud < -Z,
-                "manoeuvring filter step {k}: NEES {loud}, t = {t_loud}"
-            );
-        }
+    let runs = RUNS as f64;
+    let chi2 = ChiSquareBand::two_sided(2, RUNS, 0.95).unwrap();
+    let imm_inside = (0..STEPS)
+        .filter(|&k| {
+            let half_width = 1.96 * (predicted_variance[k] / runs / runs).sqrt();
+            (imm_nees[k] / runs - 2.0).abs() <= half_width
+        })
+        .count();
+    let chi2_inside =
+        |sums: &[f64; STEPS]| (sums.iter()).filter(|&&s| chi2.contains(s / runs)).count();
+    // The largest bound with P(count < bound) ≤ 1 % for a consistent estimator: 16 of 20.
+    let bound = (0..=STEPS)
+        .take_while(|&k| binomial_below(k, STEPS, 0.95) <= 0.01)
+        .last()
+        .unwrap();
+    assert!(
+        imm_inside >= bound,
+        "IMM inside its band at {imm_inside} of {STEPS} steps"
+    );
+    for (name, sums) in ["quiet", "manoeuvring"].iter().zip(&single_nees) {
+        let inside = chi2_inside(sums);
+        assert!(
+            inside <= 5,
+            "{name} filter inside the χ² band at {inside} of {STEPS} steps"
+        );
     }
     let mut bins_checked = 0;
     for b in 0..5 {

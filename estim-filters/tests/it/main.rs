@@ -37,6 +37,7 @@ mod gaussian_sum;
 mod iekf;
 mod imm;
 mod imm_consistency;
+mod imm_sizes;
 mod imm_smoother;
 mod multirate;
 mod nees;
