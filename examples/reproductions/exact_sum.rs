@@ -6,7 +6,8 @@
 //! `f64` partials (Shewchuk 1997, "Adaptive precision floating-point arithmetic", grow-expansion
 //! by two-sum, as Python's `math.fsum`) and [`value`](ExactSum::value) rounds it once,
 //! correctly (round half to even; Python's final step). The rounded value is a function of the
-//! exact sum alone, so any order and any split into shards give the same bits. A sum whose
+//! exact sum alone, so any order and any split into shards give the same bits, as long as no
+//! partial sum overflows (see below: an overflow depends on the order, as in `math.fsum`). A sum whose
 //! partials outgrow three is compressed (Shewchuk's Compress, exact), so most sums keep one to
 //! three partials, inline; an addition costs a few flops per partial.
 //!

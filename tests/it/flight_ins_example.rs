@@ -129,3 +129,17 @@ fn a_missing_file_or_column_is_named() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// EKF3's step by ArduPilot's rule (n samples, n the smallest with n T ≥ 12 ms − T/2): worked
+/// by hand for the loop rates ArduPilot runs at.
+#[test]
+fn ekf3_step_follows_the_autopilots_accumulation_rule() {
+    use crate::flight_ins::ekf3_step;
+    for (rate, step) in [(50.0, 0.02), (100.0, 0.01), (200.0, 0.01), (400.0, 0.0125)] {
+        let got = ekf3_step(1.0 / rate);
+        assert!(
+            (got - step).abs() < 1e-12,
+            "{rate} Hz: {got} s, not {step} s"
+        );
+    }
+}

@@ -5,8 +5,9 @@
 //! bit-identically. On the way in every shape must agree, every number be finite (log-weights
 //! may be −∞, not NaN or +∞), the log-weights normalised (log Σ Wᵢ = 0 to √ε) and each weight
 //! within √ε (relative) of exp(log Wᵢ): a typed error otherwise, never a panic. A checkpoint
-//! without weights (written before they were stored) is read with Wᵢ = exp(log Wᵢ), and then
-//! resumes to within round-off, not bit for bit.
+//! without weights (written before they were stored) in a self-describing format (JSON, CBOR,
+//! MessagePack) is read with Wᵢ = exp(log Wᵢ), and then resumes to within round-off, not bit
+//! for bit; positional formats (bincode, postcard) refuse it with a typed error.
 //!
 //! ```
 //! use estim_core::nalgebra::{Matrix1, Vector1, U1};
@@ -184,7 +185,9 @@ where
         let tolerance = super::resample::to_f64(T::default_epsilon().sqrt());
         let agrees = |(&w, &lw): (&f64, &T)| {
             let exact = super::resample::to_f64(lw).exp();
-            w >= 0.0 && (w - exact).abs() <= tolerance * w.max(exact) + f64::MIN_POSITIVE
+            w.is_finite()
+                && w >= 0.0
+                && (w - exact).abs() <= tolerance * w.max(exact) + f64::MIN_POSITIVE
         };
         if weights.len() != count || !weights.iter().zip(&f.log_weights).all(agrees) {
             return Err(weights_error);

@@ -112,9 +112,16 @@ impl Config {
     }
 }
 
-/// EKF3's own step when the loop is faster [s] (`EKF_TARGET_DT` in ArduPilot's EKF3): it
-/// runs at the loop rate `SCHED_LOOP_RATE`, but no faster than every 12 ms.
+/// EKF3's target step [s] (`EKF_TARGET_DT` in ArduPilot's EKF3).
 pub const EKF3_TARGET_STEP: f64 = 0.012;
+
+/// EKF3's step for a loop (IMU) period T [s]: it accumulates n samples, n the smallest with
+/// n T ≥ `EKF_TARGET_DT` − T/2 (`readIMUData`), so the step is n T: 20 ms at 50 Hz, 10 ms at
+/// 100 and 200 Hz, 12.5 ms at 400 Hz.
+pub fn ekf3_step(period: f64) -> f64 {
+    let n = (EKF3_TARGET_STEP / period - 0.5).ceil().max(1.0);
+    n * period
+}
 
 /// The settings derived from the recording, with where each came from.
 ///
@@ -134,8 +141,8 @@ pub struct Settings {
     pub accel_bias_walk: f64,
     /// Gyro bias walk [rad/s²/√Hz]: `EK3_GBIAS_P_NSE` √Δt.
     pub gyro_bias_walk: f64,
-    /// EKF3's step Δt [s], which its `EK3_*_P_NSE` values are per: 1/`SCHED_LOOP_RATE`, at
-    /// least [`EKF3_TARGET_STEP`] (without `SCHED_LOOP_RATE`: the log's IMU period, which is
+    /// EKF3's step Δt [s], which its `EK3_*_P_NSE` values are per: [`ekf3_step`] of the loop
+    /// period 1/`SCHED_LOOP_RATE` (without `SCHED_LOOP_RATE`: the log's IMU period, which is
     /// the loop period when the IMU is logged every loop).
     pub ekf_step: f64,
     /// GPS NE position σ [m]: `EK3_POSNE_M_NSE`; down: `EK3_ALT_M_NSE`.
@@ -363,12 +370,12 @@ fn load(config: &Config) -> Result<Recording, Box<dyn std::error::Error>> {
     }
     let imu_period = median(periods);
     // EKF3's step (see `Settings`): the per-step σ of its parameters become densities.
-    let ekf_step = if loop_rate > 0.0 {
+    let loop_period = if loop_rate > 0.0 {
         1.0 / loop_rate
     } else {
         imu_period
-    }
-    .max(EKF3_TARGET_STEP);
+    };
+    let ekf_step = ekf3_step(loop_period);
     let density = ekf_step.sqrt();
     // The origin: the home row, else the first 3-D fix.
     let home = match read_table(dir, "ORGN", &["TimeUS", "Type", "Lat", "Lng", "Alt"]) {
