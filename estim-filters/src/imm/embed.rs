@@ -605,49 +605,60 @@ where
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct EmbeddedModes<L>(pub L);
 
+// An `Embedded` mode is an estimator of the common state, so the tuple's own `Modes` and
+// `UpdateModes` serve: the set only adds the prediction, each mode with its own-size model.
+impl<T: Real, N: Dim, L: Modes<T, N>> Modes<T, N> for EmbeddedModes<L>
+where
+    DefaultAllocator: Alloc<N>,
+{
+    type Snapshot = L::Snapshot;
+
+    fn count(&self) -> usize {
+        self.0.count()
+    }
+
+    #[track_caller]
+    fn mode(&self, i: usize) -> &dyn Estimator<T, N> {
+        self.0.mode(i)
+    }
+
+    #[track_caller]
+    fn reset_mode(&mut self, i: usize, prior: Gaussian<T, N>) {
+        self.0.reset_mode(i, prior);
+    }
+
+    fn snapshot(&self) -> Self::Snapshot {
+        self.0.snapshot()
+    }
+
+    fn snapshot_into(&self, snapshot: &mut Self::Snapshot) {
+        self.0.snapshot_into(snapshot);
+    }
+
+    fn restore(&mut self, snapshot: &Self::Snapshot) {
+        self.0.restore(snapshot);
+    }
+}
+
+impl<T: Real, N: Dim, M: Dim, H: ?Sized, L: UpdateModes<T, N, M, H>> UpdateModes<T, N, M, H>
+    for EmbeddedModes<L>
+where
+    DefaultAllocator: Alloc<N, M>,
+{
+    #[track_caller]
+    fn update_mode(
+        &mut self,
+        i: usize,
+        model: &H,
+        z: &OVector<T, M>,
+        report: &mut UpdateReport<T, M>,
+    ) -> Result<()> {
+        self.0.update_mode(i, model, z, report)
+    }
+}
+
 macro_rules! embedded_modes {
     ($count:literal; $($F:ident $D:ident $P:ident $idx:tt),+) => {
-        impl<T: Real, N: Dim, $($D: Dim, $F),+> Modes<T, N>
-            for EmbeddedModes<($(Embedded<T, $D, N, $F>,)+)>
-        where
-            $($F: Estimator<T, $D> + Rollback,)+
-            DefaultAllocator: Alloc<N> $(+ Alloc<$D>)+,
-        {
-            type Snapshot = ($($F::Snapshot,)+);
-
-            fn count(&self) -> usize {
-                $count
-            }
-
-            #[track_caller]
-            fn mode(&self, i: usize) -> &dyn Estimator<T, N> {
-                match i {
-                    $($idx => &(self.0).$idx,)+
-                    _ => no_mode(i, $count),
-                }
-            }
-
-            #[track_caller]
-            fn reset_mode(&mut self, i: usize, prior: Gaussian<T, N>) {
-                match i {
-                    $($idx => (self.0).$idx.reset(prior),)+
-                    _ => no_mode(i, $count),
-                }
-            }
-
-            fn snapshot(&self) -> Self::Snapshot {
-                ($((self.0).$idx.snapshot(),)+)
-            }
-
-            fn snapshot_into(&self, snapshot: &mut Self::Snapshot) {
-                $((self.0).$idx.snapshot_into(&mut snapshot.$idx);)+
-            }
-
-            fn restore(&mut self, snapshot: &Self::Snapshot) {
-                $((self.0).$idx.restore(&snapshot.$idx);)+
-            }
-        }
-
         impl<T: Real, N: Dim, U, $($D: Dim, $F, $P),+> PredictModes<T, N, ($($P,)+)>
             for EmbeddedModes<($(Embedded<T, $D, N, $F>,)+)>
         where
@@ -665,28 +676,6 @@ macro_rules! embedded_modes {
             }
         }
 
-        impl<T: Real, N: Dim, M: Dim, H, $($D: Dim, $F),+> UpdateModes<T, N, M, H>
-            for EmbeddedModes<($(Embedded<T, $D, N, $F>,)+)>
-        where
-            H: ?Sized,
-            $($F: Estimator<T, $D> + Rollback,
-              Embedded<T, $D, N, $F>: Update<T, N, M, H>,)+
-            DefaultAllocator: Alloc<N, M> $(+ Alloc<$D, M>)+,
-        {
-            #[track_caller]
-            fn update_mode(
-                &mut self,
-                i: usize,
-                model: &H,
-                z: &OVector<T, M>,
-                report: &mut UpdateReport<T, M>,
-            ) -> Result<()> {
-                match i {
-                    $($idx => (self.0).$idx.update_into(model, z, report),)+
-                    _ => no_mode(i, $count),
-                }
-            }
-        }
     };
 }
 
