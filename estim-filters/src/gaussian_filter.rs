@@ -524,7 +524,9 @@ where
     Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
     DefaultAllocator: Alloc<N>,
 {
-    #[inline(always)]
+    // Inlined in optimised builds only: see `Update::update` (traits.rs).
+    #[cfg_attr(not(debug_assertions), inline(always))]
+    #[cfg_attr(debug_assertions, inline)]
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
         self.process_step(model, input, dt, None, Step::Apply)
     }
@@ -642,7 +644,9 @@ where
     /// Runs through the same prediction code (vector states only: the filter's state space is
     /// [`Euclidean`]); building the decorrelated map allocates for
     /// runtime sizes (it solves with R once per call).
-    #[inline(always)]
+    // Inlined in optimised builds only: see `Update::update` (traits.rs).
+    #[cfg_attr(not(debug_assertions), inline(always))]
+    #[cfg_attr(debug_assertions, inline)]
     fn predict_correlated(
         &mut self,
         process: &P,
@@ -753,7 +757,9 @@ where
     Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H, S>>,
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
+    // Inlined in optimised builds only: see `Update::update` (traits.rs).
+    #[cfg_attr(not(debug_assertions), inline(always))]
+    #[cfg_attr(debug_assertions, inline)]
     fn update_into(
         &mut self,
         model: &H,
