@@ -272,7 +272,8 @@ where
     /// Removes the batch's inserted records (latest first, so the others keep their places).
     fn remove_batch(&mut self) {
         self.slots.retain(|s| !s.ignored);
-        self.slots.sort_unstable_by_key(|s| core::cmp::Reverse(s.at));
+        self.slots
+            .sort_unstable_by_key(|s| core::cmp::Reverse(s.at));
         for slot in &self.slots {
             self.history.remove(slot.at);
         }
