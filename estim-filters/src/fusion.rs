@@ -16,7 +16,9 @@
 //!   re-run from the checkpoint before it. The replay runs the same operations in the same
 //!   order as a time-ordered delivery would have, so the result is **bit-identical** (tested);
 //!   a measurement older than the history is refused with [`FusionError::TooOld`], never fused
-//!   as if it were current;
+//!   as if it were current. Readings that arrive together (a GPS fix's position and velocity)
+//!   go in one [`FusionDriver::fuse_all`] call: inserted together, one rollback and one replay,
+//!   the same bits as fusing them one by one, and all or nothing if one is refused;
 //! - it **decides per measurement** ([`Outcome`]): accepted, rejected by the NIS gate (with the
 //!   test ratio NIS/gate and the per-component normalised innovations), used to reset the
 //!   filter, or excluded because its sensor is faulty; it keeps counters and a health summary
@@ -131,8 +133,10 @@
 //! # Memory
 //!
 //! Everything is allocated at construction: the history's records (with static sizes their
-//! vectors and matrices live inside the records), the per-sensor windows. After that, with
-//! static sizes, no call allocates (tested with a counting allocator). With runtime sizes the
+//! vectors and matrices live inside the records), the per-sensor windows, and room for a
+//! [`FusionDriver::fuse_all`] batch of one reading per sensor. After that, with static sizes,
+//! no call allocates (tested with a counting allocator); a larger batch grows the spare
+//! records and the result buffer once, to its size. With runtime sizes the
 //! snapshots are copied into the records' buffers ([`Rollback::snapshot_into`]), a covariance
 //! reset allocates one vector and one matrix, and a runtime-sized input is cloned into each
 //! record it is held over.
@@ -167,7 +171,7 @@ mod sensors;
 mod settings;
 
 pub use driver::FusionDriver;
-pub use error::{FusionError, FusionSetting};
+pub use error::{BatchError, FusionError, FusionSetting};
 pub use monitor::{SensorHealth, SensorStatus};
 pub use outcome::{
     ExclusionReason, Fused, Innovation, MAX_REPORTED_COMPONENTS, Outcome, ResetReason,

@@ -11,6 +11,7 @@ use super::sensors::SensorSet;
 use super::settings::{DuplicatePolicy, FusionSettings, InputConvention, Resolved, SensorSettings};
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback};
 
+mod batch;
 mod smooth;
 
 /// A filter `F` of the family, its process model `P` with its input, and the sensors `S`,
@@ -42,6 +43,10 @@ where
     prior: F::Snapshot,
     prior_state: OVector<T, N>,
     prior_covariance: OMatrix<T, N, N>,
+    /// Where the readings of the current [`fuse_all`](Self::fuse_all) batch went.
+    slots: Vec<batch::Slot>,
+    /// What [`fuse_all`](Self::fuse_all) returns.
+    fused: Vec<Fused<T>>,
 }
 
 impl<T, N, F, P, S> FusionDriver<T, N, F, P, S>
@@ -113,11 +118,16 @@ where
             health: health.clone(),
             outcome: None,
         };
+        let mut history = History::new(start_record, settings.capacity);
+        // A batch of one reading per sensor never allocates.
+        history.reserve(sensors.count());
         Ok(Self {
+            slots: Vec::with_capacity(sensors.count()),
+            fused: Vec::with_capacity(sensors.count()),
             prior: filter.snapshot(),
             prior_state: filter.state().clone(),
             prior_covariance: filter.covariance().clone(),
-            history: History::new(start_record, settings.capacity),
+            history,
             filter,
             process,
             sensors,
@@ -419,6 +429,11 @@ where
     /// Re-runs the records from `start` on from the checkpoint `start − 1` (restored first if
     /// `restore`; otherwise the live state must be that checkpoint's).
     fn run_from(&mut self, start: usize, restore: bool) -> Result<(), FusionError> {
+        self.run_indexed(start, restore).map_err(|(_, e)| e)
+    }
+
+    /// [`run_from`](Self::run_from), with the index of the record that failed.
+    fn run_indexed(&mut self, start: usize, restore: bool) -> Result<(), (usize, FusionError)> {
         let Self {
             filter,
             process,
@@ -432,6 +447,7 @@ where
             prior,
             prior_state,
             prior_covariance,
+            ..
         } = self;
         let checkpoint = history.get(start - 1);
         if restore {
@@ -456,7 +472,8 @@ where
                 Some(Event::Input(u)) => u,
                 _ => &*input,
             };
-            predict_span(filter, process, span_input, time - previous, settings)?;
+            predict_span(filter, process, span_input, time - previous, settings)
+                .map_err(|e| (j, e))?;
             let record = history.get_mut(j);
             match &record.event {
                 Event::Input(u) => input.clone_from(u),
@@ -467,15 +484,18 @@ where
                         prior_state: &mut *prior_state,
                         prior_covariance: &mut *prior_covariance,
                     };
-                    record.outcome = Some(decide(
-                        filter,
-                        sensors,
-                        reading,
-                        *sensor,
-                        &resolved[*sensor],
-                        health,
-                        work,
-                    )?);
+                    record.outcome = Some(
+                        decide(
+                            filter,
+                            sensors,
+                            reading,
+                            *sensor,
+                            &resolved[*sensor],
+                            health,
+                            work,
+                        )
+                        .map_err(|e| (j, e))?,
+                    );
                 }
             }
             filter.snapshot_into(&mut record.snapshot);

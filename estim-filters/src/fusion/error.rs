@@ -151,6 +151,21 @@ pub enum FusionError {
     Filter(#[from] estim_core::Error),
 }
 
+/// A batch refused by [`FusionDriver::fuse_all`](super::FusionDriver::fuse_all): which
+/// reading, and why. The driver is left exactly as it was before the batch (no reading of it
+/// is fused).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error("reading {index} of the batch: {error}")]
+pub struct BatchError {
+    /// The reading's position in the batch (0-based, in the order given). For a filter step
+    /// that failed during the replay: the reading whose update failed, or, if the step that
+    /// failed was a prediction or a later event's, the last reading (in the order given)
+    /// placed at or before that event.
+    pub index: usize,
+    /// Why: the error [`FusionDriver::fuse`](super::FusionDriver::fuse) gives.
+    pub error: FusionError,
+}
+
 impl FusionError {
     pub(crate) fn setting(setting: FusionSetting, value: f64) -> Self {
         FusionError::InvalidSetting { setting, value }

@@ -54,8 +54,9 @@ impl<T: Real, Sn, U, R> Record<T, Sn, U, R> {
     }
 }
 
-/// The records, oldest first. `ring.len() + pool.len() == capacity + 1` always: the ring
-/// holds at most `capacity` records between calls and one more while an event is processed.
+/// The records, oldest first. `ring.len() + pool.len() ≥ capacity + 1` always: the ring
+/// holds at most `capacity` records between calls and more while events are processed (one
+/// per event; a batch of k measurements takes k, and the pool grows once to the largest batch).
 #[derive(Debug)]
 pub(crate) struct History<T: Real, Sn, U, R> {
     ring: VecDeque<Record<T, Sn, U, R>>,
@@ -112,12 +113,18 @@ impl<T: Real, Sn, U, R> History<T, Sn, U, R> {
         i
     }
 
-    /// Inserts an event at `i` in a recycled record (no allocation).
-    pub fn insert(&mut self, i: usize, time: f64, event: Event<U, R>) {
-        let mut record = self
-            .pool
-            .pop()
-            .expect("the history always keeps a spare record between calls");
+    /// Inserts an event at `i` in a recycled record (no allocation while the pool has one; a
+    /// batch larger than the spare records clones one more, kept for later calls).
+    pub fn insert(&mut self, i: usize, time: f64, event: Event<U, R>)
+    where
+        Sn: Clone,
+        U: Clone,
+        R: Clone,
+    {
+        let mut record = match self.pool.pop() {
+            Some(record) => record,
+            None => self.ring[0].clone(),
+        };
         record.time = time;
         record.event = event;
         record.outcome = None;
@@ -129,6 +136,22 @@ impl<T: Real, Sn, U, R> History<T, Sn, U, R> {
         if let Some(record) = self.ring.remove(i) {
             self.pool.push(record);
         }
+    }
+
+    /// Records enough for a batch of `batch` events on a full ring: `capacity + batch` in all
+    /// (allocates only when it grows).
+    pub fn reserve(&mut self, batch: usize)
+    where
+        Sn: Clone,
+        U: Clone,
+        R: Clone,
+    {
+        let total = self.capacity + batch;
+        while self.ring.len() + self.pool.len() < total {
+            let record = self.ring[0].clone();
+            self.pool.push(record);
+        }
+        self.ring.reserve(total.saturating_sub(self.ring.len()));
     }
 
     /// Drops the oldest records beyond the capacity.

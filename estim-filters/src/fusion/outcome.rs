@@ -170,7 +170,8 @@ impl<T: Copy> Outcome<T> {
     }
 }
 
-/// What [`FusionDriver::fuse`](super::FusionDriver::fuse) did with a measurement.
+/// What [`FusionDriver::fuse`](super::FusionDriver::fuse) (or
+/// [`fuse_all`](super::FusionDriver::fuse_all)) did with a measurement.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Fused<T> {
     /// The sensor.

@@ -274,8 +274,15 @@ fn static_sizes_allocate_nothing_after_construction() {
         let mut kf = kf_driver(judged());
         let mut ukf = crate::fusion_support::driver(Ukf::new(prior()), judged());
         let count = allocations_during(|| {
-            for &(arrival, time, reading) in &events {
-                if filter_kind == 0 {
+            for (i, &(arrival, time, reading)) in events.iter().enumerate() {
+                if filter_kind == 0 && i % 2 == 1 {
+                    // A batch of two on a full history (room reserved at construction), and
+                    // a refused batch (one record inserted, then removed).
+                    let pair = [(time, reading), (time + 5e-4, reading)];
+                    black_box(kf.fuse_all(pair).unwrap());
+                    kf.advance_to(arrival.max(kf.time())).unwrap();
+                    let _ = black_box(kf.fuse_all([(time + 7e-4, reading), (f64::NAN, reading)]));
+                } else if filter_kind == 0 {
                     black_box(kf.fuse(time, reading).unwrap());
                     kf.advance_to(arrival.max(kf.time())).unwrap();
                     let _ = black_box(kf.fuse(f64::NAN, reading));

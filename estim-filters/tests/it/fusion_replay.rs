@@ -2,10 +2,12 @@
 //! horizon they give bit for bit the driver a time-ordered delivery gives, and in a Monte Carlo
 //! the real-time estimate is consistent, while fusing the same late fixes as current is not.
 
-use estim_core::nalgebra::{U1, U2};
+use estim_core::nalgebra::{U1, U2, Vector1};
 use estim_core::{LinearMeasurement, propagate::Unscented};
 use estim_filters::consistency::{ChiSquareBand, nees};
-use estim_filters::fusion::{FusionError, MonitorSettings, ResetSettings, SensorSettings};
+use estim_filters::fusion::{
+    DuplicatePolicy, FusionDriver, FusionError, MonitorSettings, ResetSettings, SensorSettings,
+};
 use estim_filters::{
     Estimator, GaussianFilter, Iekf, KalmanFilter, Predict, Rollback, SrEkf, SrKalmanFilter, SrUkf,
     Update,
@@ -14,7 +16,8 @@ use rand::Rng;
 
 use crate::common::rng;
 use crate::fusion_support::{
-    CartDriver, ConstantVelocity, GRID, Reading, Taken, driver, measurements, prior, snapshot,
+    Cart, CartDriver, ConstantVelocity, GRID, Q, Reading, Snapshot, Taken, driver, kf_driver,
+    measurements, prior, settings, snapshot,
 };
 
 /// Gate, reset and monitor all on, so that the replay has decisions to re-make.
@@ -200,4 +203,223 @@ fn late_fixes_fused_at_their_time_are_consistent_and_fused_as_current_are_not() 
             }
         }
     }
+}
+
+/// Everything two drivers expose, compared bit for bit (`==` on `f64` would let −0 = +0 pass).
+fn assert_same_bits(a: &CartDriver<KalmanFilter<f64, U2>>, b: &CartDriver<KalmanFilter<f64, U2>>) {
+    let bits = |s: &Snapshot| {
+        s.state
+            .iter()
+            .chain(s.covariance.iter())
+            .map(|v| v.to_bits())
+            .collect::<Vec<_>>()
+    };
+    let (sa, sb) = (snapshot(a), snapshot(b));
+    assert_eq!(bits(&sa), bits(&sb));
+    assert_eq!(sa, sb, "health, decisions and history must agree too");
+    assert_eq!(a.filter().snapshot(), b.filter().snapshot());
+    assert_eq!(a.log_likelihood().to_bits(), b.log_likelihood().to_bits());
+}
+
+/// `fuse_all` of each step's arrivals (late, of mixed times, and at one time: a velocity
+/// with every position fix, delayed together) equals `fuse` on each in the same order, bit for
+/// bit, with the same per-reading results; a batch given against time order returns the
+/// re-made decisions, the ones `decisions` lists.
+#[test]
+fn fuse_all_equals_fusing_one_by_one() {
+    for seed in [1, 2] {
+        // The deliveries' readings (outliers included), a velocity added to each position
+        // fix that has none, and one delay per fix time so that a fix arrives whole.
+        let (taken, _) = deliveries(seed, 300);
+        let (x, _) = measurements(seed, 300);
+        let mut noise = rng(seed ^ 0xba7c);
+        let mut fixes = Vec::new();
+        for m in &taken {
+            fixes.push(*m);
+            let alone = !taken
+                .iter()
+                .any(|o| o.step == m.step && matches!(o.reading, Reading::Velocity(_)));
+            if matches!(m.reading, Reading::Position(_)) && alone {
+                let reading = crate::fusion_support::read(&mut noise, 1, &x[m.step]);
+                fixes.push(Taken {
+                    step: m.step,
+                    reading,
+                });
+            }
+        }
+        let delay: Vec<usize> = (0..=300).map(|_| noise.random_range(0..=30)).collect();
+        let mut arrivals: Vec<(usize, Taken)> =
+            fixes.iter().map(|m| (m.step + delay[m.step], *m)).collect();
+        arrivals.sort_by_key(|(arrival, _)| *arrival); // stable: ties keep taken order
+        let mut batched = kf_driver(judged());
+        let mut single = kf_driver(judged());
+        let (mut batches, mut shared) = (0, 0);
+        let mut start = 0;
+        while start < arrivals.len() {
+            let end = start + arrivals[start..].partition_point(|a| a.0 == arrivals[start].0);
+            let batch: Vec<(f64, Reading)> = arrivals[start..end]
+                .iter()
+                .map(|(_, m)| (m.time(), m.reading))
+                .collect();
+            shared += usize::from(batch.windows(2).any(|w| w[0].0 == w[1].0));
+            // Each step's arrivals are in taken order (ties: position first), so no reading
+            // lands before one given earlier and `fuse` returns the final decisions too.
+            let one_by_one: Vec<_> = batch
+                .iter()
+                .map(|&(t, r)| single.fuse(t, r).unwrap())
+                .collect();
+            let fused = batched.fuse_all(batch).unwrap().to_vec();
+            assert_eq!(fused, one_by_one, "seed {seed}, batch {batches}");
+            assert_same_bits(&batched, &single);
+            batches += 1;
+            start = end;
+        }
+        assert!(
+            shared > 20 && batches + 20 < arrivals.len(),
+            "seed {seed}: batches of several readings and of one time ({shared}, {batches})"
+        );
+        // Against time order: the velocity at 2.99 s then the position at 2.95 s, both late.
+        let now = batched.time();
+        let against = [
+            (now - 0.01, Reading::Velocity(Vector1::new(1.0))),
+            (
+                now - 0.05,
+                Reading::Position(Vector1::new(batched.filter().state()[0])),
+            ),
+        ];
+        let provisional = single.fuse(against[0].0, against[0].1).unwrap();
+        single.fuse(against[1].0, against[1].1).unwrap();
+        let fused = batched.fuse_all(against).unwrap().to_vec();
+        assert_same_bits(&batched, &single);
+        let remade = batched
+            .decisions()
+            .find(|d| d.0 == against[0].0 && d.1 == 1)
+            .unwrap();
+        assert_eq!(fused[0].outcome, remade.2);
+        assert_eq!(fused[0].replayed, provisional.replayed);
+        assert_ne!(
+            fused[0].outcome, provisional.outcome,
+            "the position re-makes it"
+        );
+    }
+}
+
+/// A reading that `KeepFirst` ignores, in the batch or kept from before, is reported as
+/// `fuse` reports it, and ignored the same way.
+#[test]
+fn fuse_all_keeps_the_first_reading_as_fuse_does() {
+    let keep_first = || {
+        let settings = estim_filters::fusion::FusionSettings {
+            duplicates: DuplicatePolicy::KeepFirst,
+            ..settings()
+        };
+        let filter = KalmanFilter::new(prior());
+        FusionDriver::new(
+            filter,
+            ConstantVelocity { q: Q },
+            (),
+            Cart::new(),
+            0.0,
+            settings,
+            judged(),
+        )
+        .unwrap()
+    };
+    let (mut batched, mut single) = (keep_first(), keep_first());
+    let p = |z: f64| Reading::Position(Vector1::new(z));
+    let v = |z: f64| Reading::Velocity(Vector1::new(z));
+    for batch in [
+        vec![(0.10, p(0.1)), (0.10, v(1.0)), (0.10, p(0.3))],
+        // In time order (see `fuse_all`'s doc for the other): a reading kept from before and
+        // one kept from the batch.
+        vec![
+            (0.05, p(0.05)),
+            (0.20, v(1.1)),
+            (0.10, v(0.9)),
+            (0.05, p(0.2)),
+        ],
+        vec![],
+    ] {
+        let one_by_one: Vec<_> = batch
+            .iter()
+            .map(|&(t, r)| single.fuse(t, r).unwrap())
+            .collect();
+        let fused = batched.fuse_all(batch).unwrap().to_vec();
+        assert_eq!(fused, one_by_one);
+        assert_same_bits(&batched, &single);
+    }
+    assert!(batched.fuse_all([]).unwrap().is_empty());
+}
+
+/// A batch with a refused reading in the middle (each kind of refusal, and a filter step that
+/// fails in the replay) fuses nothing: the driver is exactly as before, names the reading, and
+/// goes on exactly as a driver that never saw the batch.
+#[test]
+fn fuse_all_refused_in_the_middle_changes_nothing() {
+    let (_, taken) = measurements(7, 200);
+    let mut d = kf_driver(judged());
+    let mut twin = kf_driver(judged());
+    for m in &taken {
+        d.fuse(m.time(), m.reading).unwrap();
+        twin.fuse(m.time(), m.reading).unwrap();
+    }
+    let now = d.time();
+    let p = |z: f64| Reading::Position(Vector1::new(z));
+    let v = |z: f64| Reading::Velocity(Vector1::new(z));
+    let x = *d.filter().state();
+    type Case = (Vec<(f64, Reading)>, usize, fn(&FusionError) -> bool);
+    let cases: Vec<Case> = vec![
+        (
+            vec![(now - 0.23, p(x[0])), (now - 0.6, v(x[1])), (now, p(x[0]))],
+            1,
+            |e| matches!(e, FusionError::TooOld { .. }),
+        ),
+        (vec![(now - 0.1, v(x[1])), (f64::NAN, p(x[0]))], 1, |e| {
+            matches!(e, FusionError::NonFiniteTime { .. })
+        }),
+        (
+            vec![
+                (now - 0.1, v(x[1])),
+                (now - 0.13, p(x[0])),
+                (now, Reading::Unknown),
+            ],
+            2,
+            |e| matches!(e, FusionError::UnknownSensor { sensor: 5, .. }),
+        ),
+        // `settings()` refuses a second reading of a sensor at one time, within a batch too.
+        (
+            vec![
+                (now - 0.15, p(x[0])),
+                (now - 0.05, v(x[1])),
+                (now - 0.15, p(x[0])),
+            ],
+            2,
+            |e| matches!(e, FusionError::Duplicate { sensor: 0, .. }),
+        ),
+        // A gap of 10⁶ s needs more than `max_substeps` steps.
+        (vec![(now - 0.13, p(x[0])), (now + 1e6, v(x[1]))], 1, |e| {
+            matches!(e, FusionError::GapTooLong { .. })
+        }),
+        // Checked, inserted, then its update fails in the replay (a non-finite reading).
+        (
+            vec![
+                (now - 0.33, p(x[0])),
+                (now - 0.2, v(f64::NAN)),
+                (now - 0.13, p(x[0])),
+            ],
+            1,
+            |e| matches!(e, FusionError::Filter(_)),
+        ),
+    ];
+    for (k, (batch, index, kind)) in cases.into_iter().enumerate() {
+        let refused = d.fuse_all(batch).unwrap_err();
+        assert_eq!(refused.index, index, "case {k}: {refused}");
+        assert!(kind(&refused.error), "case {k}: {refused}");
+        assert_same_bits(&d, &twin);
+    }
+    for m in measurements(8, 260).1.iter().filter(|m| m.time() > now) {
+        d.fuse(m.time(), m.reading).unwrap();
+        twin.fuse(m.time(), m.reading).unwrap();
+    }
+    assert_same_bits(&d, &twin);
 }

@@ -654,11 +654,12 @@ where
                 continue;
             }
             let (pos, vel) = gps_ned(&rec.origin, g);
-            for (k, fix) in [Fix::Position(pos), Fix::Velocity(vel)]
-                .into_iter()
-                .enumerate()
-            {
-                if !driver.fuse(taken, fix)?.outcome.applied() {
+            // The position and the velocity of one fix in one call: one rollback and one
+            // replay of the IMU samples since it was taken, not one per reading.
+            let fused =
+                driver.fuse_all([(taken, Fix::Position(pos)), (taken, Fix::Velocity(vel))])?;
+            for (k, f) in fused.iter().enumerate() {
+                if !f.outcome.applied() {
                     if k == 0 {
                         rejected.0 += 1
                     } else {
