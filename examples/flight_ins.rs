@@ -40,8 +40,10 @@
 //! one replay of the samples since it was taken (two of each when the two readings were fused
 //! one by one; the figures printed are the same to the bit). Instructions of the EKF loop
 //! (callgrind, the whole flight, 34,113 samples): 77,100 per sample before, 57,300 after,
-//! 41,200 with the fixes fused on arrival (no replay). Wall time, alternating the two builds on
-//! a shared 2-core machine at load 2–3.5: median 6.0 µs (5.0–11.2) after, 7.5 µs (6.6–12.6)
+//! 41,200 with the fixes fused on arrival (no replay). Wall time on a shared 2-core machine
+//! whose speed drifts (BENCHMARKS.md, "GPS/INS"): 5.0 µs median (4.8–5.5) in the runs where the
+//! no-replay loop took its usual 3.6–3.8 µs; alternating the two builds at load 2–3.5, median
+//! 6.0 µs (5.0–11.2) after, 7.5 µs (6.6–12.6)
 //! before. What is left is the filter's prediction (≈ 30,000 instructions: F P Fᵀ, the
 //! Jacobian, the checks), run 1.8 times per sample with the replays: the ≈ 7 replayed per fix,
 //! and the sample interval that a fix's time splits in two. The driver's own book-keeping is

@@ -155,14 +155,16 @@ pub enum FusionError {
 /// reading, and why. The driver is left exactly as it was before the batch (no reading of it
 /// is fused).
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
-#[error("reading {index} of the batch: {error}")]
+#[error("reading {index} of the batch was refused")]
 pub struct BatchError {
     /// The reading's position in the batch (0-based, in the order given). For a filter step
-    /// that failed during the replay: the reading whose update failed, or, if the step that
-    /// failed was a prediction or a later event's, the last reading (in the order given)
-    /// placed at or before that event.
+    /// that failed during the replay: the reading at the record whose step (its prediction
+    /// or its update) failed, or else the last reading, in the order given, placed before
+    /// that record.
     pub index: usize,
-    /// Why: the error [`FusionDriver::fuse`](super::FusionDriver::fuse) gives.
+    /// Why: the error [`FusionDriver::fuse`](super::FusionDriver::fuse) gives (also the
+    /// error's [`source`](core::error::Error::source)).
+    #[source]
     pub error: FusionError,
 }
 

@@ -67,8 +67,8 @@ where
     /// `fuse` would give: [`FusionError::NonFiniteTime`], [`FusionError::UnknownSensor`],
     /// [`FusionError::TooOld`], [`FusionError::Duplicate`], [`FusionError::GapTooLong`], or
     /// [`FusionError::Filter`] when a filter step of the replay fails (then the reading is
-    /// the one whose update failed, or the last one, in the order given, placed before the
-    /// step that failed).
+    /// the one at the record whose prediction or update failed, or else the last one, in the
+    /// order given, placed before that record).
     ///
     /// ```
     /// # use estim_core::nalgebra::{Matrix1, Matrix1x2, Matrix2, U1, U2, Vector1, Vector2};
