@@ -8,7 +8,7 @@ use super::history::{Event, History, Record};
 use super::monitor::{Health, SensorHealth};
 use super::outcome::{ExclusionReason, Fused, Innovation, Outcome, ResetReason};
 use super::sensors::SensorSet;
-use super::settings::{DuplicatePolicy, FusionSettings, InputConvention, Resolved, SensorSettings};
+use super::settings::{FusionSettings, InputConvention, Resolved, SensorSettings};
 use crate::traits::{Estimator, Predict, ProcessInput, Rollback};
 
 mod batch;
@@ -220,9 +220,9 @@ where
     /// Errors, each leaving the driver exactly as it was: [`FusionError::NonFiniteTime`],
     /// [`FusionError::UnknownSensor`], [`FusionError::TooOld`] (more than the horizon before
     /// the latest event, or before the oldest record kept), [`FusionError::Duplicate`] (this
-    /// sensor already has a measurement at this time and
-    /// [`FusionSettings::duplicates`] is [`DuplicatePolicy::Refuse`]; the default fuses
-    /// both), [`FusionError::GapTooLong`], and
+    /// sensor already has a measurement at this time and [`FusionSettings::duplicates`] is
+    /// [`DuplicatePolicy::Refuse`](super::DuplicatePolicy::Refuse); the default fuses both),
+    /// [`FusionError::GapTooLong`], and
     /// [`FusionError::Filter`] when a filter step fails (e.g. a non-finite reading).
     ///
     /// ```
@@ -253,63 +253,30 @@ where
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     pub fn fuse(&mut self, time: f64, reading: S::Reading) -> Result<Fused<T>, FusionError> {
-        if !time.is_finite() {
-            return Err(FusionError::NonFiniteTime { time });
+        // The same checks and insertion as a batch of one (nothing trimmed yet).
+        let slot = self.place(time, reading, 0)?;
+        let (at, sensor) = (slot.at, slot.sensor);
+        // Between calls every recorded measurement has its decision: `None` is unreachable.
+        let undecided = FusionError::Filter(Error::NonFinite {
+            stage: Stage::Update,
+            quantity: Quantity::Measurement,
+        });
+        if slot.ignored {
+            // KeepFirst: the reading already recorded at this time keeps its decision.
+            let outcome = self.history.get(at).outcome.ok_or(undecided)?;
+            return Ok(Fused {
+                sensor,
+                time,
+                outcome,
+                replayed: 0,
+                ignored: true,
+            });
         }
-        let count = self.sensors.count();
-        let sensor = self.sensors.sensor(&reading);
-        if sensor >= count {
-            return Err(FusionError::UnknownSensor { sensor, count });
-        }
-        let latest = self.history.latest().time;
-        let oldest = self
-            .history
-            .oldest()
-            .time
-            .max(latest - self.settings.horizon);
-        if time < oldest {
-            return Err(FusionError::TooOld { time, oldest });
-        }
-        let first = self.history.iter().find(|r| r.is_measurement(time, sensor));
-        match (first, self.settings.duplicates) {
-            (None, _) | (Some(_), DuplicatePolicy::FuseBoth) => {}
-            (Some(_), DuplicatePolicy::Refuse) => {
-                return Err(FusionError::Duplicate { sensor, time });
-            }
-            (Some(first), DuplicatePolicy::KeepFirst) => {
-                if let Some(outcome) = first.outcome {
-                    return Ok(Fused {
-                        sensor,
-                        time,
-                        outcome,
-                        replayed: 0,
-                        ignored: true,
-                    });
-                }
-            }
-        }
-        let at = self.history.insertion_index(time, sensor);
-        if at == 0 {
-            return Err(FusionError::TooOld { time, oldest });
-        }
-        let appended = at == self.history.len();
-        if appended {
-            substeps(time - latest, &self.settings)?;
-        }
-        self.history
-            .insert(at, time, Event::Measurement { sensor, reading });
-        if let Err(e) = self.run_from(at, !appended) {
+        if let Err(e) = self.run_from(at, at + 1 < self.history.len()) {
             self.undo(at);
             return Err(e);
         }
-        let outcome =
-            self.history
-                .get(at)
-                .outcome
-                .ok_or(FusionError::Filter(Error::NonFinite {
-                    stage: Stage::Update,
-                    quantity: Quantity::Measurement,
-                }))?;
+        let outcome = self.history.get(at).outcome.ok_or(undecided)?;
         let replayed = self.history.len() - 1 - at;
         self.history.trim();
         Ok(Fused {

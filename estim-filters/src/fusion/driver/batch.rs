@@ -15,13 +15,13 @@ use crate::traits::{Predict, ProcessInput, Rollback};
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Slot {
     /// Its record (moved on as later readings of the batch are inserted before it).
-    at: usize,
-    time: f64,
-    sensor: usize,
+    pub(super) at: usize,
+    pub(super) time: f64,
+    pub(super) sensor: usize,
     /// The events after it when it was inserted: what [`FusionDriver::fuse`] reports.
-    replayed: usize,
+    pub(super) replayed: usize,
     /// [`DuplicatePolicy::KeepFirst`] kept the reading at `at`: this one was not inserted.
-    ignored: bool,
+    pub(super) ignored: bool,
 }
 
 impl<T, N, F, P, S> FusionDriver<T, N, F, P, S>
@@ -194,7 +194,7 @@ where
 
     /// Checks a reading as [`fuse`](Self::fuse) would after the batch's readings so far (the
     /// oldest `trimmed` records gone) and inserts it, without running anything.
-    fn place(
+    pub(super) fn place(
         &mut self,
         time: f64,
         reading: S::Reading,
