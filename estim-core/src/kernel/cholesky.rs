@@ -7,7 +7,9 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use nalgebra::{DefaultAllocator, Dim, OMatrix, allocator::Allocator};
 
 #[cfg(feature = "dense")]
-use super::{SMALL_RUNTIME_CHOLESKY, dense_route, fixed_route, is_static, view, view_mut};
+use super::{
+    SMALL_RUNTIME_CHOLESKY, dense_route, fixed_route, is_static, lean_routes, view, view_mut,
+};
 #[cfg(feature = "dense")]
 use crate::dense::Operand;
 use crate::scalar::Real;
@@ -62,7 +64,7 @@ where
 {
     let _ = &scratch;
     #[cfg(feature = "dense")]
-    if !is_static::<D>() && a.nrows() > SMALL_RUNTIME_CHOLESKY {
+    if !is_static::<D>() && a.nrows() > SMALL_RUNTIME_CHOLESKY && !lean_routes() {
         let n = a.nrows();
         let ok = T::cholesky(view_mut(a), scratch.stack::<T>(n));
         // faer leaves NaN pivots unreported on some paths; a factor must be finite.
@@ -71,6 +73,7 @@ where
     #[cfg(feature = "dense")]
     if is_static::<D>()
         && a.nrows() > FAER_STATIC_CHOLESKY_MIN
+        && !lean_routes()
         && let Some(ok) = static_faer_cholesky(a)
     {
         return ok;

@@ -42,7 +42,7 @@ use crate::scalar::Real;
 mod cholesky;
 mod loops;
 mod product;
-#[cfg(test)]
+#[cfg(all(test, feature = "dense"))]
 mod tests;
 
 pub use crate::dense::{Accum, PARALLEL_THRESHOLD};
@@ -50,9 +50,6 @@ pub use cholesky::{
     CholeskyScratch, cholesky_in_place, solve_lower_in_place, solve_right_lower_in_place,
     solve_right_lower_transpose_in_place,
 };
-// Unused since the model traits lost their batch sigma-point hooks; kept for its tests.
-#[cfg(test)]
-pub(crate) use product::mul_into_column;
 pub use product::{mul, mul_lower, mul_tr, mul_tr_lower};
 
 /// dst ← src, one `memcpy` of the contiguous storage (nalgebra's `copy_from` copies element by
@@ -90,7 +87,7 @@ pub const SMALL_RUNTIME_CHOLESKY: usize = 8;
 /// for static sizes.
 #[inline(always)]
 fn fixed_route(fixed: bool, size: usize) -> bool {
-    fixed && (!cfg!(feature = "dense") || size <= STATIC_NALGEBRA_MAX)
+    fixed && (!cfg!(feature = "dense") || lean_routes() || size <= STATIC_NALGEBRA_MAX)
 }
 
 /// Whether a runtime-size operation of `work` multiply–adds runs faer (above
@@ -98,7 +95,25 @@ fn fixed_route(fixed: bool, size: usize) -> bool {
 #[cfg(feature = "dense")]
 #[inline(always)]
 fn dense_route(work: usize) -> bool {
-    work > SMALL_RUNTIME_WORK
+    work > SMALL_RUNTIME_WORK && !lean_routes()
+}
+
+// The kernels' own tests set this on their thread to run every operation on the routes a
+// build without `dense` takes (static sizes on nalgebra's fixed-size code, runtime sizes on
+// the loops), so that the one test build checks both (`tests::on_both_routes`).
+#[cfg(all(test, feature = "dense"))]
+std::thread_local! {
+    static LEAN_ROUTES: core::cell::Cell<bool> = const { core::cell::Cell::new(false) };
+}
+
+/// Whether this operation takes the routes of a build without `dense` whatever the sizes:
+/// never, outside the kernels' tests (a constant `false`, folded away).
+#[inline(always)]
+fn lean_routes() -> bool {
+    #[cfg(all(test, feature = "dense"))]
+    return LEAN_ROUTES.with(core::cell::Cell::get);
+    #[cfg(not(all(test, feature = "dense")))]
+    false
 }
 
 /// `true` when `D` is a compile-time dimension.

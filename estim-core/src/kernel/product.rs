@@ -3,7 +3,7 @@
 //! [`product`] (loops for small ones; faer, or [`Matvec`](crate::dense::Matvec) for one column,
 //! for larger ones) otherwise.
 
-use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector, allocator::Allocator};
+use nalgebra::{DefaultAllocator, Dim, OMatrix, allocator::Allocator};
 
 #[cfg(feature = "dense")]
 use super::{dense_route, view, view_mut};
@@ -258,75 +258,5 @@ pub fn mul_tr_lower<T, D, K>(
         store(dst, accum, alpha, a * b.transpose());
     } else {
         product(dst, accum, alpha, a, b, Form::LOWER_B_TRANSPOSED);
-    }
-}
-
-/// Column `column` of `dst` (+)= α A x: [`Matvec`](crate::dense::Matvec) on larger runtime
-/// sizes (`dense` feature), the loops ([`loops::product`]) on small ones, one dot product per
-/// row on static sizes.
-///
-/// # Panics
-/// If the shapes do not agree or `column` is out of range (a programmer error).
-#[track_caller]
-#[cfg_attr(not(test), allow(dead_code))]
-pub(crate) fn mul_into_column<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim>(
-    dst: &mut OMatrix<T, R, C>,
-    column: usize,
-    accum: Accum,
-    alpha: T,
-    a: &OMatrix<T, RA, CA>,
-    x: &OVector<T, RX>,
-) where
-    DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RX>,
-{
-    let rows = dst.nrows();
-    assert!(
-        column < dst.ncols() && a.shape() == (rows, x.nrows()),
-        "mul_into_column: column {column} of {:?} ← {:?} × {:?}",
-        dst.shape(),
-        a.shape(),
-        x.shape()
-    );
-    let fixed = is_static::<R>() && is_static::<RA>() && is_static::<CA>();
-    if fixed_route(fixed, rows.max(x.nrows())) {
-        return column_by_dot_products(dst, column, accum, alpha, a, x);
-    }
-    let y = &mut dst.as_mut_slice()[column * rows..(column + 1) * rows];
-    #[cfg(feature = "dense")]
-    if dense_route(rows.saturating_mul(x.nrows())) {
-        return T::matvec(y, accum, alpha, a.as_slice(), x.as_slice());
-    }
-    let shape = (rows, 1);
-    loops::product(
-        y,
-        shape,
-        accum,
-        alpha,
-        a.as_slice(),
-        x.nrows(),
-        x.as_slice(),
-        Operand::AsIs,
-    );
-}
-
-/// [`mul_into_column`] on static sizes: one dot product per row.
-#[cfg_attr(not(test), allow(dead_code))]
-pub(super) fn column_by_dot_products<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RX: Dim>(
-    dst: &mut OMatrix<T, R, C>,
-    column: usize,
-    accum: Accum,
-    alpha: T,
-    a: &OMatrix<T, RA, CA>,
-    x: &OVector<T, RX>,
-) where
-    DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RX>,
-{
-    for i in 0..dst.nrows() {
-        let sum = (0..x.nrows()).fold(T::zero(), |sum, j| sum + a[(i, j)] * x[j]);
-        let d = &mut dst[(i, column)];
-        *d = match accum {
-            Accum::Add => *d + alpha * sum,
-            Accum::Replace => alpha * sum,
-        };
     }
 }
