@@ -38,7 +38,7 @@ pub struct NoInput<P>(pub P);
 type Empty<T> = OVector<T, U0>;
 
 /// The zero-length input the wrapped model is called with.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn none<T: Real>() -> Empty<T> {
     Empty::zeros()
 }
@@ -57,7 +57,7 @@ where
         self.0.process_noise(x, &none(), dt)
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn in_place(&self) -> Option<&dyn InPlace<T, N, N, ()>> {
         self.0.in_place().map(|_| self as &dyn InPlace<T, N, N, ()>)
     }
@@ -215,7 +215,7 @@ where
         self.model.residual(a, b)
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
         self.model.in_place().map(|_| self as &dyn InPlace<T, N, M>)
     }

@@ -68,7 +68,7 @@ impl<D: Dim> RuntimeShapes<D> for DefaultAllocator {}
 
 #[cfg(feature = "std")]
 impl DimAlloc<Dyn> for DefaultAllocator {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn runtime_sized<P: Dim, F: SizeFamily<P>>(x: &mut F::Of<Dyn>) -> Option<&mut F::Of<Dyn>>
     where
         DefaultAllocator: Alloc<Dyn, P>,
@@ -79,7 +79,7 @@ impl DimAlloc<Dyn> for DefaultAllocator {
 
 impl<const R: usize> DimAlloc<Const<R>> for DefaultAllocator {
     #[cfg(feature = "std")]
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn runtime_sized<P: Dim, F: SizeFamily<P>>(_: &mut F::Of<Dyn>) -> Option<&mut F::Of<Const<R>>>
     where
         DefaultAllocator: Alloc<Dyn, P> + Alloc<Const<R>, P>,

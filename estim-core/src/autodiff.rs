@@ -88,22 +88,22 @@ pub trait AdReal: Real + DualNumFloat + DualNum<Primitive = Self> {
 }
 
 impl AdReal for f64 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn widen(self) -> f64 {
         self
     }
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn narrow(x: f64) -> Self {
         x
     }
 }
 
 impl AdReal for f32 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn widen(self) -> f64 {
         f64::from(self)
     }
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn narrow(x: f64) -> Self {
         // Only values that came from `widen` come back: exact.
         x as f32
@@ -234,7 +234,7 @@ impl<T: AdReal, N: Dim, P: AutoDiffProcess<T, N>> GenericMap<T, N, N>
 where
     DefaultAllocator: Alloc<N>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn apply<D: AdScalar<T>>(&self, x: &OVector<D, N>) -> OVector<D, N> {
         self.0.transition(x, self.1, self.2)
     }
@@ -247,7 +247,7 @@ impl<T: AdReal, N: Dim, M: Dim, H: AutoDiffMeasurement<T, N, M>> GenericMap<T, N
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn apply<D: AdScalar<T>>(&self, x: &OVector<D, N>) -> OVector<D, M> {
         self.0.measure(x)
     }
@@ -260,7 +260,7 @@ impl<T: AdReal, N: Dim, M: Dim, G: AutoDiffFunction<T, N, M>> GenericMap<T, N, M
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn apply<D: AdScalar<T>>(&self, x: &OVector<D, N>) -> OVector<D, M> {
         self.0.eval(x)
     }
@@ -392,12 +392,12 @@ where
 {
     type Input = P::Input;
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn transition(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OVector<T, N> {
         self.model.transition(x, u, dt)
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn process_noise(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OMatrix<T, N, N> {
         self.model.process_noise(x, u, dt)
     }
@@ -437,17 +437,17 @@ impl<T: AdReal, N: Dim, M: Dim, H: AutoDiffMeasurement<T, N, M>> MeasurementMode
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn measure(&self, x: &OVector<T, N>) -> OVector<T, M> {
         self.model.measure(x)
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn measurement_noise(&self, x: &OVector<T, N>) -> OMatrix<T, M, M> {
         self.model.measurement_noise(x)
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn residual(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
         self.model.residual(a, b)
     }
@@ -479,7 +479,7 @@ impl<T: AdReal, N: Dim, M: Dim, G: AutoDiffFunction<T, N, M>> VectorFunction<T, 
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, M> {
         self.model.eval(x)
     }

@@ -225,7 +225,7 @@ where
         self.0.process_noise(x, u, dt)
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn in_place(&self) -> Option<&dyn InPlace<T, N, N, P::Input>> {
         self.0.in_place()
     }
@@ -276,7 +276,7 @@ where
         self.0.residual(a, b)
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
         self.0.in_place()
     }

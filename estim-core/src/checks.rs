@@ -46,7 +46,7 @@ use crate::scalar::{Real, real};
 /// assert!(all_finite(&Matrix2::new(1.0, 2.0, 3.0, 4.0)));
 /// assert!(!all_finite(&Matrix2::new(1.0, f64::INFINITY, 3.0, 4.0)));
 /// ```
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn all_finite<T: Real, R: Dim, C: Dim, S: RawStorage<T, R, C> + IsContiguous>(
     m: &Matrix<T, R, C, S>,
 ) -> bool {
@@ -66,7 +66,7 @@ pub fn all_finite<T: Real, R: Dim, C: Dim, S: RawStorage<T, R, C> + IsContiguous
 /// values[17] = f64::NAN;
 /// assert!(!slice_finite(&values));
 /// ```
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[allow(clippy::eq_op)] // v − v is the test: it is not 0 for ±∞ and NaN.
 pub fn slice_finite<T: Real>(values: &[T]) -> bool {
     const LANES: usize = 8;
@@ -102,7 +102,7 @@ pub fn slice_finite<T: Real>(values: &[T]) -> bool {
 ///     Err(Error::NonFinite { stage, quantity })
 /// );
 /// ```
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn ensure_finite<T: Real, R: Dim, C: Dim, S: RawStorage<T, R, C> + IsContiguous>(
     m: &Matrix<T, R, C, S>,
     stage: Stage,
@@ -125,7 +125,7 @@ pub fn ensure_finite<T: Real, R: Dim, C: Dim, S: RawStorage<T, R, C> + IsContigu
 ///     Err(Error::NonFinite { stage, quantity })
 /// );
 /// ```
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn finite_or_error(finite: bool, stage: Stage, quantity: Quantity) -> Result<()> {
     if finite {
         Ok(())
@@ -355,7 +355,7 @@ where
 ///     Err(Error::NotPositiveSemiDefinite { stage, quantity: q })
 /// );
 /// ```
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn ensure_semidefinite_noise<T: Real, D: Dim>(
     m: &OMatrix<T, D, D>,
     work: &mut OMatrix<T, D, D>,
@@ -390,7 +390,7 @@ where
 }
 
 /// sᵢⱼ = (mᵢⱼ + mⱼᵢ)/2, formed as mᵢⱼ/2 + mⱼᵢ/2 so that finite entries cannot overflow.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn symmetric_entry<T: Real, D: Dim>(m: &OMatrix<T, D, D>, i: usize, j: usize) -> T
 where
     DefaultAllocator: Allocator<D, D>,
@@ -404,7 +404,7 @@ where
 /// `true` if every pivot is above the tolerance or within it with a vanishing column (then
 /// set to zero, as the PSD factorisation does); `false` at a pivot below −tolerance, a
 /// non-vanishing zero-variance column, or a NaN.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn semidefinite_ldl<T: Real, D: Dim>(
     m: &OMatrix<T, D, D>,
     work: &mut OMatrix<T, D, D>,

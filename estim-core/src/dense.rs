@@ -66,7 +66,7 @@ pub enum Part {
 
 /// faer's parallelism for an operation whose smallest dimension is `size`.
 #[cfg(feature = "dense")]
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn par(size: usize) -> Par {
     #[cfg(feature = "parallel")]
     if size >= PARALLEL_THRESHOLD {
@@ -206,7 +206,7 @@ macro_rules! matvec {
     ($t:ty, $ts:ident, $splat:ident, $fma:ident, $add:ident, $as_simd:ident, $as_mut:ident) => {
         impl Matvec<'_, $t> {
             /// (y (+)) α A x on the V vectors of rows from `start`.
-            #[inline(always)]
+            #[cfg_attr(not(debug_assertions), inline(always))]
             fn sums<S: pulp::Simd, const V: usize>(&self, simd: S, start: usize) -> [S::$ts; V] {
                 let (rows, end) = (
                     self.y.len(),
@@ -239,7 +239,7 @@ macro_rules! matvec {
             }
 
             /// Rows of y from `start`, V vectors of them, ← (y +) α A x.
-            #[inline(always)]
+            #[cfg_attr(not(debug_assertions), inline(always))]
             fn panel<S: pulp::Simd, const V: usize>(&mut self, simd: S, start: usize) -> usize {
                 let sums = self.sums::<S, V>(simd, start);
                 let end = start + V * size_of::<S::$ts>() / size_of::<$t>();
@@ -251,7 +251,7 @@ macro_rules! matvec {
         impl pulp::WithSimd for Matvec<'_, $t> {
             type Output = ();
 
-            #[inline(always)]
+            #[cfg_attr(not(debug_assertions), inline(always))]
             fn with_simd<S: pulp::Simd>(mut self, simd: S) {
                 let (rows, lanes) = (self.y.len(), size_of::<S::$ts>() / size_of::<$t>());
                 let vectors = rows / lanes;

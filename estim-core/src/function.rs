@@ -68,7 +68,7 @@ where
     /// x ⊞ δ in the input space, into `out`: the point reached from x along the tangent δ
     /// (see [`StateSpace`](crate::StateSpace)). Sigma points are formed with it. Defaults to
     /// x + δ.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn input_plus_into(&self, x: &OVector<T, N>, delta: &OVector<T, N>, out: &mut OVector<T, N>) {
         add_into(x, delta, out);
     }
@@ -76,7 +76,7 @@ where
     /// y ⊞ δ in the output space, into `out`: how a mean correction δ (the unscented mean of
     /// the deviations, a second-order bias) is applied to g(μ). Defaults to y + δ;
     /// [`difference`](Self::difference) is the matching ⊟.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn output_plus_into(&self, y: &OVector<T, M>, delta: &OVector<T, M>, out: &mut OVector<T, M>) {
         add_into(y, delta, out);
     }
@@ -84,7 +84,7 @@ where
     /// The opt-in buffer-writing form of this function ([`InPlace`]), for allocation-free
     /// propagation at runtime sizes: `Some(self)` from a function that implements it. The
     /// default, `None`, evaluates through the owned methods.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
         None
     }
@@ -105,7 +105,7 @@ impl VectorSpaces {
     }
 
     /// `true` for plain addition.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub const fn get(self) -> bool {
         self.0
     }

@@ -110,7 +110,7 @@ where
 }
 
 /// g(x) into `out`: in place for an [`InPlace`] function, else the owned value.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn eval_into<T, N, M, G>(g: &G, x: &OVector<T, N>, out: &mut OVector<T, M>)
 where
     T: Real,
@@ -126,7 +126,7 @@ where
 }
 
 /// a ⊖ b of two outputs of g into `out`.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn difference_into<T, N, M, G>(
     g: &G,
     a: &OVector<T, M>,
@@ -146,7 +146,7 @@ pub fn difference_into<T, N, M, G>(
 }
 
 /// J(x) into `out`.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn jacobian_into<T, N, M, G>(g: &G, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>)
 where
     T: Real,
@@ -162,7 +162,7 @@ where
 }
 
 /// Hₖ(x) into `out`, returned; `None` when gₖ is affine.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn hessian_into<'o, T, N, M, G>(
     g: &G,
     x: &OVector<T, N>,
@@ -186,7 +186,7 @@ where
 }
 
 /// f(x, u, Δt) into `out`.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn transition_into<T, N, P>(
     model: &P,
     x: &OVector<T, N>,
@@ -206,7 +206,7 @@ pub fn transition_into<T, N, P>(
 }
 
 /// Q(x, u, Δt) into `out`.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn process_noise_into<T, N, P>(
     model: &P,
     x: &OVector<T, N>,
@@ -226,7 +226,7 @@ pub fn process_noise_into<T, N, P>(
 }
 
 /// h(x) into `out`: [`eval_into`] of the model's [`Observation`].
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn measure_into<T, N, M, H>(model: &H, x: &OVector<T, N>, out: &mut OVector<T, M>)
 where
     T: Real,
@@ -239,7 +239,7 @@ where
 }
 
 /// R(x) into `out`.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn measurement_noise_into<T, N, M, H>(model: &H, x: &OVector<T, N>, out: &mut OMatrix<T, M, M>)
 where
     T: Real,
@@ -256,7 +256,7 @@ where
 
 /// The residual a ⊖ b of two measurements into `out`: [`difference_into`] of the model's
 /// [`Observation`].
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn residual_into<T, N, M, H>(
     model: &H,
     a: &OVector<T, M>,

@@ -309,7 +309,7 @@ where
 /// finite. One pass where a symmetrisation, an addition and a finiteness scan would otherwise
 /// each sweep the matrix; e.g. `f = |d, [a], dt, [at]| ((d + a) + (dt + at)) / 2` is
 /// `dst += a` then `dst ← (dst + dstᵀ)/2`.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
 pub fn symmetric_map<T: Real, const K: usize>(
     n: usize,
@@ -340,7 +340,7 @@ pub fn symmetric_map<T: Real, const K: usize>(
 
 /// Copies the lower triangle of `m` to its upper triangle (after a product that computed only
 /// the lower one, [`crate::kernel::mul_lower`]); true if the result is finite.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn mirror_lower_checked<T: Real, D: Dim>(m: &mut OMatrix<T, D, D>) -> bool
 where
     DefaultAllocator: Allocator<D, D>,
@@ -351,7 +351,7 @@ where
 
 /// m ← ((m + a) + (m + a)ᵀ)/2 in one pass (the same arithmetic as `m += a` then
 /// [`symmetrize`](crate::checks::symmetrize)); true if the result is finite.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
 pub fn symmetrize_add_checked<T: Real, D: Dim>(
     m: &mut OMatrix<T, D, D>,
@@ -376,7 +376,7 @@ where
 }
 
 /// dst ← ((a + b) + (a + b)ᵀ)/2 in one pass; true if the result is finite.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
 pub fn symmetric_sum_into_checked<T: Real, D: Dim>(
     dst: &mut OMatrix<T, D, D>,

@@ -55,7 +55,7 @@ where
         self.noise.clone()
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn in_place(&self) -> Option<&dyn InPlace<T, N, N, OVector<T, U>>> {
         Some(self)
     }
@@ -66,7 +66,7 @@ impl<T: Real, N: Dim, U: Dim> InPlace<T, N, N, OVector<T, U>> for LinearProcess<
 where
     DefaultAllocator: Alloc<N, U>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn value_into(&self, x: &OVector<T, N>, u: &OVector<T, U>, _dt: T, out: &mut OVector<T, N>) {
         let (f, b) = (&self.transition, &self.input);
         let fits = f.shape() == (out.nrows(), x.nrows()) && b.shape() == (out.nrows(), u.nrows());
@@ -83,17 +83,17 @@ where
         }
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn noise_into(&self, _: &OVector<T, N>, _: &OVector<T, U>, _dt: T, out: &mut OMatrix<T, N, N>) {
         assign(out, &self.noise);
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn residual_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
         crate::manifold::subtract_into(a, b, out);
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn jacobian_into(
         &self,
         _: &OVector<T, N>,
@@ -104,7 +104,7 @@ where
         assign(out, &self.transition);
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn hessian_into<'o>(
         &self,
         _: &OVector<T, N>,
@@ -118,7 +118,7 @@ where
 }
 
 /// `out` ← `value`, copying in place when the shapes agree.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn assign<T: Real, R: Dim, C: Dim>(out: &mut OMatrix<T, R, C>, value: &OMatrix<T, R, C>)
 where
     DefaultAllocator: nalgebra::allocator::Allocator<R, C>,
@@ -189,7 +189,7 @@ where
         self.noise.clone()
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
         Some(self)
     }
@@ -200,7 +200,7 @@ impl<T: Real, N: Dim, M: Dim> InPlace<T, N, M> for LinearMeasurement<T, N, M>
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn value_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OVector<T, M>) {
         let h = &self.observation;
         if h.shape() == (out.nrows(), x.nrows()) {
@@ -210,22 +210,22 @@ where
         }
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn noise_into(&self, _: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, M, M>) {
         assign(out, &self.noise);
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
         crate::manifold::subtract_into(a, b, out);
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn jacobian_into(&self, _: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, M, N>) {
         assign(out, &self.observation);
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn hessian_into<'o>(
         &self,
         _: &OVector<T, N>,

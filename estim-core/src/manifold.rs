@@ -93,12 +93,12 @@ where
 {
     const VECTOR: bool = true;
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn plus_into(&self, x: &OVector<T, N>, delta: &OVector<T, N>, out: &mut OVector<T, N>) {
         add_into(x, delta, out);
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn minus_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
         subtract_into(a, b, out);
     }
@@ -106,7 +106,7 @@ where
 
 /// out ← x + δ without allocating (`out` takes x's shape if it differs): a copy, then `+=`,
 /// which gives the same bits as adding δ to x in place.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn add_into<T: Real, D: Dim>(
     x: &OVector<T, D>,
     delta: &OVector<T, D>,
@@ -123,7 +123,7 @@ pub(crate) fn add_into<T: Real, D: Dim>(
 }
 
 /// out ← a − b without allocating (`out` takes a's shape if it differs).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn subtract_into<T: Real, D: Dim>(
     a: &OVector<T, D>,
     b: &OVector<T, D>,

@@ -56,7 +56,7 @@ where
 
     /// Opt-in for allocation-free runtime sizes: `Some(self)` from a model that implements
     /// [`InPlace`]; the default, `None`, evaluates through the owned methods.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn in_place(&self) -> Option<&dyn InPlace<T, N, N, Self::Input>> {
         None
     }
@@ -139,7 +139,7 @@ where
 
     /// Opt-in for allocation-free runtime sizes: `Some(self)` from a model that implements
     /// [`InPlace`]; the default, `None`, evaluates through the owned methods.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
         None
     }
@@ -240,29 +240,29 @@ where
 {
     const VECTOR_SPACES: VectorSpaces = VectorSpaces::of_space(S::VECTOR);
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, N> {
         self.model.transition(x, self.input, self.dt)
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn difference(&self, a: &OVector<T, N>, b: &OVector<T, N>) -> OVector<T, N> {
         let mut out = a.clone();
         self.space.minus_into(a, b, &mut out);
         out
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn input_plus_into(&self, x: &OVector<T, N>, delta: &OVector<T, N>, out: &mut OVector<T, N>) {
         self.space.plus_into(x, delta, out);
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn output_plus_into(&self, y: &OVector<T, N>, delta: &OVector<T, N>, out: &mut OVector<T, N>) {
         self.space.plus_into(y, delta, out);
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn in_place(&self) -> Option<&dyn InPlace<T, N, N>> {
         self.model.in_place().map(|_| self as &dyn InPlace<T, N, N>)
     }
@@ -275,29 +275,29 @@ impl<T: Real, N: Dim, P: ProcessModel<T, N, Input = U>, U, S: StateSpace<T, N>> 
 where
     DefaultAllocator: Alloc<N>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn value_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OVector<T, N>) {
         crate::in_place::transition_into(self.model, x, self.input, self.dt, out);
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn noise_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, N, N>) {
         crate::in_place::process_noise_into(self.model, x, self.input, self.dt, out);
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn residual_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
         self.space.minus_into(a, b, out);
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn jacobian_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, N, N>) {
         if let Some(m) = self.model.in_place() {
             m.jacobian_into(x, self.input, self.dt, out);
         }
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn hessian_into<'o>(
         &self,
         x: &OVector<T, N>,
@@ -317,7 +317,7 @@ impl<T: Real, N: Dim, P: ProcessJacobian<T, N, Input = U>, U, S: StateSpace<T, N
 where
     DefaultAllocator: Alloc<N>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, N, N> {
         self.model.transition_jacobian(x, self.input, self.dt)
     }
@@ -328,7 +328,7 @@ impl<T: Real, N: Dim, P: ProcessHessian<T, N, Input = U>, U, S: StateSpace<T, N>
 where
     DefaultAllocator: Alloc<N>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.transition_hessian(x, self.input, self.dt, k)
     }
@@ -381,23 +381,23 @@ where
     // The output ⊞ stays +: the state space decides.
     const VECTOR_SPACES: VectorSpaces = VectorSpaces::of_space(S::VECTOR);
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, M> {
         self.model.measure(x)
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn difference(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
         self.model.residual(a, b)
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn input_plus_into(&self, x: &OVector<T, N>, delta: &OVector<T, N>, out: &mut OVector<T, N>) {
         self.space.plus_into(x, delta, out);
     }
 
     /// The model's own: its value, residual and derivatives in place.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
         self.model.in_place()
     }
@@ -408,7 +408,7 @@ impl<T: Real, N: Dim, M: Dim, H: MeasurementJacobian<T, N, M>, S: StateSpace<T, 
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
         self.model.measurement_jacobian(x)
     }
@@ -419,7 +419,7 @@ impl<T: Real, N: Dim, M: Dim, H: MeasurementHessian<T, N, M>, S: StateSpace<T, N
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.measurement_hessian(x, k)
     }

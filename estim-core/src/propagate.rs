@@ -277,7 +277,7 @@ where
 /// Checks that C is n × n for the n of x, and reshapes output buffers that disagree with the
 /// mean buffer's m (left by an earlier failure), so the kernels only ever see agreeing shapes.
 /// Returns (n, m).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn check_inputs<T: Real, N: Dim, M: Dim>(
     mean: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
@@ -315,14 +315,14 @@ where
     /// covariance symmetric from its lower triangle, adds `noise` if given, and checks that
     /// every result is finite ([`Error::NonFinite`](crate::Error::NonFinite), stage
     /// `Propagation`; a noise of the wrong shape is a dimension error naming `ProcessNoise`).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub fn finish(self) -> Result<()> {
         finish(self)
     }
 }
 
 /// [`Outputs::finish`].
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn finish<T: Real, N: Dim, M: Dim>(out: Outputs<'_, T, N, M>) -> Result<()>
 where
     DefaultAllocator: Alloc<N, M>,

@@ -312,7 +312,7 @@ where
 /// and committed only if every check passes; the cross-covariance cov(x, g(x)) into `cross`
 /// if given (the smoother's prediction: the same path). Q is checked positive semi-definite unless it
 /// equals `accepted`, the last Q a committed prediction checked (which it then becomes).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[allow(clippy::too_many_arguments)]
 fn predict_step<T, N, Pr, G>(
     propagator: &Pr,
@@ -379,7 +379,7 @@ where
 
     /// Whether `q` is the accepted Q: the same shape and equal entries (−0 = +0; NaN equals
     /// nothing), without early exit (a branch-free pass the compiler vectorises).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn holds(&self, q: &OMatrix<T, N, N>) -> bool {
         self.0.shape() == q.shape()
             && (self.0.as_slice().iter())
@@ -388,7 +388,7 @@ where
     }
 
     /// Remembers `q`, of the accepted Q's shape, which a committed prediction has just checked.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn remember(&mut self, q: &OMatrix<T, N, N>) {
         kernel::copy(&mut self.0, q);
     }
@@ -405,7 +405,7 @@ pub(crate) enum Step {
 
 /// The predicted estimate into `scratch.state` and `scratch.covariance`, with Q already in
 /// `scratch.noise` (and `known` if it equals a Q already checked).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn predicted<T, N, Pr, G>(
     propagator: &Pr,
     state: &OVector<T, N>,
@@ -456,7 +456,7 @@ where
 /// positive diagonal, can make P⁻ indefinite without any other check failing):
 /// [`ensure_semidefinite_noise`], O(n²) without a factorisation when Q is diagonally dominant
 /// (every diagonal Q), else one factorisation in `work` (an n × n buffer free at this point).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn ensure_process_noise<T: Real, N: Dim>(
     q: &OMatrix<T, N, N>,
     work: &mut OMatrix<T, N, N>,
@@ -473,7 +473,7 @@ where
 /// P⁻ after a prediction: a prior accepted as PSD within its rounding tolerance (a variance of
 /// −10⁻³⁰⁰) and a finite but huge transition (10³⁰⁰) gave P⁻ a variance of −10³⁰⁰ as `Ok`
 /// (found by the fuzz test, tests/it/fuzz.rs). The diagonal costs O(n) to check.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn ensure_predicted_covariance<T: Real, N: Dim>(p: &OMatrix<T, N, N>) -> Result<()>
 where
     DefaultAllocator: Alloc<N>,
@@ -482,7 +482,7 @@ where
 }
 
 /// Makes `scratch`'s estimate the filter's, swapping buffers (no copy for runtime sizes).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn commit<T: Real, N: Dim>(
     state: &mut OVector<T, N>,
     covariance: &mut OMatrix<T, N, N>,
@@ -498,7 +498,7 @@ pub(crate) fn commit<T: Real, N: Dim>(
 /// Δt must be finite and ≥ 0: a negative step is a timestamp bug far more often than a wish
 /// to predict backwards (which a process noise Q(Δt) cannot express; use a smoother), so it is
 /// an error even for models whose Q ignores Δt.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn ensure_time_step<T: Real>(dt: T) -> Result<()> {
     if !dt.is_finite() {
         Err(Error::NonFinite {
@@ -524,9 +524,7 @@ where
     Pr: for<'a> MomentPropagator<T, N, N, Transition<'a, P, P::Input, T, S>>,
     DefaultAllocator: Alloc<N>,
 {
-    // Inlined in optimised builds only: see `Update::update` (traits.rs).
     #[cfg_attr(not(debug_assertions), inline(always))]
-    #[cfg_attr(debug_assertions, inline)]
     fn predict(&mut self, model: &P, input: &P::Input, dt: T) -> Result<()> {
         self.process_step(model, input, dt, None, Step::Apply)
     }
@@ -541,7 +539,7 @@ where
     DefaultAllocator: Alloc<N>,
 {
     /// A prediction through `model` (or its preparation).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn process_step<P>(
         &mut self,
         model: &P,
@@ -644,9 +642,7 @@ where
     /// Runs through the same prediction code (vector states only: the filter's state space is
     /// [`Euclidean`]); building the decorrelated map allocates for
     /// runtime sizes (it solves with R once per call).
-    // Inlined in optimised builds only: see `Update::update` (traits.rs).
     #[cfg_attr(not(debug_assertions), inline(always))]
-    #[cfg_attr(debug_assertions, inline)]
     fn predict_correlated(
         &mut self,
         process: &P,
@@ -685,7 +681,7 @@ where
 /// `propagator` at (`state`, `covariance`) on the state space `space`: the report goes to
 /// `report`, the posterior to `scratch.state` and `scratch.covariance` (uncommitted);
 /// `Ok(false)` if gated.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn measurement_update<T, N, M, Pr, H, S>(
     propagator: &Pr,
@@ -757,9 +753,7 @@ where
     Pr: for<'a> MomentPropagator<T, N, M, Observation<'a, H, S>>,
     DefaultAllocator: Alloc<N, M>,
 {
-    // Inlined in optimised builds only: see `Update::update` (traits.rs).
     #[cfg_attr(not(debug_assertions), inline(always))]
-    #[cfg_attr(debug_assertions, inline)]
     fn update_into(
         &mut self,
         model: &H,
@@ -781,13 +775,13 @@ where
 {
     /// P ← γ⁻¹P: the fading-memory filter's inflation before its update, each entry divided
     /// (the caller keeps a snapshot to undo it).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn inflate_covariance(&mut self, gamma: T) {
         self.covariance /= gamma;
     }
 
     /// An update with `model` and `z` (or its preparation).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn measurement_step<M, H>(
         &mut self,
         model: &H,
@@ -818,7 +812,7 @@ where
 
 /// One measurement update, computed in the step's scratch (a local for static sizes, the
 /// filter's cached one for `Dyn`) and committed only if applied.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn update_step<T, N, M, Pr, H, S>(
     propagator: &Pr,
     space: &S,

@@ -80,7 +80,7 @@ where
     }
 
     /// Gives the buffers `m` components (reallocating only if they have another size).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn fit(&mut self, m: M) {
         if self.innovation.nrows() != m.value() || self.innovation_covariance.nrows() != m.value() {
             *self = Self::zeros(m);

@@ -155,9 +155,7 @@ where
     H: MeasurementJacobian<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
-    // Inlined in optimised builds only: see `Update::update` (traits.rs).
     #[cfg_attr(not(debug_assertions), inline(always))]
-    #[cfg_attr(debug_assertions, inline)]
     fn update_into(
         &mut self,
         model: &H,

@@ -33,7 +33,7 @@ impl<T: Real, N: Dim, Pr: PropagatorWorkspace<T>> PredictScratch<T, N, Pr>
 where
     DefaultAllocator: Alloc<N>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn new(n: N) -> Self {
         Self {
             propagation: Default::default(),
@@ -76,7 +76,7 @@ impl<T: Real, N: Dim, M: Dim, Pr: PropagatorWorkspace<T>> UpdateScratch<T, N, M,
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn new(n: N, m: M) -> Self {
         Self {
             propagation: Default::default(),
@@ -181,7 +181,7 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
     /// `None` for a static size: then the caller uses a local, which the compiler keeps in
     /// registers. (Returning the choice rather than taking a closure keeps the whole static
     /// step in one function, where that optimisation can see it.)
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn predict<N: Dim>(&mut self, n: N) -> Option<&mut PredictScratch<T, N, Pr>>
     where
         DefaultAllocator: Alloc<N>,
@@ -210,7 +210,7 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
 
     /// The cached update scratch for `n` states and `m` measurement components and its slot,
     /// if both are `Dyn` (made on first use); `None` otherwise (the caller uses a local).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn update<N: Dim, M: Dim>(
         &mut self,
         n: N,
@@ -275,7 +275,7 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
     pub(crate) fn clear(&mut self) {}
 
     /// Always `None`: the caller uses a local.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn predict<N: Dim>(&mut self, _: N) -> Option<&mut PredictScratch<T, N, Pr>>
     where
         DefaultAllocator: Alloc<N>,
@@ -287,7 +287,7 @@ impl<T: Real, Pr: PropagatorWorkspace<T>> ScratchCache<T, Pr> {
     pub(crate) fn discard_predict(&mut self) {}
 
     /// Always `None`: the caller uses a local.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn update<N: Dim, M: Dim>(
         &mut self,
         _: N,

@@ -467,7 +467,7 @@ where
 /// the rule is the same for every filter). Otherwise `NonFinite` (`NotPositiveSemiDefinite`)
 /// for `stage`'s `Covariance`, and the filter is unchanged. Commits by swapping buffers (no
 /// copy for runtime sizes); the scratch then holds the old estimate.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn commit<T: Real, N: Dim, M: Dim>(
     stage: Stage,
     state: &mut OVector<T, N>,
@@ -563,7 +563,7 @@ where
 }
 
 /// S Sᵀ into `p` (of S's shape), exactly symmetric, and whether it is finite.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn outer_into<T: Real, N: Dim>(s: &OMatrix<T, N, N>, p: &mut OMatrix<T, N, N>) -> bool
 where
     DefaultAllocator: Alloc<N>,
@@ -593,7 +593,7 @@ where
 /// diagonal and finiteness checked, then [`psd_factor`]'s factor
 /// ([`psd_factor_exact_into`]: semi-definite allowed; an indefinite `q` is
 /// `NotPositiveSemiDefinite` naming `quantity`).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn noise_factor<T: Real, M: Dim>(
     q: &OMatrix<T, M, M>,
     root: &mut OMatrix<T, M, M>,
@@ -669,7 +669,7 @@ where
 /// x̂⁺ = x̂ ⊞ K̄ L⁻¹ν into `scratch.state` (`Ok(true)`). A zero (or non-finite) pivot of L is a
 /// singular (non-finite) S_zz; a non-finite posterior is an error. Inlined into both updates:
 /// a call of its own added 48 bytes to the SR-UKF 6/4 firmware step's peak stack.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn finish_update<T: Real, N: Dim, M: Dim, S: StateSpace<T, N>>(
     space: &S,
     state: &OVector<T, N>,

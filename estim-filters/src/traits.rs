@@ -170,13 +170,7 @@ where
     ///
     /// The report is a new value each call; with runtime sizes that is the one allocation of
     /// the step, which [`update_into`](Self::update_into) avoids.
-    // Inlined whole into each call site in optimised builds (the step's speed, BENCHMARKS.md);
-    // with debug assertions on (the test profile) one function per filter and model, called:
-    // inlining the step into each of the tests' thousands of calls made the test binaries
-    // about a third slower to compile. (A release build with debug assertions turned on
-    // therefore runs the step as a call: BENCHMARKS.md's figures are without them.)
     #[cfg_attr(not(debug_assertions), inline(always))]
-    #[cfg_attr(debug_assertions, inline)]
     fn update(&mut self, model: &H, z: &OVector<T, M>) -> Result<UpdateReport<T, M>> {
         let mut report = UpdateReport::zeros(z.shape_generic().0);
         self.update_into(model, z, &mut report)?;

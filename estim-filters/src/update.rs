@@ -180,7 +180,7 @@ impl<T: Real> UpdateSettings<T> {
 /// ln p = −½ (NIS + 2 Σ ln Lᵢᵢ + m ln 2π) and its outcome: [`Gated`](UpdateOutcome::Gated)
 /// if the NIS exceeds `threshold` (returns `false`: the update does not apply), else
 /// [`Applied`](UpdateOutcome::Applied).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn report_statistics<T: Real, M: Dim>(
     l: &OMatrix<T, M, M>,
     nis: T,
@@ -221,7 +221,7 @@ fn chi2_quantile(_dof: usize, _p: f64) -> Option<f64> {
 /// ln det S = 2 Σ ln Lᵢᵢ from the Cholesky factor: one logarithm of the product of the diagonal
 /// when that product is comfortably normal (the common case), else the sum of logarithms (no
 /// overflow or underflow for large or badly scaled S).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn log_det_from_cholesky<T: Real, M: Dim>(l: &OMatrix<T, M, M>) -> T
 where
     DefaultAllocator: Alloc<M>,
@@ -245,7 +245,7 @@ where
 /// caller commits it (by swapping buffers) only on `Ok(true)`; `Ok(false)` means gated.
 ///
 /// The gain is solved in place from the right, K = Pₓᵤ L⁻ᵀ L⁻¹ (two triangular solves).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn apply<T: Real, N: Dim, M: Dim, Pr: PropagatorWorkspace<T>, S: StateSpace<T, N>>(
     space: &S,
     state: &OVector<T, N>,

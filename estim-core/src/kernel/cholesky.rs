@@ -54,7 +54,7 @@ impl CholeskyScratch {
 /// unspecified. `false` if `a` is not (numerically) positive definite or not finite, and then
 /// `a` is unspecified. (A covariance that may be only semi-definite goes to
 /// [`crate::linalg::psd_factor`] instead.)
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn cholesky_in_place<T: Real, D: Dim>(
     a: &mut OMatrix<T, D, D>,
     scratch: &mut CholeskyScratch,
@@ -117,7 +117,7 @@ where
 /// its copies in and out): the KF 3/2 step 933 → 908 instructions, the UKF 6/4 step 14,671 →
 /// 14,600 (commit `b1972b9`). `false` at a pivot that is not finite and
 /// > 0.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(super) fn left_looking_cholesky<T: Real, D: Dim>(a: &mut OMatrix<T, D, D>) -> bool
 where
     DefaultAllocator: Allocator<D, D>,
@@ -140,7 +140,7 @@ where
 
 /// Solves L X = B in place (`b` ← L⁻¹ b) with L the lower triangle of `l` (its diagonal nonzero,
 /// as after a successful [`cholesky_in_place`]).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn solve_lower_in_place<T: Real, D: Dim, C: Dim>(l: &OMatrix<T, D, D>, b: &mut OMatrix<T, D, C>)
 where
     DefaultAllocator: Allocator<D, D> + Allocator<D, C>,
@@ -158,7 +158,7 @@ where
 /// Solves X Lᵀ = B in place (`b` ← B L⁻ᵀ) with L the lower triangle of `l`: the first half of
 /// a gain K = Pₓᵤ S⁻¹ = Pₓᵤ L⁻ᵀ L⁻¹, solved in K's own n × m storage (no transposed copy).
 /// Larger runtime sizes (`dense`): faer's left solve on the transposed view, (B L⁻ᵀ)ᵀ = L⁻¹ Bᵀ.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn solve_right_lower_transpose_in_place<T: Real, R: Dim, D: Dim>(
     l: &OMatrix<T, D, D>,
     b: &mut OMatrix<T, R, D>,
@@ -187,7 +187,7 @@ pub fn solve_right_lower_transpose_in_place<T: Real, R: Dim, D: Dim>(
 
 /// Solves X L = B in place (`b` ← B L⁻¹) with L the lower triangle of `l` (the second half of
 /// the gain, see [`solve_right_lower_transpose_in_place`]; (B L⁻¹)ᵀ = L⁻ᵀ Bᵀ).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn solve_right_lower_in_place<T: Real, R: Dim, D: Dim>(
     l: &OMatrix<T, D, D>,
     b: &mut OMatrix<T, R, D>,
@@ -216,7 +216,7 @@ pub fn solve_right_lower_in_place<T: Real, R: Dim, D: Dim>(
 }
 
 /// y ← y + a x over two columns (slices of equal length).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn axpy<T: Real>(y: &mut [T], a: T, x: &[T]) {
     for (yi, &xi) in y.iter_mut().zip(x) {
         *yi += a * xi;
@@ -224,7 +224,7 @@ fn axpy<T: Real>(y: &mut [T], a: T, x: &[T]) {
 }
 
 /// y ← a y.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn scale<T: Real>(y: &mut [T], a: T) {
     for yi in y {
         *yi *= a;

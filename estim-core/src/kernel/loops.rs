@@ -63,7 +63,7 @@ struct Coefficients<'a, T> {
 
 impl<T: Real> Coefficients<'_, T> {
     /// op(b)ₖⱼ.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn at(&self, k: usize, j: usize) -> T {
         match self.b_as {
             Operand::AsIs => self.b[k + j * self.inner],
@@ -81,7 +81,7 @@ struct Store<T> {
 
 impl<T: Real> Store<T> {
     /// d ← α s, or d + α s (α s = s when α = 1, as the static route's `store`).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn apply(self, d: &mut T, s: T) {
         let v = if self.alpha == T::one() {
             s
@@ -97,7 +97,7 @@ impl<T: Real> Store<T> {
 
 /// Rows `first..first + R` of every column of [`product`]'s dst: the R sums of a column held
 /// in an `[T; R]` (registers) over k, then stored.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn rows_block<T: Real, const R: usize>(
     dst: &mut [T],
     rows: usize,

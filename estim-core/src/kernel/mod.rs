@@ -55,7 +55,7 @@ pub use product::{mul, mul_lower, mul_tr, mul_tr_lower};
 /// dst ← src, one `memcpy` of the contiguous storage (nalgebra's `copy_from` copies element by
 /// element through generic indexing, measurably slower on the small static filter steps).
 /// The shapes must agree.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
 pub fn copy<T: Real, R: Dim, C: Dim>(dst: &mut OMatrix<T, R, C>, src: &OMatrix<T, R, C>)
 where
@@ -85,7 +85,7 @@ pub const SMALL_RUNTIME_CHOLESKY: usize = 8;
 /// Whether an operation whose dimensions are all static (`fixed`) and whose largest dimension
 /// is `size` runs nalgebra's fixed-size code ([`STATIC_NALGEBRA_MAX`]); folded by the compiler
 /// for static sizes.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn fixed_route(fixed: bool, size: usize) -> bool {
     fixed && (!cfg!(feature = "dense") || lean_routes() || size <= STATIC_NALGEBRA_MAX)
 }
@@ -93,7 +93,7 @@ fn fixed_route(fixed: bool, size: usize) -> bool {
 /// Whether a runtime-size operation of `work` multiply–adds runs faer (above
 /// [`SMALL_RUNTIME_WORK`]) rather than the loops.
 #[cfg(feature = "dense")]
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn dense_route(work: usize) -> bool {
     work > SMALL_RUNTIME_WORK && !lean_routes()
 }
@@ -108,7 +108,7 @@ std::thread_local! {
 
 /// Whether this operation takes the routes of a build without `dense` whatever the sizes:
 /// never, outside the kernels' tests (a constant `false`, folded away).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn lean_routes() -> bool {
     #[cfg(all(test, feature = "dense"))]
     return LEAN_ROUTES.with(core::cell::Cell::get);
@@ -117,14 +117,14 @@ fn lean_routes() -> bool {
 }
 
 /// `true` when `D` is a compile-time dimension.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub fn is_static<D: Dim>() -> bool {
     D::try_to_usize().is_some()
 }
 
 /// A faer view of the column-major storage of `m`.
 #[cfg(feature = "dense")]
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn view<T: Real, R: Dim, C: Dim>(m: &OMatrix<T, R, C>) -> MatRef<'_, T>
 where
     DefaultAllocator: Allocator<R, C>,
@@ -134,7 +134,7 @@ where
 
 /// A mutable faer view of the column-major storage of `m`.
 #[cfg(feature = "dense")]
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn view_mut<T: Real, R: Dim, C: Dim>(m: &mut OMatrix<T, R, C>) -> MatMut<'_, T>
 where
     DefaultAllocator: Allocator<R, C>,

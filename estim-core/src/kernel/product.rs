@@ -50,7 +50,7 @@ impl Form {
 /// feature, faer above (one-column products of the [`Form::PLAIN`] form:
 /// [`Matvec`](crate::dense::Matvec)). The one product behind [`mul`], [`mul_tr`], [`mul_lower`]
 /// and [`mul_tr_lower`] on the runtime route.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
 fn product<T, R, C, RA, CA, RB, CB>(
     dst: &mut OMatrix<T, R, C>,
@@ -110,7 +110,7 @@ fn product<T, R, C, RA, CA, RB, CB>(
 
 /// [`product`] on faer (shapes checked by the caller).
 #[cfg(feature = "dense")]
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
 fn dense_product<T, R, C, RA, CA, RB, CB>(
     dst: &mut OMatrix<T, R, C>,
@@ -141,7 +141,7 @@ fn dense_product<T, R, C, RA, CA, RB, CB>(
 }
 
 /// Writes or adds α · `value` into `dst` (static sizes), skipping the scaling when α = 1.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn store<T: Real, R: Dim, C: Dim>(
     dst: &mut OMatrix<T, R, C>,
     accum: Accum,
@@ -162,7 +162,7 @@ fn store<T: Real, R: Dim, C: Dim>(
 }
 
 /// dst (+)= α a b.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
 pub fn mul<T, R, K, C>(
     dst: &mut OMatrix<T, R, C>,
@@ -186,7 +186,7 @@ pub fn mul<T, R, K, C>(
 }
 
 /// dst (+)= α a bᵀ.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
 pub fn mul_tr<T, R, K, C>(
     dst: &mut OMatrix<T, R, C>,
@@ -216,7 +216,7 @@ pub fn mul_tr<T, R, K, C>(
 /// the work. The strict upper triangle of `dst` is unspecified afterwards (static sizes compute
 /// the whole product, which is cheaper than selecting a triangle there); mirror the lower
 /// triangle ([`crate::linalg::mirror_lower_checked`]) before using it.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
 pub fn mul_lower<T, D, K>(
     dst: &mut OMatrix<T, D, D>,
@@ -239,7 +239,7 @@ pub fn mul_lower<T, D, K>(
 }
 
 /// The lower triangle of dst (+)= α a bᵀ (see [`mul_lower`]; e.g. w D Dᵀ or (K S) Kᵀ).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
 pub fn mul_tr_lower<T, D, K>(
     dst: &mut OMatrix<T, D, D>,

@@ -33,7 +33,7 @@ where
     G: AffineFunction<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn propagate_into(
         &self,
         mean: &OVector<T, N>,

@@ -45,7 +45,7 @@ where
 
 /// g(μ), J(μ), J C Jᵀ and C Jᵀ (if asked for): the part every derivative-based propagator
 /// shares. Only the lower triangle of J C Jᵀ is written; not finished (mirrored, checked) yet.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(super) fn linear_moments_into<T, N, M, G>(
     mean: &OVector<T, N>,
     covariance: &OMatrix<T, N, N>,
@@ -94,7 +94,7 @@ where
     G: Differentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn propagate_into(
         &self,
         mean: &OVector<T, N>,

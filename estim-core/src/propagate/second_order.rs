@@ -49,7 +49,7 @@ pub struct SecondOrder;
 pub struct SecondOrderGaussian;
 
 /// Writes Hₖ into `h` (shape-checked): `Ok(true)`, or `Ok(false)` if gₖ is affine.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn hessian_into<T, N, M, G>(
     g: &G,
     mean: &OVector<T, N>,
@@ -76,7 +76,7 @@ where
 /// The mean-correction buffer δ, shaped like `mean` and filled with −0: x + (−0) = x for every
 /// x (+0 would turn a −0 into +0), so components without a correction keep their bits under
 /// the default ⊞.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn zero_correction<'w, T: Real, M: Dim>(
     slot: &'w mut Option<OMatrix<T, M, U1>>,
     mean: &OVector<T, M>,
@@ -90,7 +90,7 @@ where
 }
 
 /// ȳ ← g(μ) ⊞ δ, g(μ) taken from `mean` and moved aside into `centre`.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn correct_mean<T, N, M, G>(
     g: &G,
     mean: &mut OVector<T, M>,
@@ -160,7 +160,7 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     /// Linear moments plus the ½ Σᵢⱼ (Hₖ ∘ C)ᵢⱼ mean correction.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn propagate_into(
         &self,
         mean: &OVector<T, N>,
@@ -204,7 +204,7 @@ where
     G: TwiceDifferentiable<T, N, M> + ?Sized,
     DefaultAllocator: Alloc<N, M>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn propagate_into(
         &self,
         mean: &OVector<T, N>,

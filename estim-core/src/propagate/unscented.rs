@@ -313,7 +313,7 @@ where
     /// [`input_plus_into`](VectorFunction::input_plus_into), ⊖ its
     /// [`difference`](VectorFunction::difference). The 2n points go through g one at a time. A value or deviation of the wrong length is a
     /// dimension error (quantity `FunctionValue`, at `stage`).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     #[allow(clippy::too_many_arguments)]
     pub fn deviations_into<G>(
         &mut self,
@@ -386,7 +386,7 @@ where
     /// the sums are matrix products: cov(y) = w (D₊D₊ᵀ + D₋D₋ᵀ) + (β − α²) d̄ d̄ᵀ and, since
     /// χ±ⱼ − μ = ±√c Lⱼ, cov(x, y) = w √c L (D₊ − D₋)ᵀ. The 2n points go through g one at a
     /// time.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn propagate_into(
         &self,
         mean: &OVector<T, N>,

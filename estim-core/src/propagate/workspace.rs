@@ -7,7 +7,7 @@ use crate::scalar::Real;
 /// The buffer in `slot`, created (zeroed) if absent or of another shape. A model's default
 /// `_into` method may have replaced a buffer by one of the wrong shape (and the caller then
 /// reported it); this puts the right one back.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn buffer<T: Real, R: Dim, C: Dim>(
     slot: &mut Option<OMatrix<T, R, C>>,
     r: R,

@@ -42,7 +42,7 @@ pub(super) fn mismatch(quantity: Quantity, expected: usize, found: usize) -> Val
 }
 
 /// An n × n column-major buffer as N columns of N, if it has N² entries.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn square<const N: usize>(m: &[f64]) -> Option<&[[f64; N]; N]> {
     let (columns, rest) = m.as_chunks::<N>();
     if rest.is_empty() {
@@ -53,7 +53,7 @@ fn square<const N: usize>(m: &[f64]) -> Option<&[[f64; N]; N]> {
 }
 
 /// [`square`], mutably.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn square_mut<const N: usize>(m: &mut [f64]) -> Option<&mut [[f64; N]; N]> {
     let (columns, rest) = m.as_chunks_mut::<N>();
     if rest.is_empty() {
@@ -136,7 +136,7 @@ impl SlotAcc {
 
     /// [`add_any`](Self::add_any) for n = N; false (nothing changed) if a buffer is not of the
     /// size n says (never, for what this crate builds).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn add_small<const N: usize>(&mut self, e: &[f64], x: &[f64], p: &[f64], nees: f64) -> bool {
         let (Ok(e), Ok(x)) = (<&[f64; N]>::try_from(e), <&[f64; N]>::try_from(x)) else {
             return false;

@@ -268,7 +268,7 @@ impl<T: Real> ChunkWork<T> {
 
 /// Runs `f` with state scratch of dimension n: `kept` when N is `Dyn`, a fresh one on the
 /// stack when N is static.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn with_state<T: Real, N: Dim, R>(
     kept: &mut StateScratch<T, Dyn>,
     n: N,
@@ -315,7 +315,7 @@ pub(crate) fn first_error<'a, T: Real + 'a>(
 
 /// One chunk's Σ Wᵢ dᵢ into `first` and Σ Wᵢ dᵢ dᵢᵀ into `second` (column-major), dᵢ = xᵢ − s,
 /// for particles of dimension D (`x` holds them one after another).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn chunk_moments<T: Real, const D: usize>(
     x: &[T],
     weights: &[f64],

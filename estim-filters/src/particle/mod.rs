@@ -400,7 +400,7 @@ where
 
 /// Fills `out` with standard normal draws (in f64, then rounded to T, so f32 and f64 filters
 /// see the same normal stream).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn fill_normals<T: Real, N: Dim>(out: &mut OVector<T, N>, rng: &mut ParticleRng)
 where
     DefaultAllocator: Alloc<N>,

@@ -143,7 +143,7 @@ where
 
     /// Writes a draw of x⁺ into `out` and returns `true` if the model samples itself; `false`
     /// (the default) for the Gaussian path.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn sample_into(
         &self,
         x: &OVector<T, N>,
@@ -169,7 +169,7 @@ where
 {
     type Model = P;
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn model(&self) -> &P {
         self.0
     }
@@ -181,12 +181,12 @@ where
 {
     type Model = P;
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn model(&self) -> &P {
         &self.0
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn sample_into(
         &self,
         x: &OVector<T, N>,
@@ -215,7 +215,7 @@ where
 
     /// log p(z | x) if the model evaluates it itself; `None` (the default) for the Gaussian
     /// path.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn log_likelihood(&self, z: &OVector<T, M>, x: &OVector<T, N>) -> Option<T> {
         let _ = (z, x);
         None
@@ -229,7 +229,7 @@ where
 {
     type Model = H;
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn model(&self) -> &H {
         self.0
     }
@@ -242,12 +242,12 @@ where
 {
     type Model = H;
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn model(&self) -> &H {
         &self.0
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn log_likelihood(&self, z: &OVector<T, M>, x: &OVector<T, N>) -> Option<T> {
         Some(self.0.log_likelihood(z, x))
     }
@@ -263,12 +263,12 @@ where
 {
     type Model = P;
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn model(&self) -> &P {
         self.0
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn sample_into(
         &self,
         x: &OVector<T, N>,
@@ -289,12 +289,12 @@ where
 {
     type Model = H;
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn model(&self) -> &H {
         self.0
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn log_likelihood(&self, z: &OVector<T, M>, x: &OVector<T, N>) -> Option<T> {
         Some(self.0.log_likelihood(z, x))
     }

@@ -255,7 +255,7 @@ pub fn log_sum_exp<T: estim_core::Real>(values: &[T]) -> T {
 }
 
 /// A `Real` as `f64` (exact for f32 and f64).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn to_f64<T: estim_core::Real>(x: T) -> f64 {
     estim_core::nalgebra::try_convert::<T, f64>(x).unwrap_or(f64::NAN)
 }

@@ -383,7 +383,7 @@ where
 
 /// y ← y + L e for L n × n column-major: column by column, yᵣ ← Lᵣⱼ eⱼ + yᵣ, the operations
 /// (and so the bits) of nalgebra's `gemv(1, L, e, 1)` without its generic shape checks.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn add_product<T: Real>(y: &mut [T], l: &[T], e: &[T]) {
     let n = y.len();
     if n == 0 {
@@ -400,7 +400,7 @@ fn add_product<T: Real>(y: &mut [T], l: &[T], e: &[T]) {
 /// diagonal: the operations (and so the bits) of nalgebra's `solve_lower_triangular_mut`
 /// (xᵢ = bᵢ / Lᵢᵢ, then bᵣ ← −xᵢ Lᵣᵢ + bᵣ below) without its generic shape checks. Stops at a
 /// zero diagonal entry, as nalgebra's does.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn solve_lower_in_place<T: Real>(l: &[T], b: &mut [T]) {
     let m = b.len();
     for i in 0..m {
@@ -458,7 +458,7 @@ where
 }
 
 /// Moves particle `s.x` with stream `rng` into `s.y`.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn propagate<T: Real, N: Dim, P: ParticleProcess<T, N> + ?Sized>(
     s: &mut StateScratch<T, N>,
     process: &P,
@@ -567,7 +567,7 @@ impl<T: Real> SizeFamily<Dyn> for SensorFamily<T> {
 
 /// Runs `f` with measurement scratch of dimension m: `kept` when M is `Dyn`, a fresh one on
 /// the stack when M is static.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn with_sensor<T: Real, M: Dim, R>(
     kept: &mut SensorScratch<T, Dyn>,
     m: M,
@@ -602,7 +602,7 @@ struct Sums<'a, T: Real> {
 /// to `sums`. Errors: h(x) of the wrong length, a NaN or +∞ log-density (a bug in the model,
 /// e.g. h(x) NaN: [`Quantity::FunctionValue`], told apart from the [`Quantity::Weights`] of a
 /// measurement no particle explains), a non-finite or (Gaussian path) not positive definite R.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn log_density<T, N, M, H>(
     ms: &mut SensorScratch<T, M>,
     sensor: &H,

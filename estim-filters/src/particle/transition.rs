@@ -60,7 +60,7 @@ where
 {
     /// log p(x⁺ | x, u, Δt) if the model evaluates it itself; `None` (the default) for the
     /// Gaussian path.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn log_transition(
         &self,
         next: &OVector<T, N>,
@@ -73,7 +73,7 @@ where
     }
 
     /// Whether [`log_transition`](Self::log_transition) answers (`false`: the Gaussian path).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn has_own_density(&self) -> bool {
         false
     }
@@ -91,7 +91,7 @@ impl<T: Real, N: Dim, P: ProcessSampler<T, N> + TransitionDensity<T, N>> Particl
 where
     DefaultAllocator: Alloc<N>,
 {
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn log_transition(
         &self,
         next: &OVector<T, N>,
@@ -102,7 +102,7 @@ where
         Some(self.0.log_transition_density(next, x, u, dt))
     }
 
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn has_own_density(&self) -> bool {
         true
     }

@@ -61,7 +61,7 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     /// Zeroed buffers for `n` states and `m` outputs.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(super) fn new(n: N, m: M) -> Self {
         Self {
             state: OVector::zeros_generic(n, U1),
@@ -161,7 +161,7 @@ pub(crate) type Cached<'a, T, N, M> = (&'a mut FactorScratch<T, N, M>, usize);
 impl<T: Real> FactorCache<T> {
     /// The cached prediction scratch for `n` states if `N` is `Dyn` (made on first use, or
     /// remade for another n), `None` for a static size (the caller then uses a local).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn predict<N: Dim>(&mut self, n: N) -> Option<Cached<'_, T, N, N>>
     where
         DefaultAllocator: Alloc<N>,
@@ -183,7 +183,7 @@ impl<T: Real> FactorCache<T> {
 
     /// The cached update scratch for `n` states and `m` measurement components and its slot,
     /// if both are `Dyn` (made on first use); `None` otherwise (the caller uses a local).
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn update<N: Dim, M: Dim>(&mut self, n: N, m: M) -> Option<Cached<'_, T, N, M>>
     where
         DefaultAllocator: Alloc<N, M>,
@@ -239,7 +239,7 @@ impl<T: Real> core::fmt::Debug for FactorCache<T> {
 #[cfg(not(feature = "std"))]
 impl<T: Real> FactorCache<T> {
     /// Always `None`: the caller uses a local.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn predict<N: Dim>(&mut self, _: N) -> Option<Cached<'_, T, N, N>>
     where
         DefaultAllocator: Alloc<N>,
@@ -248,7 +248,7 @@ impl<T: Real> FactorCache<T> {
     }
 
     /// Always `None`: the caller uses a local.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn update<N: Dim, M: Dim>(&mut self, _: N, _: M) -> Option<Cached<'_, T, N, M>>
     where
         DefaultAllocator: Alloc<N, M>,

@@ -9,7 +9,7 @@ where
     /// The prediction (with C = cov(xₖ, xₖ₊₁) into `cross` if given), computed in the step's
     /// scratch (a local for static sizes, the cached one for `Dyn`) and committed if it
     /// succeeds and `step` applies it.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn predict_step<P>(
         &mut self,
         model: &P,
@@ -57,7 +57,7 @@ where
 
     /// An update with `model` and `z` (or its preparation), computed in the step's scratch
     /// and committed if applied.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     fn update_step<M, H>(
         &mut self,
         model: &H,

@@ -23,7 +23,7 @@ pub(crate) struct Block<'a, T> {
 
 impl<'a, T> Block<'a, T> {
     /// A block of `cols` columns with `bottom` rows below `top`.
-    #[inline(always)]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn new(top: &'a mut [T], bottom: &'a mut [T], cols: usize) -> Self {
         Self { top, bottom, cols }
     }
@@ -31,7 +31,7 @@ impl<'a, T> Block<'a, T> {
 
 /// Where row i of the pre-array lives in every block: (in `top`, offset, stride): entry
 /// (i, c) of a block is `top[c · p + i]` or `bottom[c · r + i − p]`.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn slot(i: usize, p: usize, r: usize) -> (bool, usize, usize) {
     if i < p {
         (true, i, p)
@@ -41,20 +41,20 @@ fn slot(i: usize, p: usize, r: usize) -> (bool, usize, usize) {
 }
 
 /// The part (`top` or `bottom`) of `block` that holds a row.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn part<'b, T>(block: &'b Block<'_, T>, top: bool) -> &'b [T] {
     if top { block.top } else { block.bottom }
 }
 
 /// [`part`], mutably.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn part_mut<'b, T>(block: &'b mut Block<'_, T>, top: bool) -> &'b mut [T] {
     if top { block.top } else { block.bottom }
 }
 
 /// The squared norm below which (or at ∞) a row's norm is recomputed with scaling: the
 /// smallest normal number over ε, so that no square that matters has underflowed.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn scaling_threshold<T: Real>() -> T {
     if T::default_epsilon() < real(1e-10) {
         real(f64::MIN_POSITIVE / f64::EPSILON)
@@ -240,7 +240,7 @@ fn householder<T: Real>(p: usize, r: usize, blocks: &mut [Block<'_, T>]) {
 }
 
 /// The (global) column `k` as (block, column within it).
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn locate<T>(blocks: &[Block<'_, T>], mut k: usize) -> (usize, usize) {
     for (b, block) in blocks.iter().enumerate() {
         if k < block.cols {

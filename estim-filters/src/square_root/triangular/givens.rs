@@ -8,7 +8,7 @@ use estim_core::Real;
 use super::{Block, locate};
 
 /// Column `j` of `block` from global row `row` on: its top part (rows row..p) and bottom part.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn column_from<'b, T>(
     block: &'b mut Block<'_, T>,
     j: usize,
@@ -22,7 +22,7 @@ fn column_from<'b, T>(
 }
 
 /// (x, y) ← (c x + s y, −s x + c y), elementwise.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn rotate<T: Real>(x: &mut [T], y: &mut [T], c: T, s: T) {
     for (xi, yi) in x.iter_mut().zip(y.iter_mut()) {
         let (a, b) = (*xi, *yi);
@@ -35,7 +35,7 @@ fn rotate<T: Real>(x: &mut [T], y: &mut [T], c: T, s: T) {
 type Column<'b, T> = (&'b mut [T], &'b mut [T]);
 
 /// Columns `a` < `b` of the pre-array, from row `row` on, as two disjoint mutable pairs.
-#[inline(always)]
+#[cfg_attr(not(debug_assertions), inline(always))]
 fn column_pair<'b, T>(
     blocks: &'b mut [Block<'_, T>],
     a: usize,
