@@ -85,12 +85,12 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
-// Inlining: the filter steps, propagators and kernels are `#[cfg_attr(not(debug_assertions),
-// inline(always))]`, inlined whole into their callers in optimised builds (the steps' speed,
-// BENCHMARKS.md, is measured so) and left to the compiler's judgement with debug assertions on
-// (the test profile, where forcing it copies every step into each of the tests' calls:
-// estim-filters' test binary took 262-264 s of CPU to build, 168-183 s without). A release build
-// with debug assertions turned on therefore runs them as calls.
+// Inlining, here and in estim-filters: the filter steps, propagators and kernels are
+// `#[cfg_attr(not(debug_assertions), inline(always))]`, inlined whole into their callers in
+// optimised builds (the steps' speed, BENCHMARKS.md, is measured so) and left to the compiler's
+// judgement with debug assertions on (the test profile, where forcing it copies every step into
+// each of the tests' calls: estim-filters' test binary took 262-264 s of CPU to build, 168-183 s
+// without). A release build with debug assertions turned on therefore runs them as calls.
 
 pub mod adapter;
 pub mod alloc;
