@@ -267,7 +267,10 @@ where
             m[(n + i, n + j)] = f[(j, i)] * dt;
         }
     }
-    let e = m.exp();
+    let e = exp_scaled(m).ok_or(Error::NonFinite {
+        stage,
+        quantity: Quantity::ProcessNoise,
+    })?;
     let shape = f.shape_generic();
     let phi = OMatrix::<T, N, N>::from_fn_generic(shape.0, shape.1, |i, j| e[(n + j, n + i)]);
     let upper = OMatrix::<T, N, N>::from_fn_generic(shape.0, shape.1, |i, j| e[(i, n + j)]);
@@ -276,4 +279,34 @@ where
     let q = (&q + q.transpose()) * half;
     finite(all_finite(&phi) && all_finite(&q), Quantity::ProcessNoise)?;
     Ok((phi, q))
+}
+
+/// e^M by nalgebra's `exp` after scaling M down to ‖M‖₁ ≤ B = (largest `T`)^(1/16), then
+/// squaring back; `None` when M is not finite or ‖M‖₁ overflows. nalgebra chooses its own
+/// scaling from ‖Mᵏ‖₁^(1/k) for k up to 10: when M⁸ overflows but M⁶ does not, it would square
+/// 2⁶⁴ times (f32 with |F Δt| from 7·10⁴ to 3·10⁶, f64 from 3·10³⁸). Below B (2⁸ for f32,
+/// 2⁶⁴ for f64) nothing changes; halving is exact, so the result is nalgebra's e^(M/2ˢ) squared
+/// s times.
+#[cfg(feature = "std")]
+fn exp_scaled<T: Real>(mut m: DMatrix<T>) -> Option<DMatrix<T>> {
+    let bound = T::max_value()?.powf(real(1.0 / 16.0));
+    let mut norm = m
+        .column_iter()
+        .map(|c| c.iter().fold(T::zero(), |s, v| s + v.abs()))
+        .fold(T::zero(), |a, b| if b > a { b } else { a });
+    if !norm.is_finite() || m.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let half: T = real(0.5);
+    let mut squarings = 0;
+    while norm > bound {
+        m *= half;
+        norm *= half;
+        squarings += 1;
+    }
+    let mut e = m.exp();
+    for _ in 0..squarings {
+        e = &e * &e;
+    }
+    Some(e)
 }

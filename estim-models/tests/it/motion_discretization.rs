@@ -412,3 +412,48 @@ fn van_loan_at_the_model_sizes() {
         assert!(ulps(q_d.as_slice(), vl.as_slice()));
     }
 }
+
+/// A finite F whose F Δt makes nalgebra's `exp` see M⁸ overflow while M⁶ does not (it then
+/// squared 2⁶⁴ times: the call never returned). Now a typed error, at once: e^{−FΔt} itself
+/// overflows here (Van Loan needs it, although Φ ≈ 0 and Q_d ≈ 1/2 are finite).
+#[test]
+fn van_loan_refuses_an_overflowing_step_instead_of_hanging() {
+    let overflow = Error::NonFinite {
+        stage: Stage::Construction,
+        quantity: Quantity::ProcessNoise,
+    };
+    let one = Matrix1::new(1.0f32);
+    assert_eq!(
+        van_loan(&Matrix1::new(-1.0f32), &one, &one, 1.0e5),
+        Err(overflow)
+    );
+    let one = Matrix1::new(1.0);
+    assert_eq!(
+        van_loan(&Matrix1::new(1.0e45), &one, &one, 1.0),
+        Err(overflow)
+    );
+    // F Δt itself overflows.
+    assert_eq!(
+        van_loan(&Matrix1::new(1.0e300), &one, &one, 1.0e10),
+        Err(overflow)
+    );
+}
+
+/// Above ‖M‖₁ = 2⁸ (f32) M is scaled down before nalgebra's `exp` and squared back: a rotation
+/// F = [0 ω; −ω 0] with ω Δt = 1000 rad still gives Φ = [cos sin; −sin cos](ω Δt) and, for
+/// G = I, Q_c = q I, Q_d = q Δt I. Tolerance: f32 carries a phase error of about ω Δt ε =
+/// 1.2·10⁻⁴ (ε = 2⁻²³), amplified 4× by the two squarings (‖M‖₁ ≈ 1000): 10⁻³.
+#[test]
+fn van_loan_scaled_route_matches_a_large_rotation() {
+    let (omega, dt, q) = (1000.0f32, 1.0f32, 0.3f32);
+    let f = Matrix2::new(0.0, omega, -omega, 0.0);
+    let (phi, qd) = van_loan(&f, &Matrix2::identity(), &(Matrix2::identity() * q), dt).unwrap();
+    let a = f64::from(omega * dt);
+    let exact = Matrix2::new(a.cos(), a.sin(), -a.sin(), a.cos());
+    assert!((phi.cast::<f64>() - exact).amax() < 1e-3, "{phi}");
+    let exact_q = Matrix2::<f64>::identity() * f64::from(q * dt);
+    assert!(
+        (qd.cast::<f64>() - exact_q).amax() < 1e-3 * f64::from(q),
+        "{qd}"
+    );
+}
