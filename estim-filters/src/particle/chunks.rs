@@ -388,6 +388,8 @@ pub(crate) fn moments<T: Real, N: Dim>(
         let x = &particles[range.start * n..range.end * n];
         // The loops unrolled for the common small dimensions.
         match n {
+            // A zero-dimensional state has empty moments.
+            0 => {}
             1 => chunk_moments::<T, 1>(x, w, shift, first, second),
             2 => chunk_moments::<T, 2>(x, w, shift, first, second),
             3 => chunk_moments::<T, 3>(x, w, shift, first, second),

@@ -2,13 +2,13 @@
 
 use estim_core::checks::ensure_finite;
 use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1};
-use estim_core::{Alloc, Error, Parameter, ProcessModel, Quantity, Real, Stage, error::Result};
+use estim_core::{Alloc, Error, ProcessModel, Quantity, Real, Stage, error::Result};
 
-use super::ParticleFilter;
 use super::noise::{AdditiveGaussian, ParticleProcess};
 use super::resample::{log_sum_exp, to_f64};
 use super::rng::ParticleRng;
 use super::transition::{GaussianKernel, ParticleTransition, checked_log_density};
+use super::{ParticleFilter, check_count};
 use crate::gaussian_filter::ensure_time_step;
 
 /// One recorded filtering cloud and the transition that leaves it.
@@ -221,9 +221,9 @@ where
     /// M = `paths` trajectories x₀..K from the smoothing distribution by backward simulation
     /// (see [`Ffbsi`]) through any [`ParticleTransition`], seeded by `seed`.
     ///
-    /// Errors (nothing changes: the record is only read): `paths` = 0
-    /// ([`Parameter::SampleCount`]); `last` of another particle count or dimension
-    /// ([`Error::DimensionMismatch`]); a transition without a density (singular Q:
+    /// Errors (nothing changes: the record is only read): `paths` = 0, or so many that the
+    /// paths could not be allocated ([`SampleCount`](estim_core::Parameter::SampleCount));
+    /// `last` of another particle count or dimension ([`Error::DimensionMismatch`]); a transition without a density (singular Q:
     /// [`Error::NotPositiveDefinite`] with [`Quantity::ProcessNoise`]) or f, Q not finite; a
     /// model density NaN or +∞, or a recorded state from which no particle can reach the
     /// drawn successor (every backward weight zero): [`Error::NonFinite`] with
@@ -239,12 +239,9 @@ where
         P: ParticleTransition<T, N> + ?Sized,
         P::Model: ProcessModel<T, N, Input = U>,
     {
-        if paths == 0 {
-            return Err(Error::InvalidParameter {
-                parameter: Parameter::SampleCount,
-                value: 0.0,
-            });
-        }
+        // One n × paths matrix per recorded step and the last.
+        let per_path = (self.records.len() + 1).saturating_mul(last.particles().nrows());
+        check_count::<T>(paths, per_path)?;
         if let Some(first) = self.records.first() {
             check_cloud(&first.particles, last.particles(), Stage::Smoothing)?;
         }

@@ -229,8 +229,9 @@ where
     /// seeded by `seed`. Systematic resampling when the ESS falls below N/2 (change with
     /// [`with_resampling`](Self::with_resampling) and [`with_trigger`](Self::with_trigger)).
     ///
-    /// Errors: `count` = 0 ([`Parameter::SampleCount`]); a prior covariance that is not
-    /// positive semi-definite (possible only with [`Gaussian::new_unchecked`]).
+    /// Errors: `count` = 0, or so large that the particles could not be allocated
+    /// ([`Parameter::SampleCount`]); a prior covariance that is not positive semi-definite
+    /// (possible only with [`Gaussian::new_unchecked`]).
     ///
     /// ```
     /// use estim_core::nalgebra::{Matrix2, Vector2};
@@ -247,12 +248,8 @@ where
     /// # Ok::<(), estim_core::Error>(())
     /// ```
     pub fn new(prior: Gaussian<T, N>, count: usize, seed: u64) -> Result<Self> {
-        if count == 0 {
-            return Err(Error::InvalidParameter {
-                parameter: Parameter::SampleCount,
-                value: 0.0,
-            });
-        }
+        // The cloud, its resampling buffer and six per-particle vectors.
+        check_count::<T>(count, 2 * prior.mean().nrows() + 6)?;
         let factor = psd_factor(prior.covariance(), estim_core::Stage::Construction)?;
         let (n, _) = prior.mean().shape_generic();
         let mut filter = Self {
@@ -489,6 +486,23 @@ where
         let factor = psd_factor(prior.covariance(), estim_core::Stage::Construction)
             .unwrap_or_else(|_| OMatrix::zeros_generic(n, n));
         self.draw(&prior, &factor);
+    }
+}
+
+/// `Ok` when `count` ≥ 1 items of `per_item` scalars each could be reserved now: a count that
+/// cannot even be addressed, or whose memory the allocator refuses, is an error
+/// ([`Parameter::SampleCount`]) instead of a "capacity overflow" panic or an allocation abort.
+/// (The probe is released at once; what is then allocated is this much or less.)
+pub(crate) fn check_count<T>(count: usize, per_item: usize) -> Result<()> {
+    let refused = Error::InvalidParameter {
+        parameter: Parameter::SampleCount,
+        value: count as f64,
+    };
+    let len = count.checked_mul(per_item.max(1)).filter(|_| count > 0);
+    let mut probe: Vec<T> = Vec::new();
+    match len {
+        Some(len) if probe.try_reserve_exact(len).is_ok() => Ok(()),
+        _ => Err(refused),
     }
 }
 

@@ -4,13 +4,13 @@ use estim_core::checks::{ensure_finite, ensure_shape, symmetrize};
 use estim_core::linalg::inverse_quadratic_form;
 use estim_core::nalgebra::{DefaultAllocator, Dim, DimAdd, DimSum, Dyn, OMatrix, OVector, U1};
 use estim_core::{
-    Alloc, Error, Gaussian, LinearMeasurement, LinearProcess, Parameter, Quantity, Real, Stage,
-    error::Result, psd_factor,
+    Alloc, Error, Gaussian, LinearMeasurement, LinearProcess, Quantity, Real, Stage, error::Result,
+    psd_factor,
 };
 
 use super::resample::{effective_sample_size, normaliser, resample_with, to_f64};
 use super::rng::{ParticleRng, RESAMPLE};
-use super::{ResampleWhen, Resampling, check_trigger, fill_normals};
+use super::{ResampleWhen, Resampling, check_count, check_trigger, fill_normals};
 use crate::gaussian_filter::{KalmanFilter, ensure_time_step};
 use crate::report::{UpdateOutcome, UpdateReport};
 use crate::traits::{Estimator, Predict, Update};
@@ -258,8 +258,9 @@ where
     /// (xn and xl independent a priori), equally weighted. Systematic resampling when the ESS
     /// falls below N/2, as [`ParticleFilter`](super::ParticleFilter).
     ///
-    /// Errors: `count` = 0 ([`Parameter::SampleCount`]); a nonlinear prior covariance that is
-    /// not positive semi-definite.
+    /// Errors: `count` = 0, or so large that the particles could not be allocated
+    /// ([`SampleCount`](estim_core::Parameter::SampleCount)); a nonlinear prior covariance that is not positive
+    /// semi-definite.
     ///
     /// ```
     /// use estim_core::nalgebra::{Matrix1, Matrix2, Vector1, Vector2};
@@ -281,12 +282,9 @@ where
         count: usize,
         seed: u64,
     ) -> Result<Self> {
-        if count == 0 {
-            return Err(Error::InvalidParameter {
-                parameter: Parameter::SampleCount,
-                value: 0.0,
-            });
-        }
+        // The nonlinear cloud and one Kalman filter (mean and covariance) per particle.
+        let nl = linear.mean().nrows();
+        check_count::<T>(count, 2 * nonlinear.mean().nrows() + nl * (nl + 1) + 6)?;
         let factor = psd_factor(nonlinear.covariance(), Stage::Construction)?;
         let (n, _) = nonlinear.mean().shape_generic();
         let mut particles = OMatrix::zeros_generic(n, Dyn(count));
@@ -327,7 +325,7 @@ where
     }
 
     /// The same filter resampling when `when` fires. Errors: an
-    /// [`EssBelow`](ResampleWhen::EssBelow) fraction outside (0, 1] ([`Parameter::Tolerance`]).
+    /// [`EssBelow`](ResampleWhen::EssBelow) fraction outside (0, 1] ([`Tolerance`](estim_core::Parameter::Tolerance)).
     pub fn with_trigger(mut self, when: ResampleWhen) -> Result<Self> {
         check_trigger(when)?;
         self.when = when;

@@ -1217,3 +1217,39 @@ fn guided_step_with_the_prior_as_proposal_is_the_bootstrap_filter() {
     assert!((guided.log_likelihood() - bootstrap.log_likelihood()).abs() <= 1e-12 * scale);
     assert!((guided.state()[0] - bootstrap.state()[0]).abs() <= 1e-12);
 }
+
+/// Counts whose particles or paths cannot be allocated are typed errors (they were a "capacity
+/// overflow" panic or an allocation abort), and a zero-dimensional state is an empty cloud, not
+/// a panic in the moments.
+#[test]
+fn unallocatable_counts_are_refused_and_an_empty_state_works() {
+    let prior = Gaussian::new(Vector1::new(0.0), Matrix1::new(1.0)).unwrap();
+    let refused = |count: usize| {
+        Some(Error::InvalidParameter {
+            parameter: Parameter::SampleCount,
+            value: count as f64,
+        })
+    };
+    for count in [usize::MAX, usize::MAX / 4, 1 << 60] {
+        assert_eq!(
+            ParticleFilter::new(prior.clone(), count, 1).err(),
+            refused(count)
+        );
+        assert_eq!(
+            RaoBlackwellised::new(prior.clone(), prior.clone(), count, 1).err(),
+            refused(count)
+        );
+    }
+    let zs = readings(3, 3);
+    let (process, _, _) = ar1();
+    let (ffbsi, pf) = forward(&zs, 20, 8);
+    assert_eq!(
+        ffbsi.smooth(&pf, &process, usize::MAX / 2, 1).err(),
+        refused(usize::MAX / 2)
+    );
+    let empty = Gaussian::new(DVector::<f64>::zeros(0), DMatrix::zeros(0, 0)).unwrap();
+    let mut pf = ParticleFilter::new(empty.clone(), 10, 1).unwrap();
+    assert_eq!(pf.state().len(), 0);
+    pf.reset(empty);
+    assert_eq!(pf.covariance().shape(), (0, 0));
+}
