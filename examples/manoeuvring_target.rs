@@ -52,7 +52,7 @@
 //! turn with small ω has begun, which the script never does: the covariance is then wider
 //! than the errors (NEES 2.5–3) and P(CT) higher than the frequency. On a truth
 //! sampled from the IMM's own chain and models the same code is consistent and calibrated
-//! (estim-filters' `tests/it/imm_consistency.rs`: every per-step NEES average within its
+//! (estim-filters' `tests/sampling/imm_consistency.rs`: every per-step NEES average within its
 //! bound, every calibration bin within its binomial bound, and each single-mode filter
 //! outside).
 //!

@@ -50,7 +50,7 @@
 //! ([`EmbeddedModes`] of [`Embedded`] filters, each with its [`StateMap`]).
 //!
 //! The IMM is an approximation: it merges the mᵏ mode histories into m Gaussians at each step
-//! (the exact posterior is a mixture of mᵏ). The tests (`tests/it/imm.rs`) measure that error
+//! (the exact posterior is a mixture of mᵏ). The tests (`tests/sampling/imm.rs`) measure that error
 //! against the enumeration of every mode sequence.
 //!
 //! # Failures

@@ -36,7 +36,7 @@ fn vector<T: Real>(values: Vec<T>) -> DVector<T> {
 /// Without mixture noise and without merging the filter is exact for a linear model with a
 /// mixture prior (each component is the Kalman filter of its prior, the weights Bayes'
 /// rule); with mixture noise the number of components grows as Lᵏ and merging is the
-/// approximation (measured in `tests/it/gaussian_sum.rs` against the enumeration).
+/// approximation (measured in `tests/sampling/gaussian_sum.rs` against the enumeration).
 /// Every step is atomic: on an error every component and weight is as before. It implements
 /// the step traits and [`Rollback`] (a clone of every component and weight); with the `serde`
 /// feature it checkpoints (its components, weights and bound) and resumes bit for bit.

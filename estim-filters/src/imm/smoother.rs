@@ -49,7 +49,7 @@
 //! not for the general process models of the family. Kim's plain pass drops the future
 //! data's likelihood of each pair, which fails on a manoeuvre seen by a mode with nearly
 //! deterministic dynamics: the (quiet, quiet) pair then carries the velocity after the
-//! manoeuvre back before it. `tests/it/imm_smoother.rs` measures both against the exact
+//! manoeuvre back before it. `tests/sampling/imm_smoother.rs` measures both against the exact
 //! smoothed posterior (the enumeration of every mode sequence, each smoothed by its own RTS
 //! pass): on an 8-step manoeuvre the reweighted pass is within 0.23 σ (mean), Kim's within
 //! 1.14 σ; over 200 seeded runs its RMSE is below the filter's at every time (Kim's is above

@@ -1,5 +1,6 @@
-//! estim-filters' integration tests, built as one binary (one module per topic) so that the
-//! workspace links one test executable per crate instead of one per file.
+//! estim-filters' integration tests of the Gaussian filters, smoothers, fusion and noise
+//! identification, built as one binary (one module per topic) instead of one per file; the
+//! particle filters and multiple-model estimators are in `tests/sampling`.
 //!
 //! Run one topic with `cargo test -p estim-filters --test it <module>::`, e.g.
 //! `cargo test -p estim-filters --test it equivalence::`.
@@ -33,12 +34,7 @@ mod fusion_sizes;
 mod fusion_support;
 mod fuzz;
 mod gating;
-mod gaussian_sum;
 mod iekf;
-mod imm;
-mod imm_consistency;
-mod imm_sizes;
-mod imm_smoother;
 mod multirate;
 mod nees;
 mod no_alloc;
@@ -48,11 +44,6 @@ mod noise_id_em;
 #[cfg(feature = "likelihood")]
 mod noise_id_likelihood;
 mod noise_policy;
-mod particle;
-mod particle_algorithms;
-mod particle_common;
-mod particle_parallel;
-mod rbpf_contract;
 mod rls;
 mod robust;
 mod second_order;
