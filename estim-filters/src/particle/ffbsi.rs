@@ -223,11 +223,12 @@ where
     ///
     /// Errors (nothing changes: the record is only read): `paths` = 0, or so many that the
     /// paths could not be allocated ([`SampleCount`](estim_core::Parameter::SampleCount));
-    /// `last` of another particle count or dimension ([`Error::DimensionMismatch`]); a transition without a density (singular Q:
-    /// [`Error::NotPositiveDefinite`] with [`Quantity::ProcessNoise`]) or f, Q not finite; a
-    /// model density NaN or +∞, or a recorded state from which no particle can reach the
-    /// drawn successor (every backward weight zero): [`Error::NonFinite`] with
-    /// [`Quantity::Weights`]. Every error is at [`Stage::Smoothing`] except the count checks.
+    /// `last` of another particle count or dimension ([`Error::DimensionMismatch`]); a
+    /// transition without a density (singular Q: [`Error::NotPositiveDefinite`] with
+    /// [`Quantity::ProcessNoise`]) or f, Q not finite; a model density NaN or +∞, or a recorded
+    /// state from which no particle can reach the drawn successor (every backward weight zero):
+    /// [`Error::NonFinite`] with [`Quantity::Weights`]. Every error is at [`Stage::Smoothing`]
+    /// except the count checks.
     pub fn smooth_with<P>(
         &self,
         last: &ParticleFilter<T, N>,

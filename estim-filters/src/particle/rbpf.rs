@@ -259,8 +259,8 @@ where
     /// falls below N/2, as [`ParticleFilter`](super::ParticleFilter).
     ///
     /// Errors: `count` = 0, or so large that the particles could not be allocated
-    /// ([`SampleCount`](estim_core::Parameter::SampleCount)); a nonlinear prior covariance that is not positive
-    /// semi-definite.
+    /// ([`SampleCount`](estim_core::Parameter::SampleCount)); a nonlinear prior covariance
+    /// that is not positive semi-definite.
     ///
     /// ```
     /// use estim_core::nalgebra::{Matrix1, Matrix2, Vector1, Vector2};
@@ -325,7 +325,8 @@ where
     }
 
     /// The same filter resampling when `when` fires. Errors: an
-    /// [`EssBelow`](ResampleWhen::EssBelow) fraction outside (0, 1] ([`Tolerance`](estim_core::Parameter::Tolerance)).
+    /// [`EssBelow`](ResampleWhen::EssBelow) fraction outside (0, 1]
+    /// ([`Tolerance`](estim_core::Parameter::Tolerance)).
     pub fn with_trigger(mut self, when: ResampleWhen) -> Result<Self> {
         check_trigger(when)?;
         self.when = when;
