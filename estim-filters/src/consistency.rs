@@ -44,6 +44,7 @@ use crate::report::UpdateReport;
 
 mod verdict;
 
+pub use crate::chi_square::MAX_DEGREES_OF_FREEDOM;
 pub(crate) use verdict::FamilyTest;
 pub use verdict::{Check, CheckResult, FamilyRule, Location, Outcome, Verdict, Worst};
 
@@ -242,7 +243,7 @@ pub struct ChiSquareBand {
 
 impl ChiSquareBand {
     /// The band for the average of `runs` independent χ²_`dof` variables. Needs `dof` ≥ 1,
-    /// `runs` ≥ 1 and 0 < `confidence` < 1.
+    /// `runs` ≥ 1, `dof` · `runs` ≤ [`MAX_DEGREES_OF_FREEDOM`] and 0 < `confidence` < 1.
     ///
     /// Example: 2 states, 50 runs, 95%: χ²₁₀₀(0.025)/50 = 1.48, χ²₁₀₀(0.975)/50 = 2.59.
     pub fn two_sided(dof: usize, runs: usize, confidence: f64) -> Result<Self> {
@@ -264,6 +265,10 @@ impl ChiSquareBand {
     /// The band for (1/`terms`) × a χ² variable with `degrees_of_freedom` degrees of freedom:
     /// the average of `terms` independent χ² variables whose dimensions add up to
     /// `degrees_of_freedom` (e.g. NIS of measurements of different sizes).
+    ///
+    /// Errors: [`Setting::DegreesOfFreedom`] for 0 or more than [`MAX_DEGREES_OF_FREEDOM`]
+    /// degrees of freedom, [`Setting::RunCount`] for `terms` = 0, [`Setting::Confidence`]
+    /// outside (0, 1).
     pub fn for_sum(degrees_of_freedom: usize, terms: usize, confidence: f64) -> Result<Self> {
         let confidence = validate_confidence(confidence)?;
         if terms == 0 {
@@ -370,6 +375,10 @@ impl ChiSquareAverage {
     }
 
     /// Adds one statistic `value` ~ χ²_`dof` (`value` finite and ≥ 0, `dof` ≥ 1).
+    ///
+    /// Errors (nothing added): a negative or non-finite `value`
+    /// ([`Error::NonFinite`]); `dof` = 0, or a total above `usize::MAX`
+    /// ([`Setting::DegreesOfFreedom`]).
     pub fn push(&mut self, value: f64, dof: usize) -> Result<()> {
         if !(value >= 0.0) || !value.is_finite() {
             return Err(Error::NonFinite {
@@ -384,9 +393,10 @@ impl ChiSquareAverage {
                 value: 0.0,
             });
         }
+        let degrees_of_freedom = self.total_dof(dof)?;
         self.sum += value;
         self.terms += 1;
-        self.degrees_of_freedom += dof;
+        self.degrees_of_freedom = degrees_of_freedom;
         Ok(())
     }
 
@@ -399,10 +409,26 @@ impl ChiSquareAverage {
     }
 
     /// Adds everything `other` holds.
-    pub fn merge(&mut self, other: &Self) {
+    ///
+    /// Errors (nothing added): [`Setting::DegreesOfFreedom`] when the total would exceed
+    /// `usize::MAX`.
+    pub fn merge(&mut self, other: &Self) -> Result<()> {
+        let degrees_of_freedom = self.total_dof(other.degrees_of_freedom)?;
         self.sum += other.sum;
+        // terms ≤ degrees of freedom (every term has at least one), so this cannot overflow.
         self.terms += other.terms;
-        self.degrees_of_freedom += other.degrees_of_freedom;
+        self.degrees_of_freedom = degrees_of_freedom;
+        Ok(())
+    }
+
+    /// The degrees of freedom with `more` added, if they fit in a `usize`.
+    fn total_dof(&self, more: usize) -> Result<usize> {
+        self.degrees_of_freedom
+            .checked_add(more)
+            .ok_or(ValidationError::InvalidSetting {
+                setting: Setting::DegreesOfFreedom,
+                value: more as f64,
+            })
     }
 
     /// The average (1/K) Σ εₖ, `None` when empty.
@@ -426,7 +452,7 @@ impl ChiSquareAverage {
     }
 
     /// The two-sided band of the average at `confidence` ([`ChiSquareBand::for_sum`]).
-    /// Errors when empty.
+    /// Errors when empty, or above [`MAX_DEGREES_OF_FREEDOM`] degrees of freedom.
     pub fn band(&self, confidence: f64) -> Result<ChiSquareBand> {
         ChiSquareBand::for_sum(self.degrees_of_freedom, self.terms, confidence)
     }

@@ -181,7 +181,7 @@ pub fn rate_experiment_in(
     let (q, r, c) = (lambda33 * dt * dt, lambda44, 2.0 * omega);
     let p0 = config.initial_std_deg_s.to_radians().powi(2);
     let (p_riccati, riccati_iterations, riccati_trace) =
-        iterate_riccati(p0, q, r, c, 0.0, 1e-13, 100_000);
+        iterate_riccati(p0, q, r, c, 0.0, 1e-13, 100_000)?;
     let p_eq18 = steady_state_eq18(q, r, c);
     let p_eq19 = steady_state_eq19(dt, sigma, rr, c);
     let p_eq19_printed = steady_state_eq19_printed(dt, sigma, rr, c);

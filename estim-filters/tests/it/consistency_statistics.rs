@@ -187,3 +187,65 @@ fn single_run_nis_whiteness_and_likelihood() {
     merged.merge(&ll);
     assert_eq!(merged.mean(), ll.mean());
 }
+
+/// Degrees of freedom that overflow a `usize` or that statrs cannot evaluate are typed errors:
+/// before, `ChiSquareAverage` overflowed (a panic in debug builds, a wrapped total in release)
+/// and a band for ≳ 2⁵⁴ degrees of freedom never returned (statrs' series stalls at 2⁵³).
+#[test]
+fn degrees_of_freedom_beyond_the_limit_are_refused() {
+    use estim_filters::consistency::MAX_DEGREES_OF_FREEDOM;
+    let dof_error = |r: Result<ChiSquareBand, ValidationError>| {
+        matches!(
+            r,
+            Err(ValidationError::InvalidSetting {
+                setting: Setting::DegreesOfFreedom,
+                ..
+            })
+        )
+    };
+    assert!(dof_error(ChiSquareBand::for_sum(usize::MAX, 1, 0.95)));
+    assert!(dof_error(ChiSquareBand::for_sum(
+        MAX_DEGREES_OF_FREEDOM + 1,
+        1,
+        0.95
+    )));
+    assert!(dof_error(ChiSquareBand::two_sided(1 << 30, 1 << 30, 0.95)));
+    // The largest accepted count: the band of the sum, k ± 1.96 √(2k) to within 10⁻³ of its width.
+    let k = MAX_DEGREES_OF_FREEDOM as f64;
+    let band = ChiSquareBand::for_sum(MAX_DEGREES_OF_FREEDOM, 1, 0.95).unwrap();
+    let half_width = 1.959_963_984_540_054 * (2.0 * k).sqrt();
+    assert!(
+        (band.upper - k - half_width).abs() < 1e-3 * half_width,
+        "{band:?}"
+    );
+    assert!(
+        (k - band.lower - half_width).abs() < 1e-3 * half_width,
+        "{band:?}"
+    );
+
+    let mut avg = ChiSquareAverage::new();
+    avg.push(1.0, usize::MAX).unwrap();
+    let before = avg;
+    let overflow = avg.push(1.0, 1);
+    assert!(
+        matches!(
+            overflow,
+            Err(ValidationError::InvalidSetting {
+                setting: Setting::DegreesOfFreedom,
+                ..
+            })
+        ),
+        "{overflow:?}"
+    );
+    assert_eq!(avg, before, "a refused push adds nothing");
+    let mut one = ChiSquareAverage::new();
+    one.push(2.0, 1).unwrap();
+    assert!(avg.merge(&one).is_err());
+    assert_eq!(avg, before, "a refused merge adds nothing");
+    assert!(dof_error(avg.band(0.95)));
+    one.merge(&one.clone()).unwrap();
+    assert_eq!(
+        (one.terms(), one.degrees_of_freedom(), one.sum()),
+        (2, 2, 4.0)
+    );
+}

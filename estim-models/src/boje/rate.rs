@@ -16,6 +16,8 @@
 //! samples (eq 4 plus white noise).
 
 use estim_core::nalgebra::{Matrix1, U1, Vector1};
+#[cfg(feature = "std")]
+use estim_core::{Error, Parameter};
 use estim_core::{
     LinearProcessModel, MeasurementHessian, MeasurementJacobian, MeasurementModel, ProcessJacobian,
     ProcessModel,
@@ -103,6 +105,20 @@ pub fn riccati_step(p: f64, q: f64, r: f64, c: f64, s: f64) -> f64 {
 /// Eq 17 iterated from `p0` until |pᵢ₊₁ − pᵢ| ≤ `rel_tol`·pᵢ₊₁ or `max_iterations`: returns
 /// (p, iterations, the trajectory p₀, p₁, …). Needs the `std` feature (the trajectory is a
 /// `Vec`).
+///
+/// Errors: [`Error::InvalidParameter`] with [`Parameter::StepCount`] for `max_iterations`
+/// above [`MAX_STEPS`](crate::limits::MAX_STEPS), with [`Parameter::Tolerance`] for a
+/// `rel_tol` that is negative or not finite (a NaN tolerance would never stop the iteration).
+///
+/// ```
+/// use estim_models::boje::rate::{iterate_riccati, steady_state_eq18};
+/// let (q, r, c) = (1e-4, 1.0, 10.0);
+/// let (p, iterations, trace) = iterate_riccati(0.0, q, r, c, 0.0, 1e-13, 10_000)?;
+/// assert!((p - steady_state_eq18(q, r, c)).abs() <= 1e-10 * p);
+/// assert_eq!(trace.len(), iterations + 1);
+/// assert!(iterate_riccati(0.0, q, r, c, 0.0, f64::NAN, 10).is_err());
+/// # Ok::<(), estim_core::Error>(())
+/// ```
 #[cfg(feature = "std")]
 pub fn iterate_riccati(
     p0: f64,
@@ -112,7 +128,14 @@ pub fn iterate_riccati(
     s: f64,
     rel_tol: f64,
     max_iterations: usize,
-) -> (f64, usize, Vec<f64>) {
+) -> Result<(f64, usize, Vec<f64>), Error> {
+    crate::limits::check_steps(max_iterations)?;
+    if !(rel_tol.is_finite() && rel_tol >= 0.0) {
+        return Err(Error::InvalidParameter {
+            parameter: Parameter::Tolerance,
+            value: rel_tol,
+        });
+    }
     let mut p = p0;
     let mut trace = vec![p];
     for i in 1..=max_iterations {
@@ -121,10 +144,10 @@ pub fn iterate_riccati(
         let done = (next - p).abs() <= rel_tol * next.abs();
         p = next;
         if done {
-            return (p, i, trace);
+            return Ok((p, i, trace));
         }
     }
-    (p, max_iterations, trace)
+    Ok((p, max_iterations, trace))
 }
 
 /// Eq 18: the steady state of eq 17 for s = 0, p = q/2 + √(q²/4 + q r/c²) (predicted).

@@ -17,6 +17,7 @@
 
 use core::f64::consts::SQRT_2;
 
+pub use estim_filters::consistency::MAX_DEGREES_OF_FREEDOM;
 use statrs::function::gamma::checked_gamma_ur;
 
 /// The complementary error function erfc(x) = 1 − erf(x), as Q(½, x²) (statrs' regularised
@@ -53,9 +54,10 @@ pub fn normal_cdf(x: f64) -> f64 {
 /// ≈ 10⁻¹⁵ at k ≤ 10 and ≤ 1.3 · 10⁻¹² at k = 2000-3000 against mpmath; test `lv2_stats`).
 ///
 /// `dof = 0` (no redundancy) gives 0 for x > 0 (χ²₀ is the point mass at 0) and 1 otherwise;
-/// x ≤ 0 gives 1, x = ∞ gives 0, NaN gives NaN.
+/// x ≤ 0 gives 1, x = ∞ gives 0, NaN gives NaN, and so does a `dof` above
+/// [`MAX_DEGREES_OF_FREEDOM`] (where statrs drifts, and from ≈ 2⁵⁴ never returns).
 pub fn chi2_sf(x: f64, dof: usize) -> f64 {
-    if x.is_nan() {
+    if x.is_nan() || dof > MAX_DEGREES_OF_FREEDOM {
         return f64::NAN;
     }
     if x <= 0.0 {
@@ -69,13 +71,14 @@ pub fn chi2_sf(x: f64, dof: usize) -> f64 {
 }
 
 /// The χ² threshold c with P(χ²ₖ > c) = `false_alarm` (0 < α < 1), by bisection on
-/// [`chi2_sf`] to relative width 10⁻¹⁴. `dof = 0` or α outside (0, 1) gives NaN.
+/// [`chi2_sf`] to relative width 10⁻¹⁴. `dof = 0`, `dof` above [`MAX_DEGREES_OF_FREEDOM`] or
+/// α outside (0, 1) gives NaN.
 ///
 /// Own code rather than statrs' `ChiSquared::inverse_cdf(1 − α)`: that one inverts the CDF
 /// near 1 and is off by 4.7 · 10⁻¹¹ relative at k = 1, α = 10⁻³ (measured; the test pins
 /// 10⁻¹²); bisecting the survival function keeps the tail's resolution.
 pub fn chi2_quantile_upper(false_alarm: f64, dof: usize) -> f64 {
-    if dof == 0 || !(false_alarm > 0.0 && false_alarm < 1.0) {
+    if dof == 0 || dof > MAX_DEGREES_OF_FREEDOM || !(false_alarm > 0.0 && false_alarm < 1.0) {
         return f64::NAN;
     }
     let mut hi = dof as f64 + 10.0;

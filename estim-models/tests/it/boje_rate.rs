@@ -15,7 +15,7 @@ fn eq18_equals_iterated_eq17() {
         let p18 = steady_state_eq18(q, r, c);
         assert!((riccati_step(p18, q, r, c, 0.0) - p18).abs() <= 1e-14 * p18);
         for p0 in [0.0, 1e-8, 1.0] {
-            let (p, _, _) = iterate_riccati(p0, q, r, c, 0.0, 0.0, 20_000);
+            let (p, _, _) = iterate_riccati(p0, q, r, c, 0.0, 0.0, 20_000).unwrap();
             assert!(
                 (p - p18).abs() <= 1e-12 * p18,
                 "q={q} r={r} c={c} p0={p0}: {p} vs {p18}"
@@ -38,4 +38,37 @@ fn eq19_corrected_equals_eq18() {
         let p18 = steady_state_eq18(q, r, c);
         assert!((steady_state_eq19(dt, sigma, rr, c) - p18).abs() <= 1e-13 * p18);
     }
+}
+
+/// Settings that would never stop the iteration (a NaN tolerance, an unbounded count on an
+/// unobservable channel) are refused before any step: before, the trajectory grew until the
+/// allocator aborted.
+#[test]
+fn unbounded_iteration_settings_are_refused() {
+    use estim_core::{Error, Parameter};
+    let refused = |result: Result<(f64, usize, Vec<f64>), Error>, expected: Parameter| {
+        assert!(
+            matches!(result, Err(Error::InvalidParameter { parameter, .. }) if parameter == expected),
+            "{result:?}"
+        );
+    };
+    refused(
+        iterate_riccati(1.0, 1.0, 1.0, 1.0, 0.0, f64::NAN, 10),
+        Parameter::Tolerance,
+    );
+    refused(
+        iterate_riccati(1.0, 1.0, 1.0, 1.0, 0.0, -1.0, 10),
+        Parameter::Tolerance,
+    );
+    refused(
+        iterate_riccati(1.0, 1.0, 1.0, 1.0, 0.0, f64::INFINITY, 10),
+        Parameter::Tolerance,
+    );
+    refused(
+        iterate_riccati(1.0, 1.0, 1.0, 0.0, 0.0, 1e-13, usize::MAX),
+        Parameter::StepCount,
+    );
+    // The largest accepted count still ends: c = 0 never converges, so every step runs.
+    let (_, iterations, trace) = iterate_riccati(1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1000).unwrap();
+    assert_eq!((iterations, trace.len()), (1000, 1001));
 }

@@ -136,3 +136,21 @@ fn chi2_survival_holds_at_many_degrees_of_freedom() {
     // Beyond the smallest float: 0, not NaN (χ²₂ at 1490: 2.8e-324 exactly).
     assert!(chi2_sf(1e4, 2) == 0.0 && chi2_sf(1e4, 5001) < 1e-300);
 }
+
+/// Degrees of freedom above the limit give NaN at once: statrs' series would stall (for
+/// ≳ 2⁵⁴ it never returned). The limit itself is evaluated: the upper 1 % point of χ²ₖ is
+/// k + 2.326 √(2k) to within 10⁻³ of the offset at k = 2³⁶.
+#[test]
+fn degrees_of_freedom_beyond_the_limit_give_nan() {
+    use estim_models::lv2::stats::MAX_DEGREES_OF_FREEDOM;
+    assert!(chi2_sf(1.0, MAX_DEGREES_OF_FREEDOM + 1).is_nan());
+    assert!(chi2_sf((1u64 << 60) as f64, 1 << 60).is_nan());
+    assert!(chi2_quantile_upper(0.01, usize::MAX).is_nan());
+    let k = MAX_DEGREES_OF_FREEDOM as f64;
+    let offset = chi2_quantile_upper(0.01, MAX_DEGREES_OF_FREEDOM) - k;
+    let expected = 2.326_347_874_040_841 * (2.0 * k).sqrt();
+    assert!(
+        (offset - expected).abs() < 1e-3 * expected,
+        "{offset} vs {expected}"
+    );
+}
