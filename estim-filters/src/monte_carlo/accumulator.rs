@@ -5,7 +5,7 @@ use estim_core::linalg::inverse_quadratic_form;
 use estim_core::nalgebra::SMatrix;
 use estim_core::{Error, Quantity};
 
-use crate::consistency::STAGE;
+use crate::consistency::{MAX_DEGREES_OF_FREEDOM, STAGE};
 use crate::validation::{Result, ValidationError};
 
 /// Running moments of one slot's estimates, in f64, column-major n × n matrices.
@@ -329,25 +329,34 @@ impl Accumulator {
         }
     }
 
-    /// Whether every buffer has the length its dimensions say: true for what this crate
-    /// builds, checked for shards read back from a file (which could have been edited).
-    pub(super) fn well_formed(&self, slots: usize, pairs: usize) -> bool {
+    /// Whether it holds `runs` runs and every buffer has the length its dimensions say: true
+    /// for what this crate builds, checked for shards read back from a file (which could have
+    /// been edited). Every count is then at most `runs` (one record per slot and run) and the
+    /// NIS degrees of freedom at most [`MAX_DEGREES_OF_FREEDOM`], so merging the chunks of an
+    /// experiment (at most [`MonteCarlo::MAX_CHUNKS`](super::MonteCarlo::MAX_CHUNKS)) cannot
+    /// overflow.
+    pub(super) fn well_formed(&self, runs: usize, slots: usize, pairs: usize) -> bool {
         let slot_ok = |a: &SlotAcc| {
             let (n, nn) = (a.n, a.n.checked_mul(a.n));
             let empty = a.count == 0 && a.n == 0;
-            empty
-                || (nn.is_some()
-                    && [&a.mean_e, &a.mean_x, &a.m2_x].iter().all(|v| v.len() == n)
-                    && [&a.c_ee, &a.c_ex, &a.sum_p]
-                        .iter()
-                        .all(|v| Some(v.len()) == nn))
+            let counts =
+                a.count <= runs && a.nis_count <= runs && a.nis_dof <= MAX_DEGREES_OF_FREEDOM;
+            counts
+                && (empty
+                    || (nn.is_some()
+                        && [&a.mean_e, &a.mean_x, &a.m2_x].iter().all(|v| v.len() == n)
+                        && [&a.c_ee, &a.c_ex, &a.sum_p]
+                            .iter()
+                            .all(|v| Some(v.len()) == nn)))
         };
         let pair_ok = |p: &PairAcc| {
-            Some(p.sum_ab.len()) == p.ma.checked_mul(p.mb)
+            p.count <= runs
+                && Some(p.sum_ab.len()) == p.ma.checked_mul(p.mb)
                 && p.sum_a2.len() == p.ma
                 && p.sum_b2.len() == p.mb
         };
-        self.slots.len() == slots
+        self.runs == runs
+            && self.slots.len() == slots
             && self.pairs.len() == pairs
             && self.slots.iter().all(slot_ok)
             && self.pairs.iter().all(pair_ok)

@@ -46,9 +46,12 @@ pub struct Shard {
 }
 
 impl Shard {
-    /// The runs this shard covers.
+    /// The runs this shard covers (saturating at `usize::MAX` for a shard read from a
+    /// damaged file: [`MonteCarlo::merge_shards`] refuses those).
     pub fn runs(&self) -> usize {
-        self.chunks.iter().map(|c| c.runs).sum()
+        self.chunks
+            .iter()
+            .fold(0, |sum, c| sum.saturating_add(c.runs))
     }
 }
 
@@ -107,6 +110,10 @@ impl<E> Eq for MonteCarlo<E> {}
 impl MonteCarlo {
     /// The default number of chunks the runs are split into.
     pub const DEFAULT_CHUNKS: usize = 64;
+
+    /// The most chunks [`with_chunks`](Self::with_chunks) accepts: 2¹⁶, far more than threads
+    /// or job-array tasks; the chunks' run ranges are laid out before the first run.
+    pub const MAX_CHUNKS: usize = 1 << 16;
 
     /// `runs` ≥ 1 realizations with statistics at `slots` ≥ 1 time slots, master seed 0.
     /// A slot count whose accumulators cannot be allocated is refused ([`Setting::Slot`]).
@@ -196,12 +203,14 @@ impl<E> MonteCarlo<E> {
         Ok(self)
     }
 
-    /// Splits the runs into `chunks` ≥ 1 contiguous chunks (default 64; fewer if there are
-    /// fewer runs). The statistics depend on it only through floating-point summation order;
-    /// more chunks let more threads work, at (2 × threads + 1) × slots accumulators of memory.
+    /// Splits the runs into 1 ≤ `chunks` ≤ [`MAX_CHUNKS`](MonteCarlo::MAX_CHUNKS) contiguous
+    /// chunks (default 64; fewer if there are fewer runs), else [`Setting::ChunkCount`]. The
+    /// statistics depend on it only through floating-point summation order; more chunks let
+    /// more threads work, at (2 × threads + 1) × slots accumulators of memory, and a shard
+    /// keeps one set of accumulators per chunk.
     pub fn with_chunks(mut self, chunks: usize) -> Result<Self> {
-        if chunks == 0 {
-            return Err(ValidationError::setting(Setting::ChunkCount, 0));
+        if !(1..=MonteCarlo::MAX_CHUNKS).contains(&chunks) {
+            return Err(ValidationError::setting(Setting::ChunkCount, chunks));
         }
         self.chunks = chunks;
         Ok(self)
@@ -332,7 +341,8 @@ impl<E> MonteCarlo<E> {
     /// ```
     ///
     /// Errors: a shard of another experiment, a chunk missing or given twice, accumulators of
-    /// the wrong size ([`MonteCarloError::Shards`]); shapes that differ between shards
+    /// the wrong size or with counts their chunk's runs cannot have produced
+    /// ([`MonteCarloError::Shards`]); shapes that differ between shards
     /// ([`MonteCarloError::Shape`]).
     pub fn merge_shards(
         &self,
@@ -342,6 +352,7 @@ impl<E> MonteCarlo<E> {
             error: ValidationError::setting(Setting::Shard, value),
         };
         let identity = self.identity();
+        let ranges = self.chunk_ranges();
         let mut shards: Vec<Shard> = shards.into_iter().collect();
         shards.sort_by_key(|s| s.first_chunk);
         let mut total = Accumulator::new(self.slots, self.pairs.len());
@@ -351,7 +362,8 @@ impl<E> MonteCarlo<E> {
                 return Err(invalid(shard.first_chunk));
             }
             for chunk in &shard.chunks {
-                if !chunk.well_formed(self.slots, self.pairs.len()) {
+                let runs = ranges.get(next).map(|r| r.len());
+                if runs.is_none_or(|runs| !chunk.well_formed(runs, self.slots, self.pairs.len())) {
                     return Err(invalid(next));
                 }
                 Self::merge_into(&mut total, chunk)?;

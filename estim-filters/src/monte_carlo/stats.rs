@@ -6,12 +6,19 @@ use estim_core::nalgebra::{DMatrix, DVector};
 use crate::consistency::{
     Check, ChiSquareBand, FamilyRule, FamilyTest, Location, Verdict, dist, validate_confidence,
 };
-use crate::validation::Result;
+use estim_core::checks::ensure_shape;
+use estim_core::{Quantity, Stage};
+
+use crate::validation::{Result, Setting, ValidationError};
 
 use super::accumulator::{PairAcc, SlotAcc};
 
 /// The ensemble statistics of the estimates recorded at one slot, over the N runs that
 /// recorded one. e = x − x̂ is the error, P the filter's covariance.
+///
+/// Its matrices are n × n, n the length of [`mean_error`](Self::mean_error). The fields are
+/// public (and deserialise from any file): [`EnsembleStats::verdict`] checks the shapes, the
+/// accessors below panic on statistics whose shapes disagree.
 #[derive(Clone, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct EstimateStats {
@@ -258,6 +265,12 @@ impl EnsembleStats {
     /// assume the truth's initial state is drawn from the filter's prior: with a fixed initial
     /// truth, e and x̂ are correlated through the prior, and the orthogonality, covariance and
     /// NEES checks can fail for a correct filter until the prior is forgotten.
+    ///
+    /// Errors: a `confidence` outside (0, 1) ([`Setting::Confidence`]); statistics whose
+    /// matrices are not n × n ([`Error::DimensionMismatch`](estim_core::Error::DimensionMismatch),
+    /// stage [`ConsistencyCheck`](Stage::ConsistencyCheck)) or whose degrees of freedom
+    /// overflow or exceed [`MAX_DEGREES_OF_FREEDOM`](crate::consistency::MAX_DEGREES_OF_FREEDOM)
+    /// (statistics edited by hand or read from a damaged file).
     pub fn verdict_with(&self, confidence: f64, rule: FamilyRule) -> Result<Verdict> {
         let family = |check| FamilyTest::new(check, confidence, rule);
         let mut mean = family(Check::MeanError)?;
@@ -272,7 +285,13 @@ impl EnsembleStats {
         for s in &self.slots {
             if let Some(e) = &s.estimate {
                 estimate_tests(s.slot, e, c, &mut mean, &mut cov, &mut orth)?;
-                let band = cached_band(&mut nees_band, e.state_dim() * e.samples, e.samples, c)?;
+                let dof = e.state_dim().checked_mul(e.samples).ok_or(
+                    ValidationError::InvalidSetting {
+                        setting: Setting::RunCount,
+                        value: e.samples as f64,
+                    },
+                )?;
+                let band = cached_band(&mut nees_band, dof, e.samples, c)?;
                 nees.add(
                     Location::Slot { slot: s.slot },
                     e.mean_nees,
@@ -363,6 +382,17 @@ fn estimate_tests(
     orth: &mut FamilyTest,
 ) -> Result<()> {
     let n = e.state_dim();
+    // Statistics read back from a file may have any shapes: checked before indexing.
+    let stage = Stage::ConsistencyCheck;
+    ensure_shape(&e.error_covariance, n, n, stage, Quantity::Covariance)?;
+    ensure_shape(&e.mean_covariance, n, n, stage, Quantity::Covariance)?;
+    ensure_shape(
+        &e.orthogonality_correlation,
+        n,
+        n,
+        stage,
+        Quantity::CrossCovariance,
+    )?;
     let samples = e.samples;
     if samples >= 2 {
         let dof = samples - 1;

@@ -585,6 +585,16 @@ fn recording_errors_are_typed() {
             .is_err()
     );
     assert!(MonteCarlo::new(2, 3).unwrap().with_chunks(0).is_err());
+    // Chunk ranges are laid out before the first run: a count beyond the limit is an error,
+    // not a capacity-overflow panic (or an allocation abort) at the run.
+    let many = MonteCarlo::new(usize::MAX, 1).unwrap();
+    assert!(many.clone().with_chunks(usize::MAX).is_err());
+    assert!(
+        many.clone()
+            .with_chunks(MonteCarlo::MAX_CHUNKS + 1)
+            .is_err()
+    );
+    assert!(many.with_chunks(MonteCarlo::MAX_CHUNKS).is_ok());
 }
 
 /// A slot recorded by no run, or with innovations only, gives `None` statistics; checks with

@@ -388,4 +388,48 @@ fn json_shards_merge_into_one_run_bit_for_bit() {
     let mut shards = read(&[0, 1, 3, 4]);
     shards.push(serde_json::from_value(edited).unwrap());
     assert!(shards_error(mc.merge_shards(shards)), "a corrupted shard");
+
+    // Counts no chunk of this experiment can hold (the sums overflowed: a panic in debug
+    // builds, wrapped totals in release): refused.
+    for (path, value) in [
+        (&["runs"][..], u64::MAX),
+        (&["runs"][..], 11),
+        (&["slots", "1", "count"][..], u64::MAX),
+        (&["slots", "1", "nis_count"][..], 11),
+        (&["slots", "1", "nis_dof"][..], u64::MAX),
+        (&["pairs", "0", "count"][..], 11),
+    ] {
+        let mut edited: serde_json::Value = serde_json::from_str(&files[2]).unwrap();
+        let mut field = &mut edited["chunks"][0];
+        for key in path {
+            field = match key.parse::<usize>() {
+                Ok(i) => &mut field[i],
+                Err(_) => &mut field[*key],
+            };
+        }
+        assert!(field.is_u64(), "{path:?}");
+        *field = serde_json::json!(value);
+        let mut shards = read(&[0, 1, 3, 4]);
+        shards.push(serde_json::from_value(edited).unwrap());
+        if value == u64::MAX && path == ["runs"] {
+            assert_eq!(shards[4].runs(), usize::MAX, "saturates");
+        }
+        assert!(shards_error(mc.merge_shards(shards)), "{path:?} = {value}");
+    }
+
+    // Statistics edited so that a matrix is smaller than the mean error: a typed error from
+    // the verdict, not an index out of bounds.
+    let mut stats = serde_json::to_value(&whole).unwrap();
+    stats["slots"][1]["estimate"]["error_covariance"] =
+        serde_json::to_value(estim_core::nalgebra::DMatrix::<f64>::zeros(1, 1)).unwrap();
+    let stats: estim_filters::EnsembleStats = serde_json::from_value(stats).unwrap();
+    assert!(matches!(
+        stats.verdict(0.95),
+        Err(estim_filters::ValidationError::Estimation(
+            estim_core::Error::DimensionMismatch {
+                stage: estim_core::Stage::ConsistencyCheck,
+                ..
+            }
+        ))
+    ));
 }
