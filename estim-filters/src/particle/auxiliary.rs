@@ -21,7 +21,7 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector};
 use estim_core::{Alloc, ProcessModel, Quantity, Real, Stage, error::Result};
 
 use super::ParticleFilter;
-use super::chunks::{CHUNK, first_error, for_chunks1, parallel, with_state};
+use super::chunks::{CHUNK, columns_mut, first_error, for_chunks1, parallel, range, with_state};
 use super::noise::{AdditiveGaussian, ParticleMeasurement, ParticleProcess};
 use super::step::Work;
 use crate::gaussian_filter::ensure_time_step;
@@ -121,7 +121,8 @@ where
             n.value() * CHUNK,
             |c, w, out| {
                 w.error = with_state(&mut w.state, n, |s| {
-                    for (k, column) in out.chunks_exact_mut(n.value()).enumerate() {
+                    let columns = columns_mut(out, nn, range(c, count).len());
+                    for (k, column) in columns.enumerate() {
                         let i = c * CHUNK + k;
                         s.x.copy_from_slice(&particles[i * nn..(i + 1) * nn]);
                         estim_core::in_place::transition_into(

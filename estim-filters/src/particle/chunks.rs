@@ -68,9 +68,26 @@ pub(crate) fn range(c: usize, count: usize) -> core::ops::Range<usize> {
     c * CHUNK..((c + 1) * CHUNK).min(count)
 }
 
+/// The `count` particles of `nn` values each at the start of `values`, one after another;
+/// `count` empty ones for a zero-dimensional state (`nn` = 0, where `chunks_exact_mut` would
+/// panic and a zip with it would skip every particle). The chain costs a few instructions a
+/// particle over `chunks_exact_mut` alone: the bootstrap loops branch on `nn` instead.
+#[inline]
+pub(crate) fn columns_mut<T>(
+    values: &mut [T],
+    nn: usize,
+    count: usize,
+) -> impl Iterator<Item = &mut [T]> {
+    let empty = if nn == 0 { count } else { 0 };
+    values
+        .chunks_exact_mut(nn.max(1))
+        .chain(core::iter::repeat_with(<&mut [T]>::default).take(empty))
+}
+
 /// Runs `f(c, states[c], a_c, b_c)` for every chunk c, where a_c and b_c are the c-th pieces
 /// of `a` (width `wa`) and `b` (width `wb`): on rayon's pool if `par`, else in order.
-/// `states` has one entry per chunk; `a` and `b` have at least as many pieces.
+/// `states` has one entry per chunk; `a` and `b` have at least as many pieces, or width 0
+/// (the particles of a zero-dimensional state): then every piece is empty.
 pub(crate) fn for_chunks<S, A, B, F>(
     par: bool,
     states: &mut [S],
@@ -85,25 +102,35 @@ pub(crate) fn for_chunks<S, A, B, F>(
     B: Send,
     F: Fn(usize, &mut S, &mut [A], &mut [B]) + Sync,
 {
+    // A width of 0: no piece of the (empty) slice, then one empty piece per chunk.
+    let empty = |w: usize| if w == 0 { states.len() } else { 0 };
+    let (ea, eb) = (empty(wa), empty(wb));
     let (wa, wb) = (wa.max(1), wb.max(1));
     #[cfg(feature = "parallel")]
     if par {
         use rayon::prelude::*;
+        let a = a
+            .par_chunks_mut(wa)
+            .chain((0..ea).into_par_iter().map(|_| Default::default()));
+        let b = b
+            .par_chunks_mut(wb)
+            .chain((0..eb).into_par_iter().map(|_| Default::default()));
         states
             .par_iter_mut()
-            .zip(a.par_chunks_mut(wa))
-            .zip(b.par_chunks_mut(wb))
+            .zip(a)
+            .zip(b)
             .enumerate()
             .for_each(|(c, ((s, a), b))| f(c, s, a, b));
         return;
     }
     let _ = par;
-    for (c, ((s, a), b)) in states
-        .iter_mut()
-        .zip(a.chunks_mut(wa))
-        .zip(b.chunks_mut(wb))
-        .enumerate()
-    {
+    let a = a
+        .chunks_mut(wa)
+        .chain(core::iter::repeat_with(Default::default).take(ea));
+    let b = b
+        .chunks_mut(wb)
+        .chain(core::iter::repeat_with(Default::default).take(eb));
+    for (c, ((s, a), b)) in states.iter_mut().zip(a).zip(b).enumerate() {
         f(c, s, a, b);
     }
 }

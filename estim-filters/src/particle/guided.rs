@@ -8,7 +8,7 @@ use estim_core::{
 };
 
 use super::ParticleFilter;
-use super::chunks::{CHUNK, first_error, for_chunks, parallel, with_state};
+use super::chunks::{CHUNK, columns_mut, first_error, for_chunks, parallel, with_state};
 use super::noise::{AdditiveGaussian, ParticleMeasurement};
 use super::resample::ess_of_weights;
 use super::rng::ParticleRng;
@@ -228,7 +228,8 @@ where
                     let z = OVector::<T, M>::from_column_slice_generic(m, U1, zs);
                     let mut kernel: Option<GaussianKernel<T, N>> = None;
                     let stage = Stage::Prediction;
-                    for (k, (column, eta)) in out.chunks_exact_mut(nn).zip(eta).enumerate() {
+                    let columns = columns_mut(out, nn, eta.len());
+                    for (k, (column, eta)) in columns.zip(eta).enumerate() {
                         let j = c * CHUNK + k;
                         let a = ancestors[j];
                         s.x.copy_from_slice(&particles[a * nn..(a + 1) * nn]);

@@ -367,6 +367,14 @@ where
 {
     let nn = s.x.nrows();
     if nn == 0 {
+        // A zero-dimensional state: nothing to copy, but the process still runs (its errors
+        // are reported). A loop of its own keeps the zip below the tight indexed loop.
+        for k in 0..ancestors.len() {
+            let rng = ParticleRng::stream(chunk.seed, chunk.step, (chunk.first + k) as u64);
+            if let Err(e) = propagate(s, process, input, dt, rng) {
+                return Some(e);
+            }
+        }
         return None;
     }
     for ((k, &a), column) in ancestors.iter().enumerate().zip(out.chunks_exact_mut(nn)) {
@@ -443,18 +451,25 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     let nn = s.x.nrows();
-    if nn == 0 {
-        return None;
-    }
-    for ((k, o), x) in out.iter_mut().enumerate().zip(cloud.chunks_exact(nn)) {
+    let mut weigh = |k: usize, o: &mut T, x: &[T]| {
         let (v, base) = prior(first + k);
         s.x.as_mut_slice().copy_from_slice(x);
-        match log_density::<T, N, M, H>(ms, sensor, &s.x, v, sums) {
-            Ok(log_g) => *o = base + log_g,
-            Err(e) => return Some(e),
-        }
-    }
-    None
+        log_density::<T, N, M, H>(ms, sensor, &s.x, v, sums).map(|log_g| *o = base + log_g)
+    };
+    // Two loops, not one over a chained iterator: the zip with `chunks_exact` is the tight
+    // indexed loop (a chain cost instructions in every particle's step).
+    let weighed = if nn == 0 {
+        // A zero-dimensional state: every particle is empty.
+        out.iter_mut()
+            .enumerate()
+            .try_for_each(|(k, o)| weigh(k, o, &[]))
+    } else {
+        out.iter_mut()
+            .enumerate()
+            .zip(cloud.chunks_exact(nn))
+            .try_for_each(|((k, o), x)| weigh(k, o, x))
+    };
+    weighed.err()
 }
 
 /// Moves particle `s.x` with stream `rng` into `s.y`.

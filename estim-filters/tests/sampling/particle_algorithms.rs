@@ -1253,3 +1253,71 @@ fn unallocatable_counts_are_refused_and_an_empty_state_works() {
     pf.reset(empty);
     assert_eq!(pf.covariance().shape(), (0, 0));
 }
+
+/// q = p for a zero-dimensional state: the empty particle, log q = 0.
+struct EmptyProposal;
+
+impl Proposal<f64, Dyn, Dyn> for EmptyProposal {
+    type Input = ();
+    fn propose<R: Rng + ?Sized>(
+        &self,
+        _: &DVector<f64>,
+        _: &(),
+        _: f64,
+        _: &DVector<f64>,
+        _: &mut R,
+    ) -> (DVector<f64>, f64) {
+        (DVector::zeros(0), 0.0)
+    }
+}
+
+/// A zero-dimensional state (no landmarks yet): every particle is empty, so every step weighs
+/// them equally and the likelihood of z = c + v is exactly log N(z; c, R), through the
+/// bootstrap, auxiliary and guided steps, serial or (with enough particles) on rayon's pool.
+/// Before, the weighing loops skipped every particle when the state had no components: the
+/// log-weights kept stale values and the likelihood was not the model's.
+#[test]
+fn a_zero_dimensional_state_weighs_every_particle() {
+    let empty = Gaussian::new(DVector::<f64>::zeros(0), DMatrix::zeros(0, 0)).unwrap();
+    let process = LinearProcess::without_input(DMatrix::<f64>::zeros(0, 0), DMatrix::zeros(0, 0));
+    let (c, r) = (0.5, 2.0);
+    let sensor = LinearMeasurement {
+        observation: DMatrix::<f64>::zeros(1, 0),
+        noise: DMatrix::from_element(1, 1, r),
+    }
+    .with_offset(DVector::from_element(1, c));
+    let exact = |z: f64| -0.5 * ((z - c) * (z - c) / r + (2.0 * std::f64::consts::PI * r).ln());
+    let uniform = |pf: &ParticleFilter<f64, Dyn>| {
+        let n = pf.count() as f64;
+        pf.log_weights()
+            .iter()
+            .all(|&w| (w + n.ln()).abs() <= 1e-12)
+    };
+    for count in [10, 1500, estim_filters::particle::PARALLEL_MIN] {
+        let mut bootstrap = ParticleFilter::new(empty.clone(), count, 3).unwrap();
+        let mut auxiliary = bootstrap.clone();
+        let mut guided = bootstrap.clone();
+        let mut total = 0.0;
+        for z in [0.1, 2.0, -1.5] {
+            let zv = DVector::from_element(1, z);
+            bootstrap.predict(&process, &(), 1.0).unwrap();
+            let b = bootstrap.update(&sensor, &zv).unwrap();
+            let a = auxiliary
+                .auxiliary_step(&process, &(), 1.0, &sensor, &zv)
+                .unwrap();
+            let g = guided
+                .guided_step(&process, &EmptyProposal, &(), 1.0, &sensor, &zv)
+                .unwrap();
+            total += exact(z);
+            for (name, report) in [("bootstrap", &b), ("auxiliary", &a), ("guided", &g)] {
+                let error = report.log_likelihood - exact(z);
+                assert!(error.abs() <= 1e-12, "{name}, N = {count}: {error:e}");
+            }
+            for pf in [&bootstrap, &auxiliary, &guided] {
+                assert!(uniform(pf), "N = {count}: {:?}", &pf.log_weights()[..3]);
+                assert_eq!(pf.particles().shape(), (0, count));
+                assert!((pf.log_likelihood() - total).abs() <= 1e-12 * total.abs());
+            }
+        }
+    }
+}
