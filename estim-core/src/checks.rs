@@ -183,6 +183,9 @@ pub fn ensure_shape<T, R: Dim, C: Dim, S: RawStorage<T, R, C>>(
 
 /// Replaces `m` by (m + mᵀ)/2, in place.
 ///
+/// # Panics
+/// When `m` is not square (runtime sizes only: a programmer error, as any shape misuse).
+///
 /// ```
 /// use estim_core::checks::symmetrize;
 /// use estim_core::nalgebra::Matrix2;
@@ -192,12 +195,19 @@ pub fn ensure_shape<T, R: Dim, C: Dim, S: RawStorage<T, R, C>>(
 /// assert_eq!(m, Matrix2::new(2.0, 0.75, 0.75, 2.0));
 /// ```
 #[inline]
+#[track_caller]
 pub fn symmetrize<T: Real, D: Dim>(m: &mut OMatrix<T, D, D>)
 where
     DefaultAllocator: Allocator<D, D>,
 {
     let half = real::<T>(0.5);
     let n = m.nrows();
+    assert_eq!(
+        n,
+        m.ncols(),
+        "symmetrize: a {n} × {} matrix is not square",
+        m.ncols()
+    );
     for j in 0..n {
         for i in (j + 1)..n {
             let v = (m[(i, j)] + m[(j, i)]) * half;
@@ -209,7 +219,8 @@ where
 
 /// `Ok(())` if `m` is symmetric within `√ε · max|mᵢⱼ|` (the largest finite entry), else
 /// [`Error::NotSymmetric`] naming the worst pair. A pair is symmetric if equal (±∞ included)
-/// or within that tolerance; a pair with a NaN never is, and is the worst.
+/// or within that tolerance; a pair with a NaN never is, and is the worst. A runtime-sized `m`
+/// that is not square is an [`Error::DimensionMismatch`].
 ///
 /// ```
 /// use estim_core::checks::ensure_symmetric;
@@ -232,6 +243,7 @@ pub fn ensure_symmetric<T: Real, D: Dim>(
 where
     DefaultAllocator: Allocator<D, D>,
 {
+    ensure_square(m, stage, quantity)?;
     let n = m.nrows();
     let scale = m
         .iter()
@@ -270,7 +282,7 @@ where
 /// [`Error::NotPositiveSemiDefinite`]. A necessary condition for positive semi-definiteness
 /// (variances are not negative) in O(n): for noise matrices met every step, where
 /// [`ensure_psd`] would cost a factorisation. NaN entries pass (finiteness is checked
-/// separately).
+/// separately). A runtime-sized `m` that is not square is an [`Error::DimensionMismatch`].
 ///
 /// ```
 /// use estim_core::checks::ensure_nonnegative_diagonal;
@@ -302,6 +314,7 @@ where
         let floor = -psd_tolerance(m);
         (0..m.nrows()).any(|i| m[(i, i)] < floor)
     }
+    ensure_square(m, stage, quantity)?;
     let negative = (0..m.nrows()).any(|i| m[(i, i)] < T::zero());
     if negative && beyond_round_off(m) {
         Err(Error::NotPositiveSemiDefinite { stage, quantity })
@@ -469,6 +482,7 @@ where
 }
 
 /// `Ok(())` if the symmetric `m` is positive semi-definite within τ = 16 n ε max|mᵢᵢ| ([`psd_factor`]'s rule).
+/// A runtime-sized `m` that is not square is an [`Error::DimensionMismatch`].
 ///
 /// ```
 /// use estim_core::checks::ensure_psd;
@@ -492,9 +506,24 @@ pub fn ensure_psd<T: Real, D: Dim>(
 where
     DefaultAllocator: Allocator<D> + Allocator<D, D>,
 {
+    ensure_square(m, stage, quantity)?;
     psd_factor(m, stage)
         .map(|_| ())
         .map_err(|_| Error::NotPositiveSemiDefinite { stage, quantity })
+}
+
+/// `Ok(())` if `m` is square, else the [`Error::DimensionMismatch`] of an n × n matrix with
+/// its n rows (a runtime-sized matrix the checks above would index out of bounds).
+#[inline]
+fn ensure_square<T: Real, D: Dim>(
+    m: &OMatrix<T, D, D>,
+    stage: Stage,
+    quantity: Quantity,
+) -> Result<()>
+where
+    DefaultAllocator: Allocator<D, D>,
+{
+    ensure_shape(m, m.nrows(), m.nrows(), stage, quantity)
 }
 
 #[cfg(test)]

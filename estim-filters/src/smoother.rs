@@ -286,7 +286,9 @@ where
     ///
     /// Errors, with the index of the estimate being computed: a predicted covariance that is
     /// not positive definite ([`Error::NotPositiveDefinite`], stage
-    /// [`Smoothing`](Stage::Smoothing)), a non-finite result ([`Error::NonFinite`]).
+    /// [`Smoothing`](Stage::Smoothing)), a non-finite result ([`Error::NonFinite`]), a record
+    /// whose state size differs from `filter`'s ([`Error::DimensionMismatch`], quantity
+    /// [`Mean`](Quantity::Mean): a runtime-sized filter reset to another size).
     pub fn smooth<F: OnStateSpace<T, N>>(
         &self,
         filter: &F,
@@ -423,6 +425,18 @@ where
             (OVector::zeros_generic(n, U1), OVector::zeros_generic(n, U1));
         for (step, record) in self.records.iter().enumerate().rev() {
             let fail = |error| SmootherError::at(step, error);
+            // A runtime-sized filter reset to another size between predictions: every buffer
+            // above has the filter's size (a record's values all have one size).
+            if record.state.nrows() != n.value() {
+                return Err(fail(Error::DimensionMismatch {
+                    stage: Stage::Smoothing,
+                    quantity: Quantity::Mean,
+                    expected_rows: n.value(),
+                    expected_cols: 1,
+                    found_rows: record.state.nrows(),
+                    found_cols: 1,
+                }));
+            }
             let next = smoothed.last().expect("starts with the last estimate");
             // G = C (P⁻)⁻¹ = C L⁻ᵀ L⁻¹, solved from the right in G's own storage.
             factor.copy_from(&record.predicted_covariance);

@@ -350,3 +350,34 @@ fn dynamic_shape_mismatches_are_errors_not_panics() {
     assert_eq!(err(Unscented::default().propagate(&mu, &c, &g)), e);
     assert_eq!(err(Sampled::new(50, 1).unwrap().propagate(&mu, &c, &g)), e);
 }
+
+/// The public checks on a runtime-sized matrix that is not square: a typed error (they
+/// indexed out of bounds with more rows than columns), and `symmetrize` panics at the caller.
+#[test]
+fn checks_refuse_matrices_that_are_not_square() {
+    use estim_core::checks::{
+        ensure_nonnegative_diagonal, ensure_psd, ensure_symmetric, symmetrize,
+    };
+    let (stage, quantity) = (Stage::Update, Quantity::MeasurementNoise);
+    for (rows, cols) in [(3, 2), (2, 3), (1, 0)] {
+        let m = DMatrix::<f64>::from_element(rows, cols, 1.0);
+        let mismatch = Err(Error::DimensionMismatch {
+            stage,
+            quantity,
+            expected_rows: rows,
+            expected_cols: rows,
+            found_rows: rows,
+            found_cols: cols,
+        });
+        assert_eq!(ensure_symmetric(&m, stage, quantity), mismatch);
+        assert_eq!(ensure_nonnegative_diagonal(&m, stage, quantity), mismatch);
+        assert_eq!(ensure_psd(&m, stage, quantity), mismatch);
+        let mut m = m;
+        let at = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| symmetrize(&mut m)));
+        assert!(at.is_err(), "{rows} × {cols}");
+    }
+    // Square ones are unaffected, the empty one included.
+    let empty = DMatrix::<f64>::zeros(0, 0);
+    assert_eq!(ensure_symmetric(&empty, stage, quantity), Ok(()));
+    assert_eq!(ensure_psd(&empty, stage, quantity), Ok(()));
+}

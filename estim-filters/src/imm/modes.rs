@@ -114,6 +114,10 @@ where
     type Input;
 
     /// Predicts mode `i` through its model in `models`.
+    ///
+    /// # Panics
+    /// The implementations of the crate panic when `i` ≥ [`count`](Modes::count) (a
+    /// programmer error; the IMM asks only for its modes).
     fn predict_mode(&mut self, i: usize, models: &P, input: &Self::Input, dt: T) -> Result<()>;
 }
 
@@ -123,6 +127,10 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     /// Updates mode `i` with `z`, its report into `report`.
+    ///
+    /// # Panics
+    /// The implementations of the crate panic when `i` ≥ [`count`](Modes::count) (a
+    /// programmer error; the IMM asks only for its modes).
     fn update_mode(
         &mut self,
         i: usize,

@@ -106,7 +106,7 @@ where
     /// exactly symmetric from the start.
     ///
     /// Errors: [`NoiseIdError::InvalidSetting`] for the window or floor; [`NoiseIdError::Model`]
-    /// if `initial` is not finite or not symmetric, or with [`Error::NonFinite`] (quantity
+    /// if `initial` is not finite, not square (runtime sizes) or not symmetric, or with [`Error::NonFinite`] (quantity
     /// `MeasurementNoise`) if R̂ would overflow although `initial` is finite (entries near the
     /// largest finite number, whose eigenvalues exceed it: the projection could not be formed).
     ///

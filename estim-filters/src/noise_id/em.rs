@@ -489,29 +489,42 @@ fn check_indices<T: Real, N: Dim, M: Dim>(settings: &EmSettings<T, N, M>, n: usi
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    let diagonal = |s: &[usize], d: usize, what: &str| {
-        if let Some(i) = s.iter().find(|&&i| i >= d) {
+    // The panics are in this function's body, not in closures: `#[track_caller]` does not
+    // reach into closures, and the location reported must be the caller's.
+    fn diagonal<T: Real, D: Dim>(s: &CovarianceStructure<T, D>, d: usize) -> Option<usize>
+    where
+        DefaultAllocator: Alloc<D>,
+    {
+        match s {
+            CovarianceStructure::DiagonalWithFixed(s) => s.iter().find(|&&i| i >= d).copied(),
+            _ => None,
+        }
+    }
+    let entries = |s: &MatrixStructure, rows: usize, cols: usize| match s {
+        MatrixStructure::FreeEntries(e) => {
+            e.iter().find(|&&(i, j)| i >= rows || j >= cols).copied()
+        }
+        _ => None,
+    };
+    for (what, structure, d) in [
+        ("Q", &settings.process_noise, n),
+        ("P0", &settings.initial_covariance, n),
+    ] {
+        if let Some(i) = diagonal(structure, d) {
             panic!("{what}: diagonal index {i} outside a {d} × {d} matrix");
         }
-    };
-    let entries = |s: &MatrixStructure, rows: usize, cols: usize, what: &str| {
-        if let MatrixStructure::FreeEntries(e) = s
-            && let Some(&(i, j)) = e.iter().find(|&&(i, j)| i >= rows || j >= cols)
-        {
-            panic!("{what}: entry ({i}, {j}) outside a {rows} × {cols} matrix");
+    }
+    if let Some(i) = diagonal(&settings.measurement_noise, m) {
+        panic!("R: diagonal index {i} outside a {m} × {m} matrix");
+    }
+    for (what, structure, rows) in [
+        ("F", &settings.transition, n),
+        ("H", &settings.observation, m),
+    ] {
+        if let Some((i, j)) = entries(structure, rows, n) {
+            panic!("{what}: entry ({i}, {j}) outside a {rows} × {n} matrix");
         }
-    };
-    if let CovarianceStructure::DiagonalWithFixed(s) = &settings.process_noise {
-        diagonal(s, n, "Q");
     }
-    if let CovarianceStructure::DiagonalWithFixed(s) = &settings.initial_covariance {
-        diagonal(s, n, "P0");
-    }
-    if let CovarianceStructure::DiagonalWithFixed(s) = &settings.measurement_noise {
-        diagonal(s, m, "R");
-    }
-    entries(&settings.transition, n, n, "F");
-    entries(&settings.observation, m, n, "H");
 }
 
 fn check_identifiable<T: Real, N: Dim, M: Dim, U: Dim>(

@@ -177,6 +177,21 @@ fn bad_settings_and_reports_are_typed_errors_that_change_nothing() {
         MeasurementNoiseMatching::new(Matrix1::new(f64::NAN), 10.0, 1e-6),
         Err(NoiseIdError::Model(Error::NonFinite { .. }))
     ));
+    // A runtime-sized R that is not square (it panicked, in the symmetry check or in the
+    // symmetric part).
+    for (rows, cols) in [(2, 3), (3, 2)] {
+        assert!(matches!(
+            MeasurementNoiseMatching::new(
+                estim_core::nalgebra::DMatrix::<f64>::identity(rows, cols),
+                10.0,
+                1e-6
+            ),
+            Err(NoiseIdError::Model(Error::DimensionMismatch {
+                quantity: Quantity::MeasurementNoise,
+                ..
+            }))
+        ));
+    }
     let mut adaptive = MeasurementNoiseMatching::new(r, 10.0, 1e-6).unwrap();
     let before = adaptive.clone();
     let bad = UpdateReport {

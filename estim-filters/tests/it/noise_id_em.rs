@@ -550,3 +550,51 @@ fn single_precision_follows_double() {
     );
     assert!((ls - ld).abs() < 1e-4 * ld.abs(), "{ls} vs {ld}");
 }
+
+/// An index outside its matrix is a programmer error: `estimate` panics, and the panic names
+/// the caller's line (`#[track_caller]`), for every kind of index. Before, the checks panicked
+/// inside closures, which `#[track_caller]` does not reach: the location was em.rs.
+#[test]
+fn index_panics_name_the_callers_line() {
+    use std::panic::{self, AssertUnwindSafe};
+    use std::sync::{Arc, Mutex};
+    let model = walk(1.0, 1.0);
+    let run = simulate(&mut rng(1), &model, &Matrix1::new(0.2), 5, |_| false);
+    let records = [Record {
+        inputs: &run.inputs,
+        measurements: &run.measurements,
+    }];
+    let bad = [
+        EmSettings::new().with_process_noise(CovarianceStructure::DiagonalWithFixed(vec![1])),
+        EmSettings::new().with_measurement_noise(CovarianceStructure::DiagonalWithFixed(vec![3])),
+        EmSettings::new().with_prior(false, CovarianceStructure::DiagonalWithFixed(vec![1])),
+        EmSettings::new().with_transition(MatrixStructure::FreeEntries(vec![(0, 1)])),
+        EmSettings::new().with_observation(MatrixStructure::FreeEntries(vec![(1, 0)])),
+    ];
+    // The hook is global: keep only this thread's panic locations.
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let (record, this) = (Arc::clone(&seen), std::thread::current().id());
+    let previous = panic::take_hook();
+    panic::set_hook(Box::new(move |info| {
+        if std::thread::current().id() == this {
+            let at = info.location().map(|l| (l.file().to_string(), l.line()));
+            record.lock().unwrap().push(at);
+        }
+    }));
+    for settings in &bad {
+        let outcome =
+            panic::catch_unwind(AssertUnwindSafe(|| estimate(&model, settings, &records)));
+        assert!(outcome.is_err());
+    }
+    let _ = panic::take_hook();
+    panic::set_hook(previous);
+    // Five panics, all at the one call above.
+    let seen = seen.lock().unwrap().clone();
+    assert_eq!(seen.len(), bad.len());
+    let (file, line) = seen[0].clone().expect("a location");
+    assert_eq!(file, file!());
+    assert!(
+        seen.iter().all(|at| *at == Some((file.clone(), line))),
+        "{seen:?}"
+    );
+}

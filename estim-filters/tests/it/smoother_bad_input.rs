@@ -232,3 +232,41 @@ fn a_huge_lag_is_the_whole_pass_smoother() {
     let lagged = short.smooth(&c).unwrap();
     assert_eq!(lagged[..], expected[expected.len() - 4..]);
 }
+
+/// A runtime-sized filter reset to another size after the predictions were recorded: the
+/// backward pass returns a typed error at the first record it meets (it panicked on a shape
+/// assertion in the copy of the predicted covariance).
+#[test]
+fn a_filter_of_another_size_is_refused() {
+    use estim_core::nalgebra::{DMatrix, DVector, Dyn};
+    use estim_filters::{Estimator, smoother::Rts};
+    let gaussian = |n: usize| Gaussian::new(DVector::zeros(n), DMatrix::identity(n, n)).unwrap();
+    let mut kf = KalmanFilter::<f64, Dyn>::new(gaussian(2));
+    let process = LinearProcess {
+        transition: DMatrix::<f64>::identity(2, 2),
+        input: DMatrix::zeros(2, 1),
+        noise: DMatrix::identity(2, 2) * 0.1,
+    };
+    let mut rts = Rts::new();
+    for _ in 0..3 {
+        rts.predict(&mut kf, &process, &DVector::zeros(1), 1.0)
+            .unwrap();
+    }
+    assert_eq!(rts.smooth(&kf).unwrap().len(), 4);
+    kf.reset(gaussian(3));
+    let error = rts.smooth(&kf).unwrap_err();
+    assert_eq!(error.step, 2);
+    assert_eq!(
+        error.error,
+        Error::DimensionMismatch {
+            stage: Stage::Smoothing,
+            quantity: Quantity::Mean,
+            expected_rows: 3,
+            expected_cols: 1,
+            found_rows: 2,
+            found_cols: 1,
+        }
+    );
+    assert!(rts.smooth_with_cross_covariances(&kf).is_err());
+    assert!(rts.smooth_with_times(&kf).is_err());
+}

@@ -49,6 +49,10 @@ impl CovarianceAnalysis {
     }
 
     /// corr(eᵢ, δx̂ⱼ) at entry `k` (NaN where δx̂ⱼ has no spread, as at t = 0).
+    ///
+    /// # Panics
+    /// When `k` is not an entry (`k` ≥ the length of `time`), as indexing does.
+    #[track_caller]
     pub fn orthogonality_correlation(&self, k: usize) -> Matrix3<f64> {
         let (e, x, c) = (
             &self.error_covariance[k],
@@ -62,6 +66,10 @@ impl CovarianceAnalysis {
     }
 
     /// max over entries of |corr(e, δx̂)| at entry `k` (NaN if none is defined).
+    ///
+    /// # Panics
+    /// When `k` is not an entry, as [`orthogonality_correlation`](Self::orthogonality_correlation).
+    #[track_caller]
     pub fn max_orthogonality(&self, k: usize) -> f64 {
         self.orthogonality_correlation(k)
             .iter()
@@ -73,6 +81,10 @@ impl CovarianceAnalysis {
     }
 
     /// diag cov(e) ./ diag P at entry `k`: 1 for a consistent filter.
+    ///
+    /// # Panics
+    /// When `k` is not an entry (`k` ≥ the length of `time`), as indexing does.
+    #[track_caller]
     pub fn covariance_ratio(&self, k: usize) -> Vector3<f64> {
         self.error_covariance[k]
             .diagonal()

@@ -206,6 +206,10 @@ impl CovarianceHistory {
     }
 
     /// √diag P at entry `i`: (σ_δp \[m\], σ_δv \[m/s\], σ_b \[m/s²\]).
+    ///
+    /// # Panics
+    /// When `i` is not an entry (`i` ≥ the length of `time`), as indexing does.
+    #[track_caller]
     pub fn sigma(&self, i: usize) -> Vector3<f64> {
         self.posterior[i].diagonal().map(f64::sqrt)
     }

@@ -62,6 +62,11 @@ where
 
     /// Samples all axes at the true vector `truth`: reading = clip(uᵢ·θ + bᵢ + σᵢ nᵢ), NaN when
     /// dropped.
+    ///
+    /// # Panics
+    /// When the public `bias` has fewer entries than there are axes (a runtime-sized array
+    /// whose bias was replaced by a shorter vector).
+    #[track_caller]
     pub fn sample<R: Rng + ?Sized>(&self, truth: &OVector<f64, N>, rng: &mut R) -> SensorSample<M> {
         let mut reading = self.axes.ideal_reading(truth);
         let m = reading.nrows();

@@ -198,8 +198,8 @@ pub fn discrete_white_noise<T: Real, const K: usize>(
 /// # Errors
 ///
 /// - [`Error::InvalidParameter`] (`TimeStep`) for a negative or non-finite Δt;
-/// - [`Error::DimensionMismatch`] when G has not n rows or Q_c is not square with G's column
-///   count (runtime sizes only);
+/// - [`Error::DimensionMismatch`] when F is not square, G has not n rows or Q_c is not square
+///   with G's column count (runtime sizes only);
 /// - [`Error::NonFinite`] for a non-finite F (`Jacobian`), G or Q_c (`ProcessNoise`), or a
 ///   result that overflowed.
 ///
@@ -229,6 +229,16 @@ where
 {
     check_step(dt)?;
     let n = f.nrows();
+    if f.ncols() != n {
+        return Err(Error::DimensionMismatch {
+            stage: Stage::Construction,
+            quantity: Quantity::Jacobian,
+            expected_rows: n,
+            expected_cols: n,
+            found_rows: n,
+            found_cols: f.ncols(),
+        });
+    }
     let w = g.ncols();
     if g.nrows() != n || qc.nrows() != w || qc.ncols() != w {
         let (rows, cols) = if g.nrows() != n {

@@ -290,6 +290,19 @@ fn bad_settings_are_typed_errors() {
             ..
         })
     ));
+    // A non-square F, either way: a typed error (it indexed out of bounds).
+    for (rows, cols) in [(3, 2), (2, 3)] {
+        let f = DMatrix::<f64>::zeros(rows, cols);
+        let g = DMatrix::<f64>::zeros(rows, 1);
+        assert!(matches!(
+            van_loan(&f, &g, &DMatrix::identity(1, 1), 0.1),
+            Err(Error::DimensionMismatch {
+                quantity: Quantity::Jacobian,
+                found_cols,
+                ..
+            }) if found_cols == cols
+        ));
+    }
 }
 
 /// Irregular steps summing to T.
