@@ -120,9 +120,52 @@ pub(crate) mod dist {
         (2.0 * Normal::standard().sf(z.abs())).min(1.0)
     }
 
+    /// From this many degrees of freedom Student's t quantile is [`t_quantile_expansion`]:
+    /// statrs 0.19's inversion drifts from about 2¹⁴ (6.5 · 10⁻⁷ at 2¹⁵ and p = 0.975,
+    /// 1.2 · 10⁻⁴ at 10⁶, 6 · 10⁻³ at 4 · 10⁶) and from about 1.7 · 10⁷ never returns, while
+    /// the expansion's next term is below 10⁻¹⁵ here (the two agree to 2 · 10⁻¹² at 2¹²–2¹³
+    /// for p ≥ 0.975; at p = 0.8 statrs is off by 2 · 10⁻⁹ from 2¹⁰ on).
+    pub(crate) const T_QUANTILE_EXPANSION: usize = 1 << 12;
+
+    /// From this many degrees of freedom Student's t tail is [`t_tail_expansion`]: statrs'
+    /// drifts with ν (1.4 · 10⁻¹⁰ relative here at |t| = 1, 3 · 10⁻⁷ at 2³⁰, 0.6 at 2⁵⁰; 0.5
+    /// for every t at 2⁶⁰), while the expansion's next term, O(x¹¹/ν³), is below 10⁻¹¹
+    /// relative for |t| ≤ 4 here.
+    pub(crate) const T_TAIL_EXPANSION: usize = 1 << 16;
+
+    /// The p quantile of Student's t with ν degrees of freedom from that of N(0, 1), z:
+    /// t_p ≈ z + g₁/ν + g₂/ν² + g₃/ν³ + g₄/ν⁴ (Abramowitz & Stegun 26.7.5), with
+    /// g₁ = (z³ + z)/4, g₂ = (5z⁵ + 16z³ + 3z)/96, g₃ = (3z⁷ + 19z⁵ + 17z³ − 15z)/384,
+    /// g₄ = (79z⁹ + 776z⁷ + 1482z⁵ − 1920z³ − 945z)/92160.
+    pub(crate) fn t_quantile_expansion(p: f64, dof: usize) -> f64 {
+        let z = Normal::standard().inverse_cdf(p);
+        let (z2, v) = (z * z, dof as f64);
+        let g1 = z * (z2 + 1.0) / 4.0;
+        let g2 = z * ((5.0 * z2 + 16.0) * z2 + 3.0) / 96.0;
+        let g3 = z * (((3.0 * z2 + 19.0) * z2 + 17.0) * z2 - 15.0) / 384.0;
+        let g4 = z * ((((79.0 * z2 + 776.0) * z2 + 1482.0) * z2 - 1920.0) * z2 - 945.0) / 92160.0;
+        z + (g1 + (g2 + (g3 + g4 / v) / v) / v) / v
+    }
+
+    /// P(T > x) for Student's t with ν degrees of freedom, x ≥ 0, to second order in 1/ν:
+    /// Q(x) + φ(x) [(x³ + x)/(4ν) + (3x⁷ − 7x⁵ − 5x³ − 3x)/(96ν²)] (Q and φ the standard
+    /// normal tail and density; the second-order term checked against statrs at ν = 2⁸–2¹²,
+    /// where their difference shrinks as 1/ν³).
+    pub(crate) fn t_tail_expansion(x: f64, dof: usize) -> f64 {
+        let (x2, v) = (x * x, dof as f64);
+        let density = (-0.5 * x2).exp() / (2.0 * core::f64::consts::PI).sqrt();
+        let first = x * (x2 + 1.0) / 4.0;
+        let second = x * (((3.0 * x2 - 7.0) * x2 - 5.0) * x2 - 3.0) / 96.0;
+        Normal::standard().sf(x) + density * (first + second / v) / v
+    }
+
     /// The `(1 + confidence)/2` quantile of Student's t with `dof` degrees of freedom.
     pub(crate) fn t_two_sided(confidence: f64, dof: usize) -> Result<f64> {
-        Ok(student(dof)?.inverse_cdf(0.5 + 0.5 * confidence))
+        let p = 0.5 + 0.5 * confidence;
+        if dof >= T_QUANTILE_EXPANSION {
+            return Ok(t_quantile_expansion(p, dof));
+        }
+        Ok(student(dof)?.inverse_cdf(p))
     }
 
     /// 2 (1 − F_t(|t|)).
@@ -131,7 +174,12 @@ pub(crate) mod dist {
         if t.is_nan() {
             return Ok(0.0);
         }
-        Ok((2.0 * d.sf(t.abs())).min(1.0))
+        let tail = if dof >= T_TAIL_EXPANSION {
+            t_tail_expansion(t.abs(), dof)
+        } else {
+            d.sf(t.abs())
+        };
+        Ok((2.0 * tail).min(1.0))
     }
 }
 
@@ -693,5 +741,25 @@ mod tests {
         assert!((q - 11.0 / 8.0).abs() < 1e-15);
         let mut bad = [1.0, 2.0, 2.0, 1.0];
         assert!(cholesky_quadratic_form(&mut bad, &mut [1.0, 0.0], 2).is_none());
+    }
+
+    /// Where Student's t switches from statrs to its expansions, the two agree (quantiles
+    /// to 10⁻¹¹ at p ≥ 0.975, tails to 10⁻⁹ relative for |t| ≤ 4, statrs' own drift), so no
+    /// band or p-value jumps at the switch.
+    #[test]
+    fn t_expansions_meet_statrs_at_the_switch() {
+        use statrs::distribution::{ContinuousCDF, StudentsT};
+        let v = dist::T_QUANTILE_EXPANSION;
+        let t = StudentsT::new(0.0, 1.0, v as f64).unwrap();
+        for p in [0.975, 0.995, 0.9995, 0.999_995] {
+            let (a, b) = (t.inverse_cdf(p), dist::t_quantile_expansion(p, v));
+            assert!((a - b).abs() < 1e-11, "p = {p}: {a} vs {b}");
+        }
+        let v = dist::T_TAIL_EXPANSION;
+        let t = StudentsT::new(0.0, 1.0, v as f64).unwrap();
+        for x in [0.0, 0.5, 1.0, 2.5, 4.0] {
+            let (a, b) = (t.sf(x), dist::t_tail_expansion(x, v));
+            assert!((a - b).abs() < 1e-9 * a, "x = {x}: {a} vs {b}");
+        }
     }
 }

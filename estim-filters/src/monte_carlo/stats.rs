@@ -98,7 +98,16 @@ impl EstimateStats {
     }
 
     /// The ratios (P_ens)ᵢᵢ / (P̄)ᵢᵢ, ≈ 1 when consistent.
+    ///
+    /// # Panics
+    /// When the two covariances are not n × n (statistics edited by hand).
+    #[track_caller]
     pub fn covariance_ratio(&self) -> DVector<f64> {
+        let n = self.state_dim();
+        assert!(
+            self.error_covariance.shape() == (n, n) && self.mean_covariance.shape() == (n, n),
+            "covariance_ratio: covariances of another size than the {n} components of the mean error"
+        );
         DVector::from_fn(self.state_dim(), |i, _| {
             self.error_covariance[(i, i)] / self.mean_covariance[(i, i)]
         })
@@ -114,8 +123,12 @@ impl EstimateStats {
     }
 
     /// The half-width of each component's band for [`mean_error`](Self::mean_error):
-    /// t_{N−1,(1+c)/2} · sᵢ / √N with sᵢ² = (P_ens)ᵢᵢ. Needs N ≥ 2.
+    /// t_{N−1,(1+c)/2} · sᵢ / √N with sᵢ² = (P_ens)ᵢᵢ. Needs N ≥ 2 and an n × n P_ens
+    /// ([`Error::DimensionMismatch`](estim_core::Error::DimensionMismatch) otherwise).
     pub fn mean_error_bound(&self, confidence: f64) -> Result<DVector<f64>> {
+        let n = self.state_dim();
+        let (stage, quantity) = (Stage::ConsistencyCheck, Quantity::Covariance);
+        ensure_shape(&self.error_covariance, n, n, stage, quantity)?;
         let t = dist::t_two_sided(
             validate_confidence(confidence)?,
             self.samples.saturating_sub(1),
