@@ -5,12 +5,17 @@
 
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
-/// The most degrees of freedom the crate evaluates a χ² distribution for: 2³⁶ ≈ 6.9 · 10¹⁰,
-/// beyond any NIS or NEES sum of a run (10⁷ steps of 10³ components). Above it statrs'
-/// regularised incomplete gamma function drifts (P(a, a) off by 5 · 10⁻⁵ at a = 2³⁶ and
-/// 1.3 · 10⁻³ at 2⁴⁰, measured against 1/2 + 1/(3√(2πa))), and from about 2⁵⁴ its series
-/// never ends (its counter stops growing at 2⁵³).
-pub const MAX_DEGREES_OF_FREEDOM: usize = 1 << 36;
+/// The most degrees of freedom the crate evaluates a χ² distribution for: 2³⁶ ≈ 6.9 · 10¹⁰
+/// (`usize::MAX` on 32-bit targets), beyond the NIS or NEES sums of runs (10⁷ steps of 10³
+/// components) and ensembles (10⁶ runs of 10⁴). Above it statrs' regularised incomplete
+/// gamma function drifts (P(a, a) off by 5 · 10⁻⁵ at a = 2³⁶ and 1.3 · 10⁻³ at 2⁴⁰, measured
+/// against 1/2 + 1/(3√(2πa))), and from about 2⁵⁴ its series never ends (its counter stops
+/// growing at 2⁵³).
+pub const MAX_DEGREES_OF_FREEDOM: usize = if usize::BITS > 36 {
+    (1u64 << 36) as usize
+} else {
+    usize::MAX
+};
 
 /// χ²_dof, or `None` for dof = 0 or above [`MAX_DEGREES_OF_FREEDOM`] (or a dof statrs
 /// refuses).

@@ -116,8 +116,9 @@ where
     /// Predicts mode `i` through its model in `models`.
     ///
     /// # Panics
-    /// The implementations of the crate panic when `i` ≥ [`count`](Modes::count) (a
-    /// programmer error; the IMM asks only for its modes).
+    /// The implementations of the crate panic when `i` ≥ [`count`](Modes::count) and
+    /// `models` has an entry `i` (a programmer error; the IMM asks only for its modes). A list
+    /// of models without entry `i` is an [`Error::DimensionMismatch`] instead.
     fn predict_mode(&mut self, i: usize, models: &P, input: &Self::Input, dt: T) -> Result<()>;
 }
 

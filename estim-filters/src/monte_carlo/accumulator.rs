@@ -5,7 +5,7 @@ use estim_core::linalg::inverse_quadratic_form;
 use estim_core::nalgebra::SMatrix;
 use estim_core::{Error, Quantity};
 
-use crate::consistency::{MAX_DEGREES_OF_FREEDOM, STAGE};
+use crate::consistency::STAGE;
 use crate::validation::{Result, ValidationError};
 
 /// Running moments of one slot's estimates, in f64, column-major n × n matrices.
@@ -331,16 +331,14 @@ impl Accumulator {
 
     /// Whether it holds `runs` runs and every buffer has the length its dimensions say: true
     /// for what this crate builds, checked for shards read back from a file (which could have
-    /// been edited). Every count is then at most `runs` (one record per slot and run) and the
-    /// NIS degrees of freedom at most [`MAX_DEGREES_OF_FREEDOM`], so merging the chunks of an
-    /// experiment (at most [`MonteCarlo::MAX_CHUNKS`](super::MonteCarlo::MAX_CHUNKS)) cannot
-    /// overflow.
+    /// been edited). Every count is then at most `runs` (one record per slot and run), so the
+    /// counts of an experiment's chunks add up to at most its runs; the NIS degrees of freedom
+    /// have no such bound ([`dof_fit`](Self::dof_fit)).
     pub(super) fn well_formed(&self, runs: usize, slots: usize, pairs: usize) -> bool {
         let slot_ok = |a: &SlotAcc| {
             let (n, nn) = (a.n, a.n.checked_mul(a.n));
             let empty = a.count == 0 && a.n == 0;
-            let counts =
-                a.count <= runs && a.nis_count <= runs && a.nis_dof <= MAX_DEGREES_OF_FREEDOM;
+            let counts = a.count <= runs && a.nis_count <= runs;
             counts
                 && (empty
                     || (nn.is_some()
@@ -360,6 +358,15 @@ impl Accumulator {
             && self.pairs.len() == pairs
             && self.slots.iter().all(slot_ok)
             && self.pairs.iter().all(pair_ok)
+    }
+
+    /// Whether the NIS degrees of freedom of `other` can be added to these without overflow
+    /// (always, for what this crate records: a sum of measurement sizes over runs).
+    pub(super) fn dof_fit(&self, other: &Accumulator) -> bool {
+        self.slots
+            .iter()
+            .zip(&other.slots)
+            .all(|(a, b)| a.nis_dof.checked_add(b.nis_dof).is_some())
     }
 
     pub(super) fn merge(&mut self, other: &Accumulator) -> Result<()> {

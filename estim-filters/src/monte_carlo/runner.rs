@@ -363,7 +363,10 @@ impl<E> MonteCarlo<E> {
             }
             for chunk in &shard.chunks {
                 let runs = ranges.get(next).map(|r| r.len());
-                if runs.is_none_or(|runs| !chunk.well_formed(runs, self.slots, self.pairs.len())) {
+                let fits = |runs| {
+                    chunk.well_formed(runs, self.slots, self.pairs.len()) && total.dof_fit(chunk)
+                };
+                if !runs.is_some_and(fits) {
                     return Err(invalid(next));
                 }
                 Self::merge_into(&mut total, chunk)?;

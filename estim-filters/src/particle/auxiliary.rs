@@ -21,7 +21,7 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector};
 use estim_core::{Alloc, ProcessModel, Quantity, Real, Stage, error::Result};
 
 use super::ParticleFilter;
-use super::chunks::{CHUNK, columns_mut, first_error, for_chunks1, parallel, range, with_state};
+use super::chunks::{CHUNK, first_error, for_chunks1, parallel, range, with_state};
 use super::noise::{AdditiveGaussian, ParticleMeasurement, ParticleProcess};
 use super::step::Work;
 use crate::gaussian_filter::ensure_time_step;
@@ -121,9 +121,7 @@ where
             n.value() * CHUNK,
             |c, w, out| {
                 w.error = with_state(&mut w.state, n, |s| {
-                    let columns = columns_mut(out, nn, range(c, count).len());
-                    for (k, column) in columns.enumerate() {
-                        let i = c * CHUNK + k;
+                    let mut mean = |i: usize, column: &mut [T]| {
                         s.x.copy_from_slice(&particles[i * nn..(i + 1) * nn]);
                         estim_core::in_place::transition_into(
                             process.model(),
@@ -133,16 +131,23 @@ where
                             &mut s.y,
                         );
                         let (stage, quantity) = (Stage::Prediction, Quantity::FunctionValue);
-                        let checked = ensure_shape(&s.y, s.x.nrows(), 1, stage, quantity)
-                            .and_then(|()| ensure_finite(&s.y, stage, quantity));
-                        if let Err(e) = checked {
-                            return Some(e);
-                        }
+                        ensure_shape(&s.y, s.x.nrows(), 1, stage, quantity)
+                            .and_then(|()| ensure_finite(&s.y, stage, quantity))?;
                         for (o, &y) in column.iter_mut().zip(s.y.iter()) {
                             *o = y;
                         }
-                    }
-                    None
+                        Ok(())
+                    };
+                    // Two loops, as in the bootstrap steps: a zero-dimensional state has empty
+                    // columns, which `chunks_exact_mut` cannot give.
+                    let done = if nn == 0 {
+                        range(c, count).try_for_each(|i| mean(i, &mut []))
+                    } else {
+                        out.chunks_exact_mut(nn)
+                            .enumerate()
+                            .try_for_each(|(k, column)| mean(c * CHUNK + k, column))
+                    };
+                    done.err()
                 });
             },
         );

@@ -68,22 +68,6 @@ pub(crate) fn range(c: usize, count: usize) -> core::ops::Range<usize> {
     c * CHUNK..((c + 1) * CHUNK).min(count)
 }
 
-/// The `count` particles of `nn` values each at the start of `values`, one after another;
-/// `count` empty ones for a zero-dimensional state (`nn` = 0, where `chunks_exact_mut` would
-/// panic and a zip with it would skip every particle). The chain costs a few instructions a
-/// particle over `chunks_exact_mut` alone: the bootstrap loops branch on `nn` instead.
-#[inline]
-pub(crate) fn columns_mut<T>(
-    values: &mut [T],
-    nn: usize,
-    count: usize,
-) -> impl Iterator<Item = &mut [T]> {
-    let empty = if nn == 0 { count } else { 0 };
-    values
-        .chunks_exact_mut(nn.max(1))
-        .chain(core::iter::repeat_with(<&mut [T]>::default).take(empty))
-}
-
 /// Runs `f(c, states[c], a_c, b_c)` for every chunk c, where a_c and b_c are the c-th pieces
 /// of `a` (width `wa`) and `b` (width `wb`): on rayon's pool if `par`, else in order.
 /// `states` has one entry per chunk; `a` and `b` have at least as many pieces, or width 0

@@ -571,23 +571,37 @@ fn index_panics_name_the_callers_line() {
         EmSettings::new().with_transition(MatrixStructure::FreeEntries(vec![(0, 1)])),
         EmSettings::new().with_observation(MatrixStructure::FreeEntries(vec![(1, 0)])),
     ];
-    // The hook is global: keep only this thread's panic locations.
+    // The hook is global: this thread's panics are recorded, every other thread's go to the
+    // hook that was there (other tests run beside this one). It is put back before asserting.
     let seen = Arc::new(Mutex::new(Vec::new()));
-    let (record, this) = (Arc::clone(&seen), std::thread::current().id());
-    let previous = panic::take_hook();
+    let previous = Arc::new(panic::take_hook());
+    let (record, forward, this) = (
+        Arc::clone(&seen),
+        Arc::clone(&previous),
+        std::thread::current().id(),
+    );
     panic::set_hook(Box::new(move |info| {
         if std::thread::current().id() == this {
             let at = info.location().map(|l| (l.file().to_string(), l.line()));
             record.lock().unwrap().push(at);
+        } else {
+            forward(info);
         }
     }));
-    for settings in &bad {
-        let outcome =
-            panic::catch_unwind(AssertUnwindSafe(|| estimate(&model, settings, &records)));
-        assert!(outcome.is_err());
+    let outcomes: Vec<bool> = bad
+        .iter()
+        .map(|settings| {
+            panic::catch_unwind(AssertUnwindSafe(|| estimate(&model, settings, &records))).is_err()
+        })
+        .collect();
+    // Drops this test's hook (and with it its reference to the previous one), then restores
+    // that one.
+    drop(panic::take_hook());
+    match Arc::try_unwrap(previous) {
+        Ok(previous) => panic::set_hook(previous),
+        Err(_) => unreachable!("the test's hook, which held the other reference, is dropped"),
     }
-    let _ = panic::take_hook();
-    panic::set_hook(previous);
+    assert_eq!(outcomes, [true; 5], "every bad index panics");
     // Five panics, all at the one call above.
     let seen = seen.lock().unwrap().clone();
     assert_eq!(seen.len(), bad.len());

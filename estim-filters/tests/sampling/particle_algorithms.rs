@@ -1273,7 +1273,8 @@ impl Proposal<f64, Dyn, Dyn> for EmptyProposal {
 
 /// A zero-dimensional state (no landmarks yet): every particle is empty, so every step weighs
 /// them equally and the likelihood of z = c + v is exactly log N(z; c, R), through the
-/// bootstrap, auxiliary and guided steps, serial or (with enough particles) on rayon's pool.
+/// bootstrap, auxiliary and guided steps, serially and (with enough particles) on a
+/// two-thread rayon pool.
 /// Before, the weighing loops skipped every particle when the state had no components: the
 /// log-weights kept stale values and the likelihood was not the model's.
 #[test]
@@ -1293,31 +1294,42 @@ fn a_zero_dimensional_state_weighs_every_particle() {
             .iter()
             .all(|&w| (w + n.ln()).abs() <= 1e-12)
     };
-    for count in [10, 1500, estim_filters::particle::PARALLEL_MIN] {
-        let mut bootstrap = ParticleFilter::new(empty.clone(), count, 3).unwrap();
-        let mut auxiliary = bootstrap.clone();
-        let mut guided = bootstrap.clone();
-        let mut total = 0.0;
-        for z in [0.1, 2.0, -1.5] {
-            let zv = DVector::from_element(1, z);
-            bootstrap.predict(&process, &(), 1.0).unwrap();
-            let b = bootstrap.update(&sensor, &zv).unwrap();
-            let a = auxiliary
-                .auxiliary_step(&process, &(), 1.0, &sensor, &zv)
-                .unwrap();
-            let g = guided
-                .guided_step(&process, &EmptyProposal, &(), 1.0, &sensor, &zv)
-                .unwrap();
-            total += exact(z);
-            for (name, report) in [("bootstrap", &b), ("auxiliary", &a), ("guided", &g)] {
-                let error = report.log_likelihood - exact(z);
-                assert!(error.abs() <= 1e-12, "{name}, N = {count}: {error:e}");
-            }
-            for pf in [&bootstrap, &auxiliary, &guided] {
-                assert!(uniform(pf), "N = {count}: {:?}", &pf.log_weights()[..3]);
-                assert_eq!(pf.particles().shape(), (0, count));
-                assert!((pf.log_likelihood() - total).abs() <= 1e-12 * total.abs());
+    // On two threads, so that PARALLEL_MIN particles take the rayon path.
+    let run = || {
+        for count in [10, 1500, estim_filters::particle::PARALLEL_MIN] {
+            let mut bootstrap = ParticleFilter::new(empty.clone(), count, 3).unwrap();
+            let mut auxiliary = bootstrap.clone();
+            let mut guided = bootstrap.clone();
+            let mut total = 0.0;
+            for z in [0.1, 2.0, -1.5] {
+                let zv = DVector::from_element(1, z);
+                bootstrap.predict(&process, &(), 1.0).unwrap();
+                let b = bootstrap.update(&sensor, &zv).unwrap();
+                let a = auxiliary
+                    .auxiliary_step(&process, &(), 1.0, &sensor, &zv)
+                    .unwrap();
+                let g = guided
+                    .guided_step(&process, &EmptyProposal, &(), 1.0, &sensor, &zv)
+                    .unwrap();
+                total += exact(z);
+                for (name, report) in [("bootstrap", &b), ("auxiliary", &a), ("guided", &g)] {
+                    let error = report.log_likelihood - exact(z);
+                    assert!(error.abs() <= 1e-12, "{name}, N = {count}: {error:e}");
+                }
+                for pf in [&bootstrap, &auxiliary, &guided] {
+                    assert!(uniform(pf), "N = {count}: {:?}", &pf.log_weights()[..3]);
+                    assert_eq!(pf.particles().shape(), (0, count));
+                    assert!((pf.log_likelihood() - total).abs() <= 1e-12 * total.abs());
+                }
             }
         }
-    }
+    };
+    #[cfg(feature = "parallel")]
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap()
+        .install(run);
+    #[cfg(not(feature = "parallel"))]
+    run();
 }

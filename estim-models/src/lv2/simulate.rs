@@ -70,6 +70,12 @@ where
     pub fn sample<R: Rng + ?Sized>(&self, truth: &OVector<f64, N>, rng: &mut R) -> SensorSample<M> {
         let mut reading = self.axes.ideal_reading(truth);
         let m = reading.nrows();
+        // Checked here, not by the index below, so that the panic names the caller.
+        assert!(
+            self.bias.nrows() >= m,
+            "SensorArray::sample: {} biases for {m} axes",
+            self.bias.nrows()
+        );
         let mut missing = vec![false; m];
         let mut clipped = vec![false; m];
         for i in 0..m {

@@ -68,7 +68,7 @@ fn unbounded_iteration_settings_are_refused() {
         iterate_riccati(1.0, 1.0, 1.0, 0.0, 0.0, 1e-13, usize::MAX),
         Parameter::StepCount,
     );
-    // The largest accepted count still ends: c = 0 never converges, so every step runs.
+    // An accepted count runs to its end when nothing converges (c = 0): every step is taken.
     let (_, iterations, trace) = iterate_riccati(1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1000).unwrap();
     assert_eq!((iterations, trace.len()), (1000, 1001));
 }
