@@ -1,14 +1,13 @@
 //! The ensemble statistics of a Monte Carlo experiment and their verdict: per slot, the
 //! estimate and NIS statistics, per residual pair the cross-correlation, with their bands.
 
+use estim_core::checks::ensure_shape;
 use estim_core::nalgebra::{DMatrix, DVector};
+use estim_core::{Quantity, Stage};
 
 use crate::consistency::{
     Check, ChiSquareBand, FamilyRule, FamilyTest, Location, Verdict, dist, validate_confidence,
 };
-use estim_core::checks::ensure_shape;
-use estim_core::{Quantity, Stage};
-
 use crate::validation::{Result, Setting, ValidationError};
 
 use super::accumulator::{PairAcc, SlotAcc};
