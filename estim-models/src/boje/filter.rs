@@ -28,7 +28,7 @@ use estim_core::{
     LinearMeasurementModel, MeasurementHessian, MeasurementJacobian, MeasurementModel,
     ProcessHessian, ProcessJacobian, ProcessModel, wrap_components,
 };
-use estim_filters::{Estimator, PredictCorrelated, Update};
+use estim_filters::{Estimator, PredictCorrelated, Rollback, Update};
 
 use super::geometry::{ChannelVariances, InversionInput, inertial_moments, invert, rate_squared};
 
@@ -434,9 +434,10 @@ pub struct StepReport {
     pub fix_nis: Option<f64>,
 }
 
-/// A filter that can run [`filter_step`] with process `P`.
+/// A filter that can run [`filter_step`] with process `P` (and roll back a failed one).
 pub trait PlanarFilter<P: ProcessModel<f64, U6>>:
     Estimator<f64, U6>
+    + Rollback
     + Update<f64, U6, U1, RateSquaredMeasurement>
     + Update<f64, U6, U3, PositionHeadingMeasurement>
     + PredictCorrelated<f64, U6, U1, P, RateSquaredMeasurement>
@@ -447,6 +448,7 @@ impl<P, F> PlanarFilter<P> for F
 where
     P: ProcessModel<f64, U6>,
     F: Estimator<f64, U6>
+        + Rollback
         + Update<f64, U6, U1, RateSquaredMeasurement>
         + Update<f64, U6, U3, PositionHeadingMeasurement>
         + PredictCorrelated<f64, U6, U1, P, RateSquaredMeasurement>,
@@ -462,10 +464,12 @@ where
 /// 4. `predict_correlated` with the θ̇² model, zᵢ and S (the process noise of this step is
 ///    correlated with the θ̇² noise of this sample).
 ///
-/// On an error the filter may have taken steps 2–3 (each step is atomic, the sequence is not).
+/// On an error the filter is as it was before the call: steps 2–3 taken before a failing
+/// step are rolled back ([`Rollback`]).
 ///
 /// Errors: those of the input construction and of the filter steps (non-finite values,
-/// innovation covariance not positive definite, Q − S R⁻¹ Sᵀ not PSD).
+/// innovation covariance not positive definite, Q − S R⁻¹ Sᵀ not PSD, a negative or
+/// non-finite Δt).
 pub fn filter_step<F, P>(
     filter: &mut F,
     process: &P,
@@ -478,19 +482,27 @@ where
     F: PlanarFilter<P>,
 {
     let input = process.input(accel, filter.state(), filter.covariance())?;
-    let rate = process.rate_measurement();
-    let z = Vector1::new(rate_squared(accel, process.half_separation()));
-    let rate_report = Update::<f64, U6, U1, RateSquaredMeasurement>::update(filter, &rate, &z)?;
-    let fix_nis = match fix {
-        Some((model, y)) => {
-            Some(Update::<f64, U6, U3, PositionHeadingMeasurement>::update(filter, model, y)?.nis)
-        }
-        None => None,
+    let before = filter.snapshot();
+    let steps = |filter: &mut F| {
+        let rate = process.rate_measurement();
+        let z = Vector1::new(rate_squared(accel, process.half_separation()));
+        let rate_report = Update::<f64, U6, U1, RateSquaredMeasurement>::update(filter, &rate, &z)?;
+        let fix_nis = match fix {
+            Some((model, y)) => Some(
+                Update::<f64, U6, U3, PositionHeadingMeasurement>::update(filter, model, y)?.nis,
+            ),
+            None => None,
+        };
+        let s = process.noise_cross_covariance(&input, filter.state(), dt);
+        filter.predict_correlated(process, &input, dt, &rate, &z, &s)?;
+        Ok(StepReport {
+            rate_nis: rate_report.nis,
+            fix_nis,
+        })
     };
-    let s = process.noise_cross_covariance(&input, filter.state(), dt);
-    filter.predict_correlated(process, &input, dt, &rate, &z, &s)?;
-    Ok(StepReport {
-        rate_nis: rate_report.nis,
-        fix_nis,
-    })
+    let result = steps(filter);
+    if result.is_err() {
+        filter.restore(&before);
+    }
+    result
 }

@@ -112,18 +112,22 @@ impl OwnShipTrajectoryEstimator {
     }
 
     /// One OTE cycle on the velocity `prior` with pseudo-measurement `z` (eq 46–48), without a
-    /// CKF: returns the step record.
+    /// CKF: returns the step record. On an error (a non-finite prior or reading, an innovation
+    /// covariance that is not positive definite) the estimator is as it was.
     pub fn update(&mut self, prior: &Vector2<f64>, z: &Vector2<f64>) -> Result<OteStep, Error> {
         let p = *self.rls.covariance();
-        self.rls.reset(Gaussian::new_unchecked(*prior, p));
-        let report = self.rls.update(&self.measurement, z)?;
+        // The cycle runs on a copy (two 2-vectors and a 2 × 2 matrix), committed at the end.
+        let mut rls = self.rls.clone();
+        rls.reset(Gaussian::new_unchecked(*prior, p));
+        let report = rls.update(&self.measurement, z)?;
         // K_p = M (M + S_p)⁻¹ with M = P_p/γ; M + S_p is the report's innovation covariance.
         let s = Cholesky::new(report.innovation_covariance).ok_or(Error::NotPositiveDefinite {
             stage: Stage::Update,
             quantity: Quantity::InnovationCovariance,
         })?;
-        let m = p / self.rls.forgetting_factor();
+        let m = p / rls.forgetting_factor();
         let gain = s.solve(&m.transpose()).transpose();
+        self.rls = rls;
         Ok(OteStep {
             pseudo_measurement: *z,
             prior_velocity: *prior,

@@ -121,7 +121,19 @@ impl LuFilter {
     }
 
     /// One accelerometer sample a_c(t_j): mechanisation and error-state prediction to t_{j+1}.
+    ///
+    /// Errors (the filter unchanged): a non-finite sample ([`Error::NonFinite`], quantity
+    /// [`Measurement`](Quantity::Measurement): the accelerometer's reading), and the
+    /// prediction's errors.
     pub fn propagate(&mut self, acceleration: f64) -> Result<(), Error> {
+        if !acceleration.is_finite() {
+            // It would turn the mechanisation's position and velocity into NaN, and every
+            // later update would blame the GPS fix.
+            return Err(Error::NonFinite {
+                stage: Stage::Prediction,
+                quantity: Quantity::Measurement,
+            });
+        }
         self.kalman.predict(&self.process, &(), self.dt)?;
         self.mechanisation.step(acceleration, self.dt);
         Ok(())

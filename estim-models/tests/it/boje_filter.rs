@@ -308,3 +308,31 @@ fn circle_truth_is_consistent() {
         assert!((radius - 10.0).abs() < 0.11, "k = {k}: radius {radius}");
     }
 }
+
+/// A step that fails after its first update (a non-finite fix reading, a negative Δt for the
+/// prediction) leaves the filter as it was: before, the θ̇² update (and the fix) stayed
+/// applied.
+#[test]
+fn a_failed_filter_step_is_rolled_back() {
+    let config = CircleConfig::paper();
+    let data = simulate_circle(&config, 7).unwrap();
+    let process = PlanarProcess {
+        half_separation: config.half_separation,
+        variances: config.variances(),
+    };
+    let fix_model = config.fix_model();
+    let p0 = Matrix6::from_diagonal(&Vector6::new(0.01, 0.01, 1e-4, 0.25, 0.25, 1e-4));
+    let mut filter = Ekf::new(Gaussian::new(data.truth[0], p0).unwrap());
+    filter_step(&mut filter, &process, &data.accel[0], None, config.dt).unwrap();
+    let before = filter.clone();
+    let bad_fix = Vector3::new(f64::NAN, 0.0, 0.0);
+    let good_fix = Vector3::new(data.truth[1][X], data.truth[1][Y], data.truth[1][HEADING]);
+    for (fix, dt) in [
+        (Some((&fix_model, &bad_fix)), config.dt),
+        (Some((&fix_model, &good_fix)), -config.dt),
+        (None, f64::NAN),
+    ] {
+        assert!(filter_step(&mut filter, &process, &data.accel[1], fix, dt).is_err());
+        assert_eq!(filter, before, "dt = {dt}");
+    }
+}

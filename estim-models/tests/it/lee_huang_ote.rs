@@ -189,3 +189,28 @@ fn correct_rejects_a_state_at_the_origin() {
     assert!(ote.correct(&mut ckf).is_err());
     assert_eq!(*ckf.state(), x);
 }
+
+/// A cycle that fails (a non-finite prior velocity or pseudo-measurement) leaves the OTE as it
+/// was: before, the RLS had already been reset to the prior when the update failed.
+#[test]
+fn a_failed_cycle_changes_nothing() {
+    let mut ote = OwnShipTrajectoryEstimator::new(&OteSettings::issue()).unwrap();
+    ote.update(&Vector2::new(1.0, 1.0), &Vector2::new(1.1, 0.9))
+        .unwrap();
+    let before = ote.clone();
+    for (prior, z) in [
+        (Vector2::new(5.0, 5.0), Vector2::new(f64::NAN, 0.0)),
+        (Vector2::new(f64::NAN, 5.0), Vector2::new(1.0, 1.0)),
+        (Vector2::new(5.0, f64::INFINITY), Vector2::new(1.0, 1.0)),
+    ] {
+        assert!(ote.update(&prior, &z).is_err(), "{prior:?} {z:?}");
+        assert_eq!(ote, before, "{prior:?} {z:?}");
+    }
+    // And the next good cycle is the one the clone gives.
+    let mut clone = before.clone();
+    let step = ote.update(&Vector2::new(1.0, 1.0), &Vector2::new(1.2, 0.8));
+    assert_eq!(
+        step,
+        clone.update(&Vector2::new(1.0, 1.0), &Vector2::new(1.2, 0.8))
+    );
+}

@@ -266,3 +266,26 @@ fn paper_residual_matrix_is_not_white() {
     );
     assert!(z[(1, 0)].abs() < 1.0);
 }
+
+/// A non-finite accelerometer sample is a typed error at `propagate`, with the filter
+/// unchanged: before, it returned `Ok`, turned the mechanisation into NaN, and every later
+/// update failed blaming the GPS fix.
+#[test]
+fn a_non_finite_acceleration_is_refused_at_once() {
+    let scenario = Scenario::paper();
+    let mut filter = LuFilter::new(&scenario, &FilterSettings::consistent(&scenario)).unwrap();
+    filter.propagate(0.01).unwrap();
+    let before = filter.clone();
+    for a in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        assert_eq!(
+            filter.propagate(a),
+            Err(estim_core::Error::NonFinite {
+                stage: estim_core::Stage::Prediction,
+                quantity: estim_core::Quantity::Measurement,
+            })
+        );
+        assert_eq!(filter, before);
+    }
+    filter.propagate(0.02).unwrap();
+    assert!(filter.update(&Vector2::new(0.1, 0.01)).is_ok());
+}
