@@ -21,7 +21,7 @@ use estim_core::nalgebra::{DefaultAllocator, Dim, Dyn, OMatrix, OVector};
 use estim_core::{Alloc, ProcessModel, Quantity, Real, Stage, error::Result};
 
 use super::ParticleFilter;
-use super::chunks::{CHUNK, first_error, for_chunks1, parallel, range, with_state};
+use super::chunks::{CHUNK, columns, first_error, for_chunks1, parallel, with_state};
 use super::noise::{AdditiveGaussian, ParticleMeasurement, ParticleProcess};
 use super::step::Work;
 use crate::gaussian_filter::ensure_time_step;
@@ -114,14 +114,17 @@ where
         let work = &mut self.work;
         // First stage: μᵢ into `next`, log ηᵢ into `log_eta`.
         let (nn, particles) = (n.value(), cloud.particles.as_slice());
+        let mut placeholder = Vec::new();
+        let (out, width) = columns(work.next.as_mut_slice(), &mut placeholder, nn, count);
         for_chunks1(
             parallel(count),
             &mut work.chunks,
-            work.next.as_mut_slice(),
-            n.value() * CHUNK,
+            out,
+            width * CHUNK,
             |c, w, out| {
                 w.error = with_state(&mut w.state, n, |s| {
-                    let mut mean = |i: usize, column: &mut [T]| {
+                    for (k, column) in out.chunks_exact_mut(width).enumerate() {
+                        let i = c * CHUNK + k;
                         s.x.copy_from_slice(&particles[i * nn..(i + 1) * nn]);
                         estim_core::in_place::transition_into(
                             process.model(),
@@ -131,23 +134,16 @@ where
                             &mut s.y,
                         );
                         let (stage, quantity) = (Stage::Prediction, Quantity::FunctionValue);
-                        ensure_shape(&s.y, s.x.nrows(), 1, stage, quantity)
-                            .and_then(|()| ensure_finite(&s.y, stage, quantity))?;
+                        let checked = ensure_shape(&s.y, s.x.nrows(), 1, stage, quantity)
+                            .and_then(|()| ensure_finite(&s.y, stage, quantity));
+                        if let Err(e) = checked {
+                            return Some(e);
+                        }
                         for (o, &y) in column.iter_mut().zip(s.y.iter()) {
                             *o = y;
                         }
-                        Ok(())
-                    };
-                    // Two loops, as in the bootstrap steps: a zero-dimensional state has empty
-                    // columns, which `chunks_exact_mut` cannot give.
-                    let done = if nn == 0 {
-                        range(c, count).try_for_each(|i| mean(i, &mut []))
-                    } else {
-                        out.chunks_exact_mut(nn)
-                            .enumerate()
-                            .try_for_each(|(k, column)| mean(c * CHUNK + k, column))
-                    };
-                    done.err()
+                    }
+                    None
                 });
             },
         );

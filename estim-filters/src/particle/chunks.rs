@@ -68,10 +68,28 @@ pub(crate) fn range(c: usize, count: usize) -> core::ops::Range<usize> {
     c * CHUNK..((c + 1) * CHUNK).min(count)
 }
 
+/// The particles' columns for [`for_chunks`] and the width of one column: `values` (n per
+/// particle), or for a zero-dimensional state, whose particles are empty, `placeholder` filled
+/// with one unused value per particle, so that the per-chunk loops (zipped with
+/// `chunks_exact_mut(width)`) run once per particle as for any other state. The placeholder
+/// allocates only then.
+pub(crate) fn columns<'a, T: Real>(
+    values: &'a mut [T],
+    placeholder: &'a mut Vec<T>,
+    n: usize,
+    count: usize,
+) -> (&'a mut [T], usize) {
+    if n > 0 {
+        return (values, n);
+    }
+    placeholder.clear();
+    placeholder.resize(count, T::zero());
+    (placeholder.as_mut_slice(), 1)
+}
+
 /// Runs `f(c, states[c], a_c, b_c)` for every chunk c, where a_c and b_c are the c-th pieces
 /// of `a` (width `wa`) and `b` (width `wb`): on rayon's pool if `par`, else in order.
-/// `states` has one entry per chunk; `a` and `b` have at least as many pieces, or width 0
-/// (the particles of a zero-dimensional state): then every piece is empty.
+/// `states` has one entry per chunk; `a` and `b` have at least as many pieces.
 pub(crate) fn for_chunks<S, A, B, F>(
     par: bool,
     states: &mut [S],
@@ -86,35 +104,25 @@ pub(crate) fn for_chunks<S, A, B, F>(
     B: Send,
     F: Fn(usize, &mut S, &mut [A], &mut [B]) + Sync,
 {
-    // A width of 0: no piece of the (empty) slice, then one empty piece per chunk.
-    let empty = |w: usize| if w == 0 { states.len() } else { 0 };
-    let (ea, eb) = (empty(wa), empty(wb));
     let (wa, wb) = (wa.max(1), wb.max(1));
     #[cfg(feature = "parallel")]
     if par {
         use rayon::prelude::*;
-        let a = a
-            .par_chunks_mut(wa)
-            .chain((0..ea).into_par_iter().map(|_| Default::default()));
-        let b = b
-            .par_chunks_mut(wb)
-            .chain((0..eb).into_par_iter().map(|_| Default::default()));
         states
             .par_iter_mut()
-            .zip(a)
-            .zip(b)
+            .zip(a.par_chunks_mut(wa))
+            .zip(b.par_chunks_mut(wb))
             .enumerate()
             .for_each(|(c, ((s, a), b))| f(c, s, a, b));
         return;
     }
     let _ = par;
-    let a = a
-        .chunks_mut(wa)
-        .chain(core::iter::repeat_with(Default::default).take(ea));
-    let b = b
-        .chunks_mut(wb)
-        .chain(core::iter::repeat_with(Default::default).take(eb));
-    for (c, ((s, a), b)) in states.iter_mut().zip(a).zip(b).enumerate() {
+    for (c, ((s, a), b)) in states
+        .iter_mut()
+        .zip(a.chunks_mut(wa))
+        .zip(b.chunks_mut(wb))
+        .enumerate()
+    {
         f(c, s, a, b);
     }
 }

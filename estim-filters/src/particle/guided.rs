@@ -8,7 +8,7 @@ use estim_core::{
 };
 
 use super::ParticleFilter;
-use super::chunks::{CHUNK, first_error, for_chunks, parallel, with_state};
+use super::chunks::{CHUNK, columns, first_error, for_chunks, parallel, with_state};
 use super::noise::{AdditiveGaussian, ParticleMeasurement};
 use super::resample::ess_of_weights;
 use super::rng::ParticleRng;
@@ -214,11 +214,13 @@ where
         let (nn, particles, zs) = (n.value(), cloud.particles.as_slice(), z.as_slice());
         let (ancestors, log_weights) = (&work.ancestors, &cloud.log_weights);
         work.log_eta.resize(count, T::zero());
+        let mut placeholder = Vec::new();
+        let (out, width) = columns(work.next.as_mut_slice(), &mut placeholder, nn, count);
         for_chunks(
             parallel(count),
             &mut work.chunks,
-            work.next.as_mut_slice(),
-            nn * CHUNK,
+            out,
+            width * CHUNK,
             &mut work.log_eta,
             CHUNK,
             |c, w, out, eta| {
@@ -228,16 +230,19 @@ where
                     let z = OVector::<T, M>::from_column_slice_generic(m, U1, zs);
                     let mut kernel: Option<GaussianKernel<T, N>> = None;
                     let stage = Stage::Prediction;
-                    let mut propose = |k: usize, column: &mut [T], eta: &mut T| {
+                    for (k, (column, eta)) in out.chunks_exact_mut(width).zip(eta).enumerate() {
                         let j = c * CHUNK + k;
                         let a = ancestors[j];
                         s.x.copy_from_slice(&particles[a * nn..(a + 1) * nn]);
                         let mut rng = ParticleRng::stream(seed, step, j as u64);
                         let (next, log_q) = proposal.propose(&s.x, input, dt, &z, &mut rng);
-                        ensure_shape(&next, nn, 1, stage, Quantity::FunctionValue)
-                            .and_then(|()| ensure_finite(&next, stage, Quantity::FunctionValue))?;
+                        let checked = ensure_shape(&next, nn, 1, stage, Quantity::FunctionValue)
+                            .and_then(|()| ensure_finite(&next, stage, Quantity::FunctionValue));
+                        if let Err(e) = checked {
+                            return Some(e);
+                        }
                         if !log_q.is_finite() {
-                            return Err(Error::NonFinite {
+                            return Some(Error::NonFinite {
                                 stage,
                                 quantity: Quantity::Weights,
                             });
@@ -257,27 +262,18 @@ where
                                 stage,
                             )
                             .map(|fresh| kernel.insert(fresh).log_density(&next, &mut s.y))
-                        }?;
+                        };
+                        let log_p = match log_p {
+                            Ok(log_p) => log_p,
+                            Err(e) => return Some(e),
+                        };
                         let prior = if resample { uniform } else { log_weights[j] };
                         *eta = prior + log_p - log_q;
                         for (o, &x) in column.iter_mut().zip(next.iter()) {
                             *o = x;
                         }
-                        Ok(())
-                    };
-                    // Two loops, as in the bootstrap steps: a zero-dimensional state has empty
-                    // columns, which `chunks_exact_mut` cannot give.
-                    let done = if nn == 0 {
-                        eta.iter_mut()
-                            .enumerate()
-                            .try_for_each(|(k, eta)| propose(k, &mut [], eta))
-                    } else {
-                        out.chunks_exact_mut(nn)
-                            .zip(eta)
-                            .enumerate()
-                            .try_for_each(|(k, (column, eta))| propose(k, column, eta))
-                    };
-                    done.err()
+                    }
+                    None
                 });
             },
         );

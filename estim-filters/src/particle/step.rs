@@ -13,8 +13,8 @@ use estim_core::{
 };
 
 use super::chunks::{
-    CHUNK, ChunkWork, StateScratch, chunk_count, dmatrix, dvector, first_error, for_chunks,
-    for_chunks1, for_states, lse_combine, lse_partial, parallel, range, with_state,
+    CHUNK, ChunkWork, StateScratch, chunk_count, columns, dmatrix, dvector, first_error,
+    for_chunks, for_chunks1, for_states, lse_combine, lse_partial, parallel, range, with_state,
 };
 use super::noise::{AdditiveGaussian, ParticleMeasurement, ParticleProcess};
 use super::resample::{ess_of_weights, resample_with, to_f64};
@@ -124,11 +124,13 @@ where
         let count = particles.ncols();
         let ancestors = &self.ancestors;
         let particles = particles.as_slice();
+        let mut placeholder = Vec::new();
+        let (out, width) = columns(self.next.as_mut_slice(), &mut placeholder, n.value(), count);
         for_chunks1(
             parallel(count),
             &mut self.chunks,
-            self.next.as_mut_slice(),
-            n.value() * CHUNK,
+            out,
+            width * CHUNK,
             |c, w, out| {
                 let range = range(c, count);
                 let ancestors = &ancestors[range.clone()];
@@ -456,8 +458,6 @@ where
         s.x.as_mut_slice().copy_from_slice(x);
         log_density::<T, N, M, H>(ms, sensor, &s.x, v, sums).map(|log_g| *o = base + log_g)
     };
-    // Two loops, not one over a chained iterator: the zip with `chunks_exact` is the tight
-    // indexed loop (a chain cost instructions in every particle's step).
     let weighed = if nn == 0 {
         // A zero-dimensional state: every particle is empty.
         out.iter_mut()
