@@ -23,9 +23,11 @@ use std::time::Duration;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use estim_core::nalgebra::{Cholesky, Matrix1, Matrix2, Matrix4, U1, U2, U4, Vector1};
 use estim_core::nalgebra::{Vector2, Vector4};
+use estim_core::rand::Rng;
 use estim_core::{Gaussian, MeasurementModel, ProcessModel};
 use estim_filters::particle::{
-    PARALLEL_MIN, ParticleFilter, ParticleRng, RESAMPLE, ResampleWhen, Resampling, resample,
+    PARALLEL_MIN, ParticleFilter, ParticleRng, Proposal, RESAMPLE, ResampleWhen, Resampling,
+    resample,
 };
 use estim_filters::{Estimator, Predict, Update};
 use rand_distr::{Distribution, StandardNormal};
@@ -392,9 +394,30 @@ fn check_same_algorithm() {
     let _ = PARALLEL_MIN;
 }
 
+/// q = p for the growth model: x⁺ = f(x, k) + √10 e drawn from the particle's stream, with
+/// its log-density (the guided step with it is the bootstrap filter).
+struct GrowthPrior;
+
+impl Proposal<f64, U1, U1> for GrowthPrior {
+    type Input = f64;
+    fn propose<R: Rng + ?Sized>(
+        &self,
+        x: &Vector1<f64>,
+        k: &f64,
+        _: f64,
+        _: &Vector1<f64>,
+        rng: &mut R,
+    ) -> (Vector1<f64>, f64) {
+        let e: f64 = StandardNormal.sample(rng);
+        let log_q = -0.5 * e * e - 0.5 * (std::f64::consts::TAU * 10.0).ln();
+        (Vector1::new(growth(x[0], *k) + 10f64.sqrt() * e), log_q)
+    }
+}
+
 /// Counted mode for callgrind: `PARTICLE_BENCH_STEPS=<variant>=<steps>[,<count>]` with
-/// variant `library` or `hand` runs that many growth-model steps at N = `count` (default
-/// 1000) in [`run_counted`] and exits, e.g. `PARTICLE_BENCH_STEPS=library=50
+/// variant `library` (predict and update), `auxiliary` (the auxiliary step), `guided` (the
+/// guided step with q = p) or `hand` runs that many growth-model steps at N = `count`
+/// (default 1000) in [`run_counted`] and exits, e.g. `PARTICLE_BENCH_STEPS=library=50
 /// valgrind --tool=callgrind --toggle-collect='*run_counted*' <binary> --bench`. The
 /// difference of two step counts is the per-step cost without the setup.
 fn counted() -> bool {
@@ -424,9 +447,15 @@ fn run_counted(variant: &str, steps: usize, count: usize) {
     let half_log_2pi = 0.5 * std::f64::consts::TAU.ln();
     for k in 1..=steps {
         let (kf, z) = (k as f64, zs[k % STEPS]);
+        let zv = Vector1::new(z);
         if variant == "library" {
             pf.predict(&Growth, &kf, 1.0).unwrap();
-            pf.update(&Square, &Vector1::new(z)).unwrap();
+            pf.update(&Square, &zv).unwrap();
+        } else if variant == "auxiliary" {
+            pf.auxiliary_step(&Growth, &kf, 1.0, &Square, &zv).unwrap();
+        } else if variant == "guided" {
+            pf.guided_step(&Growth, &GrowthPrior, &kf, 1.0, &Square, &zv)
+                .unwrap();
         } else {
             hand.step(
                 |x, e, out| out[0] = growth(x[0], kf) + sq * e[0],

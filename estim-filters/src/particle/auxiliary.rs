@@ -115,15 +115,15 @@ where
         // First stage: μᵢ into `next`, log ηᵢ into `log_eta`.
         let (nn, particles) = (n.value(), cloud.particles.as_slice());
         let mut placeholder = Vec::new();
-        let (out, width) = columns(work.next.as_mut_slice(), &mut placeholder, nn, count);
+        let out = columns(work.next.as_mut_slice(), &mut placeholder, nn, count);
         for_chunks1(
             parallel(count),
             &mut work.chunks,
             out,
-            width * CHUNK,
+            n.value().max(1) * CHUNK,
             |c, w, out| {
                 w.error = with_state(&mut w.state, n, |s| {
-                    for (k, column) in out.chunks_exact_mut(width).enumerate() {
+                    for (k, column) in out.chunks_exact_mut(n.value().max(1)).enumerate() {
                         let i = c * CHUNK + k;
                         s.x.copy_from_slice(&particles[i * nn..(i + 1) * nn]);
                         estim_core::in_place::transition_into(

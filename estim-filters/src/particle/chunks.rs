@@ -68,23 +68,24 @@ pub(crate) fn range(c: usize, count: usize) -> core::ops::Range<usize> {
     c * CHUNK..((c + 1) * CHUNK).min(count)
 }
 
-/// The particles' columns for [`for_chunks`] and the width of one column: `values` (n per
-/// particle), or for a zero-dimensional state, whose particles are empty, `placeholder` filled
-/// with one unused value per particle, so that the per-chunk loops (zipped with
-/// `chunks_exact_mut(width)`) run once per particle as for any other state. The placeholder
+/// The buffer of the particles' columns for [`for_chunks`]: `values` (n per particle), or
+/// for a zero-dimensional state, whose particles are empty, `placeholder` filled with one
+/// unused value per particle. With columns of width n.max(1) the per-chunk loops (zipped with
+/// `chunks_exact_mut`) then run once per particle as for any other state. The placeholder
 /// allocates only then.
+#[cfg_attr(not(debug_assertions), inline(always))]
 pub(crate) fn columns<'a, T: Real>(
     values: &'a mut [T],
     placeholder: &'a mut Vec<T>,
     n: usize,
     count: usize,
-) -> (&'a mut [T], usize) {
+) -> &'a mut [T] {
     if n > 0 {
-        return (values, n);
+        return values;
     }
     placeholder.clear();
     placeholder.resize(count, T::zero());
-    (placeholder.as_mut_slice(), 1)
+    placeholder.as_mut_slice()
 }
 
 /// Runs `f(c, states[c], a_c, b_c)` for every chunk c, where a_c and b_c are the c-th pieces

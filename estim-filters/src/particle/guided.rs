@@ -215,12 +215,12 @@ where
         let (ancestors, log_weights) = (&work.ancestors, &cloud.log_weights);
         work.log_eta.resize(count, T::zero());
         let mut placeholder = Vec::new();
-        let (out, width) = columns(work.next.as_mut_slice(), &mut placeholder, nn, count);
+        let out = columns(work.next.as_mut_slice(), &mut placeholder, nn, count);
         for_chunks(
             parallel(count),
             &mut work.chunks,
             out,
-            width * CHUNK,
+            n.value().max(1) * CHUNK,
             &mut work.log_eta,
             CHUNK,
             |c, w, out, eta| {
@@ -230,7 +230,9 @@ where
                     let z = OVector::<T, M>::from_column_slice_generic(m, U1, zs);
                     let mut kernel: Option<GaussianKernel<T, N>> = None;
                     let stage = Stage::Prediction;
-                    for (k, (column, eta)) in out.chunks_exact_mut(width).zip(eta).enumerate() {
+                    for (k, (column, eta)) in
+                        out.chunks_exact_mut(n.value().max(1)).zip(eta).enumerate()
+                    {
                         let j = c * CHUNK + k;
                         let a = ancestors[j];
                         s.x.copy_from_slice(&particles[a * nn..(a + 1) * nn]);

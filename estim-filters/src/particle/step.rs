@@ -125,12 +125,12 @@ where
         let ancestors = &self.ancestors;
         let particles = particles.as_slice();
         let mut placeholder = Vec::new();
-        let (out, width) = columns(self.next.as_mut_slice(), &mut placeholder, n.value(), count);
+        let out = columns(self.next.as_mut_slice(), &mut placeholder, n.value(), count);
         for_chunks1(
             parallel(count),
             &mut self.chunks,
             out,
-            width * CHUNK,
+            n.value().max(1) * CHUNK,
             |c, w, out| {
                 let range = range(c, count);
                 let ancestors = &ancestors[range.clone()];
