@@ -107,7 +107,7 @@ impl EstimateStats {
             self.error_covariance.shape() == (n, n) && self.mean_covariance.shape() == (n, n),
             "covariance_ratio: covariances of another size than the {n} components of the mean error"
         );
-        DVector::from_fn(self.state_dim(), |i, _| {
+        DVector::from_fn(n, |i, _| {
             self.error_covariance[(i, i)] / self.mean_covariance[(i, i)]
         })
     }
