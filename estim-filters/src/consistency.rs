@@ -170,17 +170,17 @@ pub(crate) mod dist {
 
     /// 2 (1 − F_t(|t|)).
     pub(crate) fn t_p_value(t: f64, dof: usize) -> Result<f64> {
+        let d = student(dof)?;
+        // Before either route: statrs' incomplete beta panics on NaN.
+        if t.is_nan() {
+            return Ok(0.0);
+        }
         let tail = if dof >= T_TAIL_EXPANSION {
             t_tail_expansion(t.abs(), dof)
         } else {
-            student(dof)?.sf(t.abs())
+            d.sf(t.abs())
         };
-        // NaN (an undefined statistic) counts as the most extreme.
-        Ok(if t.is_nan() {
-            0.0
-        } else {
-            (2.0 * tail).min(1.0)
-        })
+        Ok((2.0 * tail).min(1.0))
     }
 }
 
