@@ -744,6 +744,19 @@ mod tests {
         assert!(cholesky_quadratic_form(&mut bad, &mut [1.0, 0.0], 2).is_none());
     }
 
+    /// An undefined t statistic (NaN) has p-value 0 on both routes, without reaching statrs
+    /// (whose incomplete beta panics on NaN), and dof = 0 is refused on both.
+    #[test]
+    fn t_p_value_of_nan_and_of_no_degrees_of_freedom() {
+        for dof in [10, dist::T_TAIL_EXPANSION] {
+            assert_eq!(dist::t_p_value(f64::NAN, dof).unwrap(), 0.0);
+            let p = dist::t_p_value(0.0, dof).unwrap();
+            assert!((p - 1.0).abs() < 1e-12, "{p}");
+        }
+        assert!(dist::t_p_value(f64::NAN, 0).is_err());
+        assert!(dist::t_p_value(1.0, 0).is_err());
+    }
+
     /// Where Student's t switches from statrs to its expansions, the two agree (quantiles
     /// to 10⁻¹¹ at p ≥ 0.975, tails to 10⁻⁹ relative for |t| ≤ 4, statrs' own drift), so no
     /// band or p-value jumps at the switch.
