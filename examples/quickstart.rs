@@ -70,11 +70,10 @@ impl MeasurementModel<f64, U4, U2> for Radar {
             self.sigma_bearing.powi(2),
         ))
     }
-    fn residual(&self, a: &Vector2<f64>, b: &Vector2<f64>) -> Vector2<f64> {
+    fn residual_into(&self, a: &Vector2<f64>, b: &Vector2<f64>, out: &mut Vector2<f64>) {
         // The bearing (component 1) is an angle: wrap its difference into (−π, π].
-        let mut r = a - b;
-        estim::core::wrap_components(&mut r, &[1]);
-        r
+        *out = a - b;
+        estim::core::wrap_components(out, &[1]);
     }
 }
 impl MeasurementJacobian<f64, U4, U2> for Radar {

@@ -76,12 +76,6 @@ where
         crate::in_place::process_noise_into(&self.0, x, &none(), dt, out);
     }
 
-    fn residual_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
-        if let Some(m) = self.0.in_place() {
-            m.residual_into(a, b, out);
-        }
-    }
-
     fn jacobian_into(&self, x: &OVector<T, N>, _: &(), dt: T, out: &mut OMatrix<T, N, N>) {
         if let Some(m) = self.0.in_place() {
             m.jacobian_into(x, &none(), dt, out);
@@ -211,8 +205,8 @@ where
         self.model.measurement_noise(x)
     }
 
-    fn residual(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
-        self.model.residual(a, b)
+    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        self.model.residual_into(a, b, out);
     }
 
     #[cfg_attr(not(debug_assertions), inline(always))]
@@ -233,10 +227,6 @@ where
 
     fn noise_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, M, M>) {
         crate::in_place::measurement_noise_into(&self.model, x, out);
-    }
-
-    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
-        crate::in_place::residual_into(&self.model, a, b, out);
     }
 
     fn jacobian_into(&self, x: &OVector<T, N>, u: &(), dt: T, out: &mut OMatrix<T, M, N>) {

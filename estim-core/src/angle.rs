@@ -1,7 +1,7 @@
 //! Angles: wrapping into one period, for headings, bearings and attitude residuals.
 //!
 //! An angle measurement or an angle state lives on a circle, so the difference of two angles
-//! is only defined modulo 2π. A model with angle components wraps them in its `residual`
+//! is only defined modulo 2π. A model with angle components wraps them in its `residual_into`
 //! (the ⊖ of the filter's innovation ν = z ⊖ ẑ) with [`wrap_components`], and a simulator
 //! wraps a drawn angle with [`wrap_angle`].
 
@@ -50,7 +50,7 @@ pub fn wrap_angle<T: Real>(a: T) -> T {
 /// For a measurement z = (range, bearing) the model's residual is z_a ⊖ z_b = (r_a − r_b,
 /// wrap(β_a − β_b)): compute the plain difference, then wrap the angle components. An index at
 /// or past the end of `v` names no component and is skipped (a residual cannot fail, so this
-/// does not panic); test a model's `residual` to catch a wrong index.
+/// does not panic); test a model's `residual_into` to catch a wrong index.
 ///
 /// ```
 /// use core::f64::consts::PI;

@@ -150,10 +150,10 @@ where
     /// R(x), written plainly.
     fn measurement_noise(&self, x: &OVector<T, N>) -> OMatrix<T, M, M>;
 
-    /// The residual a ⊖ b (defaults to a − b; override for wrapping components), as in
-    /// [`MeasurementModel::residual`].
-    fn residual(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
-        a - b
+    /// The residual a ⊖ b into `out` (defaults to a − b; override for wrapping components),
+    /// as in [`MeasurementModel::residual_into`].
+    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        crate::manifold::subtract_into(a, b, out);
     }
 }
 
@@ -448,8 +448,8 @@ where
     }
 
     #[cfg_attr(not(debug_assertions), inline(always))]
-    fn residual(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
-        self.model.residual(a, b)
+    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        self.model.residual_into(a, b, out);
     }
 }
 

@@ -5,11 +5,9 @@
 //! instead, with an error at construction rather than at some later step:
 //! [`LinearProcess::try_new`] and [`LinearMeasurement::try_new`] verify that Q (resp. R) is
 //! finite, symmetric (within √ε of its largest entry) and positive **semi**-definite, by one
-//! factorisation, and return the model wrapped in [`Checked`], which implements every model
-//! trait of the inner model and gives read-only access to it (`Deref`, no `DerefMut`): a
-//! checked model cannot be mutated into an unchecked one; to change it, take it apart with
-//! [`Checked::into_inner`] and check again. The public-field structs keep working as before
-//! (checked per step only).
+//! factorisation, and return the model. Its fields stay public: a model changed after it was
+//! built is checked per step like any other (those checks run for every model anyway, so no
+//! step relies on the construction check).
 //!
 //! **Why semi-definite.** The factorisation is [`psd_factor`] (a Cholesky
 //! factorisation that accepts zero pivots within 16 n ε max Qᵢᵢ, with diagonal pivoting as a
@@ -23,7 +21,7 @@
 //!
 //! | noise | at construction | at every step |
 //! |---|---|---|
-//! | [`Checked`] linear models | shape, NaN/∞, asymmetry, any negative eigenvalue (one factorisation) | the checks below, which cannot fail |
+//! | linear models built by `try_new` | shape, NaN/∞, asymmetry, any negative eigenvalue (one factorisation) | the checks below, which cannot fail for an unchanged model |
 //! | any model (Q(x, u, Δt), R(x) evaluated per step) | — | shape; NaN/∞ ([`NonFinite`](crate::Error::NonFinite)); (Q + Qᵀ)/2 not semi-definite by [`psd_factor`]'s rule (a pivot below −τ = −16 n ε max Qᵢᵢ, or a zero-variance direction whose covariances exceed √(τ max Qᵢᵢ) + τ: [`ensure_semidefinite_noise`](crate::checks::ensure_semidefinite_noise)), a positive diagonal notwithstanding ([`NotPositiveSemiDefinite`](crate::Error::NotPositiveSemiDefinite) naming the noise); for R, also S = cov(ẑ) + R not positive definite ([`NotPositiveDefinite`](crate::Error::NotPositiveDefinite), from the Cholesky factorisation the update does anyway) |
 //!
 //! **Policy for state-dependent noise**: an indefinite Q(x) or R(x) is an error of the step
@@ -36,7 +34,7 @@
 //! a constant Q, checked or not, is tested once; Lu's Monte Carlo, a rank-one Q every step,
 //! went from 1.4× to 1.04× its time without the test, BENCHMARKS.md). R is tested at every
 //! update (its size varies with the sensor). Not refused per step: an asymmetric Q or R, of which
-//! the filters use the symmetric part (Q + Qᵀ)/2 (the checked models refuse it when built).
+//! the filters use the symmetric part (Q + Qᵀ)/2 (`try_new` refuses it).
 //! The square-root filters factorise Q and R every step anyway ([`psd_factor`]) and refuse an
 //! indefinite one there.
 //!
@@ -48,7 +46,7 @@
 //! let f = Matrix2::new(1.0, 0.1, 0.0, 1.0);
 //! let q = Matrix2::new(1e-3, 0.0, 0.0, 0.0);
 //! let process = LinearProcess::try_new(f, Matrix2x1::zeros(), q)?;
-//! assert_eq!(process.noise, q); // read access through Deref
+//! assert_eq!(process.noise, q);
 //! // Indefinite with a positive diagonal: refused when built, not at some later step.
 //! let r = Matrix2::new(1.0, 2.0, 2.0, 1.0);
 //! assert_eq!(
@@ -60,32 +58,14 @@
 //! );
 //! # Ok::<(), Error>(())
 //! ```
-//!
-//! A checked model cannot be changed in place:
-//!
-//! ```compile_fail
-//! use estim_core::nalgebra::{Matrix2, Matrix2x1};
-//! use estim_core::LinearProcess;
-//! let mut process =
-//!     LinearProcess::try_new(Matrix2::identity(), Matrix2x1::zeros(), Matrix2::identity())
-//!         .unwrap();
-//! process.noise = Matrix2::new(1.0, 2.0, 2.0, 1.0); // error: no DerefMut
-//! ```
 
-use core::ops::Deref;
-
-use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
+use nalgebra::{DefaultAllocator, Dim, OMatrix};
 
 use crate::alloc::Alloc;
 use crate::checks::{ensure_finite, ensure_shape, ensure_symmetric};
 use crate::error::{Error, Quantity, Result, Stage};
-use crate::in_place::InPlace;
 use crate::linalg::psd_factor;
 use crate::linear::{LinearMeasurement, LinearProcess};
-use crate::model::{
-    LinearMeasurementModel, LinearProcessModel, MeasurementHessian, MeasurementJacobian,
-    MeasurementModel, ProcessHessian, ProcessJacobian, ProcessModel,
-};
 use crate::scalar::Real;
 
 /// `Ok(())` if the noise covariance `noise` (Q or R, named by `quantity`) is square, finite,
@@ -114,33 +94,6 @@ where
         .map_err(|_| Error::NotPositiveSemiDefinite { stage, quantity })
 }
 
-/// A model whose matrices were checked when it was built ([`LinearProcess::try_new`],
-/// [`LinearMeasurement::try_new`]; see the [module docs](self)). Implements every model trait
-/// of the inner model by delegation, bit for bit, and dereferences to it for reading; it cannot
-/// be mutated.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Checked<M>(M);
-
-impl<M> Checked<M> {
-    /// The inner model, by reference (as `Deref` gives).
-    pub fn get(&self) -> &M {
-        &self.0
-    }
-
-    /// The inner model, to change (and check again).
-    pub fn into_inner(self) -> M {
-        self.0
-    }
-}
-
-impl<M> Deref for Checked<M> {
-    type Target = M;
-
-    fn deref(&self) -> &M {
-        &self.0
-    }
-}
-
 impl<T: Real, N: Dim, U: Dim> LinearProcess<T, N, U>
 where
     DefaultAllocator: Alloc<N, U>,
@@ -163,7 +116,7 @@ where
         transition: OMatrix<T, N, N>,
         input: OMatrix<T, N, U>,
         noise: OMatrix<T, N, N>,
-    ) -> Result<Checked<Self>> {
+    ) -> Result<Self> {
         let stage = Stage::Construction;
         let n = transition.nrows();
         ensure_shape(&transition, n, n, stage, Quantity::Jacobian)?;
@@ -172,11 +125,11 @@ where
         ensure_finite(&transition, stage, Quantity::Jacobian)?;
         ensure_finite(&input, stage, Quantity::Jacobian)?;
         check_noise(&noise, Quantity::ProcessNoise)?;
-        Ok(Checked(Self {
+        Ok(Self {
             transition,
             input,
             noise,
-        }))
+        })
     }
 }
 
@@ -198,113 +151,12 @@ where
     ///     Err(Error::NotSymmetric { quantity: Quantity::MeasurementNoise, .. })
     /// ));
     /// ```
-    pub fn try_new(
-        observation: OMatrix<T, M, N>,
-        noise: OMatrix<T, M, M>,
-    ) -> Result<Checked<Self>> {
+    pub fn try_new(observation: OMatrix<T, M, N>, noise: OMatrix<T, M, M>) -> Result<Self> {
         let stage = Stage::Construction;
         let m = observation.nrows();
         ensure_shape(&noise, m, m, stage, Quantity::MeasurementNoise)?;
         ensure_finite(&observation, stage, Quantity::Jacobian)?;
         check_noise(&noise, Quantity::MeasurementNoise)?;
-        Ok(Checked(Self { observation, noise }))
+        Ok(Self { observation, noise })
     }
-}
-
-impl<T: Real, N: Dim, P: ProcessModel<T, N>> ProcessModel<T, N> for Checked<P>
-where
-    DefaultAllocator: Alloc<N>,
-{
-    type Input = P::Input;
-
-    fn transition(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OVector<T, N> {
-        self.0.transition(x, u, dt)
-    }
-
-    fn process_noise(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OMatrix<T, N, N> {
-        self.0.process_noise(x, u, dt)
-    }
-
-    #[cfg_attr(not(debug_assertions), inline(always))]
-    fn in_place(&self) -> Option<&dyn InPlace<T, N, N, P::Input>> {
-        self.0.in_place()
-    }
-}
-
-impl<T: Real, N: Dim, P: ProcessJacobian<T, N>> ProcessJacobian<T, N> for Checked<P>
-where
-    DefaultAllocator: Alloc<N>,
-{
-    fn transition_jacobian(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OMatrix<T, N, N> {
-        self.0.transition_jacobian(x, u, dt)
-    }
-}
-
-impl<T: Real, N: Dim, P: ProcessHessian<T, N>> ProcessHessian<T, N> for Checked<P>
-where
-    DefaultAllocator: Alloc<N>,
-{
-    fn transition_hessian(
-        &self,
-        x: &OVector<T, N>,
-        u: &P::Input,
-        dt: T,
-        k: usize,
-    ) -> Option<OMatrix<T, N, N>> {
-        self.0.transition_hessian(x, u, dt, k)
-    }
-}
-
-impl<T: Real, N: Dim, P: LinearProcessModel<T, N>> LinearProcessModel<T, N> for Checked<P> where
-    DefaultAllocator: Alloc<N>
-{
-}
-
-impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>> MeasurementModel<T, N, M> for Checked<H>
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    fn measure(&self, x: &OVector<T, N>) -> OVector<T, M> {
-        self.0.measure(x)
-    }
-
-    fn measurement_noise(&self, x: &OVector<T, N>) -> OMatrix<T, M, M> {
-        self.0.measurement_noise(x)
-    }
-
-    fn residual(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
-        self.0.residual(a, b)
-    }
-
-    #[cfg_attr(not(debug_assertions), inline(always))]
-    fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
-        self.0.in_place()
-    }
-}
-
-impl<T: Real, N: Dim, M: Dim, H: MeasurementJacobian<T, N, M>> MeasurementJacobian<T, N, M>
-    for Checked<H>
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    fn measurement_jacobian(&self, x: &OVector<T, N>) -> OMatrix<T, M, N> {
-        self.0.measurement_jacobian(x)
-    }
-}
-
-impl<T: Real, N: Dim, M: Dim, H: MeasurementHessian<T, N, M>> MeasurementHessian<T, N, M>
-    for Checked<H>
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    fn measurement_hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
-        self.0.measurement_hessian(x, k)
-    }
-}
-
-impl<T: Real, N: Dim, M: Dim, H: LinearMeasurementModel<T, N, M>> LinearMeasurementModel<T, N, M>
-    for Checked<H>
-where
-    DefaultAllocator: Alloc<N, M>,
-{
 }

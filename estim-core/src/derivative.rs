@@ -296,7 +296,7 @@ impl<T: Real> DerivativeCheck<T> {
     /// [`AttitudeError`](crate::manifold::AttitudeError)), the differences are taken on the
     /// manifold, as the filters use the Jacobian: column j against
     /// ((g(x ⊞ hⱼeⱼ) ⊟ g(x)) − (g(x ⊞ (−hⱼeⱼ)) ⊟ g(x))) / (2hⱼ), ⊟ the function's
-    /// [`difference`](crate::VectorFunction::difference). A Jacobian that is correct on the manifold
+    /// [`difference_into`](crate::VectorFunction::difference_into). A Jacobian that is correct on the manifold
     /// is then not flagged for differing from the derivative of the coordinates.
     ///
     /// Errors: non-finite values or a runtime shape mismatch.
@@ -330,8 +330,9 @@ impl<T: Real> DerivativeCheck<T> {
             xp[j] = x[j];
             ensure_shape(&yp, m, 1, stage, Quantity::FunctionValue)?;
             ensure_shape(&ym, m, 1, stage, Quantity::FunctionValue)?;
-            // Through difference() so wrapped outputs (angles) difference correctly.
-            let dy = g.difference(&yp, &ym);
+            // Through the function's ⊖ so wrapped outputs (angles) difference correctly.
+            let mut dy = yp.clone();
+            g.difference_into(&yp, &ym, &mut dy);
             ensure_shape(&dy, m, 1, stage, Quantity::FunctionValue)?;
             ensure_finite(&dy, stage, Quantity::FunctionValue)?;
             for i in 0..m {
@@ -370,7 +371,8 @@ impl<T: Real> DerivativeCheck<T> {
             g.input_plus_into(x, &delta, &mut xp);
             let value = g.eval(&xp);
             ensure_shape(&value, m, 1, stage, Quantity::FunctionValue)?;
-            let d = g.difference(&value, y);
+            let mut d = value.clone();
+            g.difference_into(&value, y, &mut d);
             ensure_shape(&d, m, 1, stage, Quantity::FunctionValue)?;
             ensure_finite(&d, stage, Quantity::FunctionValue)?;
             Ok(d)

@@ -13,14 +13,15 @@
 //! **Allocation-free runtime sizes.** The methods return owned values, which for `Dyn` sizes
 //! allocate. A function that should not allocate implements the one opt-in trait
 //! [`InPlace`] and returns `Some(self)` from [`VectorFunction::in_place`]; the propagators
-//! then write its values, differences and derivatives into their own buffers. Whatever is
+//! then write its values and derivatives into their own buffers (differences are written in
+//! place by every function: [`VectorFunction::difference_into`]). Whatever is
 //! written is shape-checked by the caller, so a wrong size is a typed error, not a wrong answer.
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
 pub use crate::in_place::InPlace;
-use crate::manifold::add_into;
+use crate::manifold::{add_into, subtract_into};
 use crate::scalar::Real;
 
 /// y = g(x) from an `N`-dimensional to an `M`-dimensional space.
@@ -48,11 +49,13 @@ where
     /// g(x).
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, M>;
 
-    /// The difference a ⊖ b of two outputs, used wherever outputs are subtracted (deviations
-    /// from a mean, innovations). Defaults to a − b; override it for outputs that wrap, such
-    /// as angles (see [`wrap_angle`](crate::wrap_angle)).
-    fn difference(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
-        a - b
+    /// The difference a ⊖ b of two outputs into `out`, used wherever outputs are subtracted
+    /// (deviations from a mean, innovations). Defaults to a − b; override it for outputs that
+    /// wrap, such as angles (see [`wrap_angle`](crate::wrap_angle)). Like ⊞, in place for
+    /// every function: `out` arrives with the outputs' shape.
+    #[cfg_attr(not(debug_assertions), inline(always))]
+    fn difference_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        subtract_into(a, b, out);
     }
 
     /// Whether both ⊞ are plain vector addition: lets the unscented propagator form μ ± Lⱼ and
@@ -75,7 +78,7 @@ where
 
     /// y ⊞ δ in the output space, into `out`: how a mean correction δ (the unscented mean of
     /// the deviations, a second-order bias) is applied to g(μ). Defaults to y + δ;
-    /// [`difference`](Self::difference) is the matching ⊟.
+    /// [`difference_into`](Self::difference_into) is the matching ⊟.
     #[cfg_attr(not(debug_assertions), inline(always))]
     fn output_plus_into(&self, y: &OVector<T, M>, delta: &OVector<T, M>, out: &mut OVector<T, M>) {
         add_into(y, delta, out);

@@ -9,12 +9,17 @@
 //! [`MeasurementModel::in_place`]; after the filter's workspace is sized (its
 //! `prepare_predict` / `prepare_update`, or the first step) a step then allocates nothing.
 //! [`LinearProcess`](crate::LinearProcess) and [`LinearMeasurement`](crate::LinearMeasurement)
-//! do this already, and so do the wrappers of the library ([`Checked`](crate::Checked),
-//! [`NoInput`](crate::NoInput), [`Offset`](crate::Offset)) when the model they wrap does.
+//! do this already, and so do the adapters of the library ([`NoInput`](crate::NoInput),
+//! [`Offset`](crate::Offset)) when the model they wrap does.
 //!
 //! What a model writes is shape-checked by the caller: a wrong size is a
 //! [`DimensionMismatch`](crate::Error::DimensionMismatch), never a wrong answer. A model that
 //! does not opt in runs exactly as before, through its owned methods.
+//!
+//! Differences of outputs are not part of it: like ⊞, the residual
+//! ([`MeasurementModel::residual_into`]) and a function's ⊖
+//! ([`VectorFunction::difference_into`]) are written in place by every model, through the one
+//! method.
 //!
 //! ```
 //! use estim_core::in_place::{InPlace, transition_into};
@@ -44,10 +49,6 @@
 //!     fn noise_into(&self, _: &DVector<f64>, _: &(), dt: f64, out: &mut DMatrix<f64>) {
 //!         out.fill_with_identity();
 //!         *out *= 0.01 * dt;
-//!     }
-//!     fn residual_into(&self, a: &DVector<f64>, b: &DVector<f64>, out: &mut DVector<f64>) {
-//!         out.copy_from(a);
-//!         *out -= b;
 //!     }
 //!     // No Jacobian or Hessian traits: never asked for these.
 //!     fn jacobian_into(&self, _: &DVector<f64>, _: &(), _: f64, _: &mut DMatrix<f64>) {}
@@ -90,10 +91,6 @@ where
     /// The additive noise covariance Q(x, u, Δt) or R(x) into `out`.
     fn noise_into(&self, x: &OVector<T, N>, u: &U, dt: T, out: &mut OMatrix<T, M, M>);
 
-    /// The residual a ⊖ b of two outputs into `out` (a − b unless the model's residual
-    /// wraps).
-    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>);
-
     /// The Jacobian ∂/∂x (m × n) into `out`.
     fn jacobian_into(&self, x: &OVector<T, N>, u: &U, dt: T, out: &mut OMatrix<T, M, N>);
 
@@ -122,26 +119,6 @@ where
     match g.in_place() {
         Some(g) => g.value_into(x, &(), T::zero(), out),
         None => *out = g.eval(x),
-    }
-}
-
-/// a ⊖ b of two outputs of g into `out`.
-#[cfg_attr(not(debug_assertions), inline(always))]
-pub fn difference_into<T, N, M, G>(
-    g: &G,
-    a: &OVector<T, M>,
-    b: &OVector<T, M>,
-    out: &mut OVector<T, M>,
-) where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    G: VectorFunction<T, N, M> + ?Sized,
-    DefaultAllocator: Alloc<N, M>,
-{
-    match g.in_place() {
-        Some(g) => g.residual_into(a, b, out),
-        None => *out = g.difference(a, b),
     }
 }
 
@@ -252,22 +229,4 @@ where
         Some(m) => m.noise_into(x, &(), T::zero(), out),
         None => *out = model.measurement_noise(x),
     }
-}
-
-/// The residual a ⊖ b of two measurements into `out`: [`difference_into`] of the model's
-/// [`Observation`].
-#[cfg_attr(not(debug_assertions), inline(always))]
-pub fn residual_into<T, N, M, H>(
-    model: &H,
-    a: &OVector<T, M>,
-    b: &OVector<T, M>,
-    out: &mut OVector<T, M>,
-) where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    H: MeasurementModel<T, N, M> + ?Sized,
-    DefaultAllocator: Alloc<N, M>,
-{
-    difference_into(&Observation::new(model), a, b, out);
 }

@@ -12,8 +12,8 @@
 //! - [`propagate`]: the moment propagators — given x ~ N(μ, C) and y = g(x), the mean and
 //!   covariance of y and the cross-covariance of x and y — linearised, second order (Papoulis),
 //!   Gaussian second order, unscented and sampled.
-//! - [`linear`]: linear-Gaussian models with constant matrices; [`checked`]: the same with
-//!   their noise checked once, when built.
+//! - [`linear`]: linear-Gaussian models with constant matrices; [`checked`]: their
+//!   constructors that check the noise once, when the model is built.
 //! - [`derivative`]: checks analytic Jacobians and Hessians against finite differences, or
 //!   against a reference model (such as its automatic derivatives).
 //! - `autodiff` (feature `autodiff`): models written once over a dual-number scalar, with
@@ -121,7 +121,6 @@ pub mod serialize;
 pub use adapter::{NoInput, Offset};
 pub use alloc::Alloc;
 pub use angle::{wrap_angle, wrap_components};
-pub use checked::Checked;
 pub use error::{Error, Parameter, Quantity, Stage};
 pub use function::{AffineFunction, Differentiable, TwiceDifferentiable, VectorFunction};
 pub use gaussian::Gaussian;

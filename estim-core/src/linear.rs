@@ -89,11 +89,6 @@ where
     }
 
     #[cfg_attr(not(debug_assertions), inline(always))]
-    fn residual_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
-        crate::manifold::subtract_into(a, b, out);
-    }
-
-    #[cfg_attr(not(debug_assertions), inline(always))]
     fn jacobian_into(
         &self,
         _: &OVector<T, N>,
@@ -213,11 +208,6 @@ where
     #[cfg_attr(not(debug_assertions), inline(always))]
     fn noise_into(&self, _: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, M, M>) {
         assign(out, &self.noise);
-    }
-
-    #[cfg_attr(not(debug_assertions), inline(always))]
-    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
-        crate::manifold::subtract_into(a, b, out);
     }
 
     #[cfg_attr(not(debug_assertions), inline(always))]

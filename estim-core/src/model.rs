@@ -32,7 +32,7 @@ use crate::function::{
     AffineFunction, Differentiable, TwiceDifferentiable, VectorFunction, VectorSpaces,
 };
 use crate::in_place::InPlace;
-use crate::manifold::{Euclidean, StateSpace};
+use crate::manifold::{Euclidean, StateSpace, subtract_into};
 use crate::scalar::Real;
 
 /// A discrete-time process model x⁺ = f(x, u, Δt) + w, w ~ N(0, Q(x, u, Δt)).
@@ -131,10 +131,12 @@ where
     /// update, at the predicted state x̂⁻ (the mean before the update), for every propagator.
     fn measurement_noise(&self, x: &OVector<T, N>) -> OMatrix<T, M, M>;
 
-    /// The residual a ⊖ b between two measurements (innovations, deviations). Defaults to
-    /// a − b; override for components that wrap, such as headings.
-    fn residual(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
-        a - b
+    /// The residual a ⊖ b between two measurements (innovations, deviations) into `out`.
+    /// Defaults to a − b; override for components that wrap, such as headings. Like ⊞, in
+    /// place for every model: `out` arrives with the measurements' shape.
+    #[cfg_attr(not(debug_assertions), inline(always))]
+    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        subtract_into(a, b, out);
     }
 
     /// Opt-in for allocation-free runtime sizes: `Some(self)` from a model that implements
@@ -246,10 +248,8 @@ where
     }
 
     #[cfg_attr(not(debug_assertions), inline(always))]
-    fn difference(&self, a: &OVector<T, N>, b: &OVector<T, N>) -> OVector<T, N> {
-        let mut out = a.clone();
-        self.space.minus_into(a, b, &mut out);
-        out
+    fn difference_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
+        self.space.minus_into(a, b, out);
     }
 
     #[cfg_attr(not(debug_assertions), inline(always))]
@@ -268,8 +268,7 @@ where
     }
 }
 
-/// The model's [`InPlace`] at this step's input and Δt (reached only when the model has one),
-/// with the state space's ⊟ as the residual.
+/// The model's [`InPlace`] at this step's input and Δt (reached only when the model has one).
 impl<T: Real, N: Dim, P: ProcessModel<T, N, Input = U>, U, S: StateSpace<T, N>> InPlace<T, N, N>
     for Transition<'_, P, U, T, S>
 where
@@ -283,11 +282,6 @@ where
     #[cfg_attr(not(debug_assertions), inline(always))]
     fn noise_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, N, N>) {
         crate::in_place::process_noise_into(self.model, x, self.input, self.dt, out);
-    }
-
-    #[cfg_attr(not(debug_assertions), inline(always))]
-    fn residual_into(&self, a: &OVector<T, N>, b: &OVector<T, N>, out: &mut OVector<T, N>) {
-        self.space.minus_into(a, b, out);
     }
 
     #[cfg_attr(not(debug_assertions), inline(always))]
@@ -332,6 +326,13 @@ where
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.transition_hessian(x, self.input, self.dt, k)
     }
+}
+
+impl<T: Real, N: Dim, P: LinearProcessModel<T, N, Input = U>, U, S: StateSpace<T, N>>
+    AffineFunction<T, N, N> for Transition<'_, P, U, T, S>
+where
+    DefaultAllocator: Alloc<N>,
+{
 }
 
 /// The map x ↦ h(x) of a measurement model on the state space `S` ([`Euclidean`] by
@@ -387,8 +388,8 @@ where
     }
 
     #[cfg_attr(not(debug_assertions), inline(always))]
-    fn difference(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
-        self.model.residual(a, b)
+    fn difference_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        self.model.residual_into(a, b, out);
     }
 
     #[cfg_attr(not(debug_assertions), inline(always))]
@@ -396,7 +397,7 @@ where
         self.space.plus_into(x, delta, out);
     }
 
-    /// The model's own: its value, residual and derivatives in place.
+    /// The model's own: its value, noise and derivatives in place.
     #[cfg_attr(not(debug_assertions), inline(always))]
     fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
         self.model.in_place()
@@ -423,13 +424,6 @@ where
     fn hessian(&self, x: &OVector<T, N>, k: usize) -> Option<OMatrix<T, N, N>> {
         self.model.measurement_hessian(x, k)
     }
-}
-
-impl<T: Real, N: Dim, P: LinearProcessModel<T, N, Input = U>, U, S: StateSpace<T, N>>
-    AffineFunction<T, N, N> for Transition<'_, P, U, T, S>
-where
-    DefaultAllocator: Alloc<N>,
-{
 }
 
 impl<T: Real, N: Dim, M: Dim, H: LinearMeasurementModel<T, N, M>, S: StateSpace<T, N>>

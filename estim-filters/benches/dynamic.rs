@@ -306,11 +306,6 @@ where
         assign(out, &self.q);
     }
 
-    fn residual_into(&self, a: &OVector<f64, N>, b: &OVector<f64, N>, out: &mut OVector<f64, N>) {
-        assign(out, a);
-        *out -= b;
-    }
-
     fn jacobian_into(&self, x: &OVector<f64, N>, _: &(), _: f64, out: &mut OMatrix<f64, N, N>) {
         assign(out, &self.f);
         for i in 0..x.nrows() {
@@ -419,11 +414,6 @@ where
 
     fn noise_into(&self, _: &OVector<f64, N>, _: &(), _: f64, out: &mut OMatrix<f64, M, M>) {
         assign(out, &self.r);
-    }
-
-    fn residual_into(&self, a: &OVector<f64, M>, b: &OVector<f64, M>, out: &mut OVector<f64, M>) {
-        assign(out, a);
-        *out -= b;
     }
 
     /// Row i of H scaled by 1 + ε cos((H x)ᵢ), with (H x)ᵢ as a row-times-vector dot product

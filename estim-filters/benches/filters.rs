@@ -567,8 +567,8 @@ impl MeasurementModel<f64, U6, U4> for Beacons {
         self.noise
     }
 
-    fn residual(&self, a: &Meas4, b: &Meas4) -> Meas4 {
-        self.residual_of(a, b)
+    fn residual_into(&self, a: &Meas4, b: &Meas4, out: &mut Meas4) {
+        *out = self.residual_of(a, b);
     }
 }
 

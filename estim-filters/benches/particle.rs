@@ -108,8 +108,8 @@ impl MeasurementModel<f64, U4, U2> for RangeBearing {
     fn measurement_noise(&self, _: &Vector4<f64>) -> Matrix2<f64> {
         Matrix2::new(R_DIAG[0], 0.0, 0.0, R_DIAG[1])
     }
-    fn residual(&self, a: &Vector2<f64>, b: &Vector2<f64>) -> Vector2<f64> {
-        Vector2::new(a[0] - b[0], wrap(a[1] - b[1]))
+    fn residual_into(&self, a: &Vector2<f64>, b: &Vector2<f64>, out: &mut Vector2<f64>) {
+        *out = Vector2::new(a[0] - b[0], wrap(a[1] - b[1]));
     }
 }
 

@@ -111,9 +111,9 @@ impl AutoDiffMeasurement<f64, U6, U4> for RangeBearing {
     fn measurement_noise(&self, _: &Vector6<f64>) -> Matrix4<f64> {
         Self::noise()
     }
-    fn residual(&self, a: &Vector4<f64>, b: &Vector4<f64>) -> Vector4<f64> {
+    fn residual_into(&self, a: &Vector4<f64>, b: &Vector4<f64>, out: &mut Vector4<f64>) {
         let d = a - b;
-        Vector4::new(d[0], wrap_angle(d[1]), d[2], wrap_angle(d[3]))
+        *out = Vector4::new(d[0], wrap_angle(d[1]), d[2], wrap_angle(d[3]));
     }
 }
 
@@ -124,8 +124,8 @@ impl MeasurementModel<f64, U6, U4> for RangeBearing {
     fn measurement_noise(&self, _: &Vector6<f64>) -> Matrix4<f64> {
         Self::noise()
     }
-    fn residual(&self, a: &Vector4<f64>, b: &Vector4<f64>) -> Vector4<f64> {
-        AutoDiffMeasurement::residual(self, a, b)
+    fn residual_into(&self, a: &Vector4<f64>, b: &Vector4<f64>, out: &mut Vector4<f64>) {
+        AutoDiffMeasurement::residual_into(self, a, b, out);
     }
 }
 

@@ -89,7 +89,8 @@ where
                     found_cols: 1,
                 });
             }
-            let residual = measurement.residual(z, &hx);
+            let mut residual = hx.clone();
+            measurement.residual_into(z, &hx, &mut residual);
             ensure_shape(&residual, m, 1, stage, Quantity::Innovation)?;
         }
         let chol = Cholesky::new(r).ok_or(Error::NotPositiveDefinite {
@@ -127,9 +128,9 @@ where
 {
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, N> {
         let mut fx = self.process.transition(x, self.input, self.dt);
-        let residual = self
-            .measurement
-            .residual(self.z, &self.measurement.measure(x));
+        let hx = self.measurement.measure(x);
+        let mut residual = hx.clone();
+        self.measurement.residual_into(self.z, &hx, &mut residual);
         fx.gemv(T::one(), &self.gain, &residual, T::one());
         fx
     }

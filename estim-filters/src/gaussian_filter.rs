@@ -714,7 +714,7 @@ where
         )
         .map_err(|e| measurement_length_error(e, m))?;
     report.fit(z.shape_generic().0);
-    estim_core::in_place::residual_into(model, z, &scratch.predicted.mean, &mut report.innovation);
+    model.residual_into(z, &scratch.predicted.mean, &mut report.innovation);
     estim_core::in_place::measurement_noise_into(model, state, &mut scratch.noise);
     update::apply(space, state, covariance, scratch, report, settings)
 }

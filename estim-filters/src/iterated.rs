@@ -511,7 +511,8 @@ where
             // NaN: the step is rejected.
             return T::zero() / T::zero();
         }
-        let mut r = model.residual(z, &predicted);
+        let mut r = predicted.clone();
+        model.residual_into(z, &predicted, &mut r);
         kernel::solve_lower_in_place(&self.noise_factor, &mut r);
         let mut d = x - prior;
         kernel::solve_lower_in_place(&self.prior_factor, &mut d);
@@ -587,8 +588,8 @@ where
         self.model.measurement_noise(x)
     }
 
-    fn residual(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
-        self.model.residual(a, b)
+    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        self.model.residual_into(a, b, out);
     }
 }
 

@@ -651,7 +651,7 @@ where
         });
     }
     finite(predicted, stage, Quantity::FunctionValue)?;
-    estim_core::in_place::residual_into(model, z, predicted, &mut report.innovation);
+    model.residual_into(z, predicted, &mut report.innovation);
     ensure_shape(
         &report.innovation,
         z.nrows(),

@@ -191,8 +191,8 @@ where
         self.model.measurement_noise(&split::<T, N, K, NK>(x).0)
     }
 
-    fn residual(&self, a: &SVector<T, M>, b: &SVector<T, M>) -> SVector<T, M> {
-        self.model.residual(a, b)
+    fn residual_into(&self, a: &SVector<T, M>, b: &SVector<T, M>, out: &mut SVector<T, M>) {
+        self.model.residual_into(a, b, out);
     }
 }
 

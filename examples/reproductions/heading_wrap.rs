@@ -113,12 +113,13 @@ impl MeasurementModel<f64, U3, estim::nalgebra::U1> for Compass {
     fn measurement_noise(&self, _: &Vector3<f64>) -> estim::nalgebra::Matrix1<f64> {
         estim::nalgebra::Matrix1::new(COMPASS_SIGMA * COMPASS_SIGMA)
     }
-    fn residual(
+    fn residual_into(
         &self,
         a: &estim::nalgebra::Vector1<f64>,
         b: &estim::nalgebra::Vector1<f64>,
-    ) -> estim::nalgebra::Vector1<f64> {
-        estim::nalgebra::Vector1::new(wrap_angle(a[0] - b[0]))
+        out: &mut estim::nalgebra::Vector1<f64>,
+    ) {
+        *out = estim::nalgebra::Vector1::new(wrap_angle(a[0] - b[0]));
     }
 }
 

@@ -9,7 +9,7 @@
 //! | `kf.update(z)`; `kf.y`, `kf.S`, `kf.log_likelihood` | `let r = filter.update(&sensor, &z)?;` `r.innovation`, `r.innovation_covariance`, `r.log_likelihood`, `r.nis` |
 //! | `ExtendedKalmanFilter`, `update(z, HJacobian, Hx)` | `Ekf::new(prior)`; your model implements `MeasurementJacobian` |
 //! | `UnscentedKalmanFilter(..., points=MerweScaledSigmaPoints(n, α, β, κ))` | `Ukf::with_propagator(prior, Unscented::new(α, β, κ)?)` |
-//! | `residual_z` | `MeasurementModel::residual` (angles: `wrap_angle`) |
+//! | `residual_z` | `MeasurementModel::residual_into` (angles: `wrap_angle`) |
 //! | `residual_x`, `x_mean_fn` | a [`StateSpace`](crate::core::StateSpace) (⊞/⊟) given to `with_state_space` |
 //! | Joseph form update (`update` default in FilterPy) | `CovarianceUpdate::Joseph` (the default) |
 //! | `batch_filter(zs)`, `rts_smoother(Xs, Ps)` | `filter_sequence`, `smooth_sequence` (missing `z` as `None`), `Rts` |

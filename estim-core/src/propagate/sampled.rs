@@ -18,7 +18,7 @@ use crate::scalar::{Real, real};
 /// cross-covariance.
 ///
 /// Deviations are accumulated relative to g(μ) through the function's
-/// [`difference`](VectorFunction::difference), which avoids cancellation and handles wrapped
+/// [`difference_into`](VectorFunction::difference_into), which avoids cancellation and handles wrapped
 /// outputs. The same seed gives the same result. The standard error of each mean component is
 /// √(cov(y)ₖₖ / N); use it to set test tolerances. Requirements on g: [`VectorFunction`].
 /// Vector states only: the draws are μ + L zᵢ, not μ ⊞ L zᵢ (the input's ⊞ is not used).
@@ -100,7 +100,8 @@ where
             x += &dx;
             let y = g.eval(&x);
             ensure_shape(&y, m, 1, Stage::Propagation, Quantity::FunctionValue)?;
-            let d = g.difference(&y, &y0);
+            let mut d = y.clone();
+            g.difference_into(&y, &y0, &mut d);
             ensure_shape(&d, m, 1, Stage::Propagation, Quantity::FunctionValue)?;
             sum_dx += &dx;
             sum_d += &d;

@@ -8,7 +8,7 @@ use crate::alloc::Alloc;
 use crate::checks::ensure_shape;
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
 use crate::function::VectorFunction;
-use crate::in_place::{difference_into, eval_into};
+use crate::in_place::eval_into;
 use crate::kernel::{self, Accum, CholeskyScratch, mul_tr, mul_tr_lower};
 use crate::linalg::psd_factor_into;
 use crate::scalar::{Real, real};
@@ -27,7 +27,7 @@ use crate::scalar::{Real, real};
 ///
 /// ⊞ in the input is the function's [`input_plus_into`](VectorFunction::input_plus_into), in
 /// the output its [`output_plus_into`](VectorFunction::output_plus_into), ⊖ its
-/// [`difference`](VectorFunction::difference) (Hertzberg et al. 2013); by default +, + and −,
+/// [`difference_into`](VectorFunction::difference_into) (Hertzberg et al. 2013); by default +, + and −,
 /// and then this is the plain transform to the bit.
 ///
 /// This is algebraically the textbook form with W₀ᵐ = 1 − n/c and W₀ᶜ = W₀ᵐ + 1 − α² + β, but it
@@ -37,7 +37,7 @@ use crate::scalar::{Real, real};
 /// ε‖y‖/α² (any formulation does). In `f64` with α = 10⁻³ that is ≈ 10⁻¹⁰ ‖y‖; in `f32` it is of
 /// the order of ‖y‖ itself, so with `f32` use α ≳ 0.3 (the `f32` [`Default`] takes 0.5) or
 /// [`Unscented::cubature`].
-/// Deviations go through the function's [`difference`](VectorFunction::difference), so
+/// Deviations go through the function's [`difference_into`](VectorFunction::difference_into), so
 /// wrapped outputs (angles) are handled. The factor L is a semi-definite square root
 /// ([`psd_factor`](crate::linalg::psd_factor); for runtime sizes a plain Cholesky factor first), so directions with zero variance
 /// are allowed. The deviations are collected as the columns of two m × n matrices and the sums
@@ -311,7 +311,7 @@ where
     /// g(μ) into `value`, D₊ = [g(μ ⊞ Lⱼ) ⊖ g(μ)]ⱼ into `plus` and D₋ = [g(μ ⊞ −Lⱼ) ⊖ g(μ)]ⱼ
     /// into `minus` (m × n each), L = `offsets`; ⊞ is g's
     /// [`input_plus_into`](VectorFunction::input_plus_into), ⊖ its
-    /// [`difference`](VectorFunction::difference). The 2n points go through g one at a time. A value or deviation of the wrong length is a
+    /// [`difference_into`](VectorFunction::difference_into). The 2n points go through g one at a time. A value or deviation of the wrong length is a
     /// dimension error (quantity `FunctionValue`, at `stage`).
     #[cfg_attr(not(debug_assertions), inline(always))]
     #[allow(clippy::too_many_arguments)]
@@ -358,7 +358,7 @@ where
                 }
                 eval_into(g, x, y);
                 ensure_shape(y, m, 1, stage, Quantity::FunctionValue)?;
-                difference_into(g, y, value, d);
+                g.difference_into(y, value, d);
                 ensure_shape(d, m, 1, stage, Quantity::FunctionValue)?;
                 deviations.as_mut_slice()[j * m..(j + 1) * m].copy_from_slice(d.as_slice());
             }

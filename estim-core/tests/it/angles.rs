@@ -1,8 +1,8 @@
-//! Angle outputs: a function whose `difference` wraps into (−π, π], with the mean of the
+//! Angle outputs: a function whose `difference_into` wraps into (−π, π], with the mean of the
 //! angle at or near ±π so that sigma points and samples fall on both sides of the cut. The
 //! unscented and sampled moments must be those of the unwrapped angle (modulo 2π for the
 //! mean): wrapping is invisible as long as every deviation is below π. Without the wrapping
-//! `difference`, the same function gives a variance of order π² (the control).
+//! `difference_into`, the same function gives a variance of order π² (the control).
 
 use crate::common;
 
@@ -29,12 +29,12 @@ impl VectorFunction<f64, U2, U2> for Heading {
         Vector2::new(wrap(x[0] + 0.5 * x[1] + self.k * x[1].sin()), x[1])
     }
 
-    fn difference(&self, a: &Vector2<f64>, b: &Vector2<f64>) -> Vector2<f64> {
-        if self.wrapped {
+    fn difference_into(&self, a: &Vector2<f64>, b: &Vector2<f64>, out: &mut Vector2<f64>) {
+        *out = if self.wrapped {
             Vector2::new(wrap(a[0] - b[0]), a[1] - b[1])
         } else {
             a - b
-        }
+        };
     }
 }
 

@@ -335,12 +335,12 @@ impl MeasurementModel<f64, U4, U2> for RangeBearing {
         Matrix2::identity()
     }
 
-    fn residual(&self, a: &Vector2<f64>, b: &Vector2<f64>) -> Vector2<f64> {
-        if self.plain_residual {
+    fn residual_into(&self, a: &Vector2<f64>, b: &Vector2<f64>, out: &mut Vector2<f64>) {
+        *out = if self.plain_residual {
             a - b
         } else {
             Vector2::new(a[0] - b[0], wrap(a[1] - b[1]))
-        }
+        };
     }
 }
 
@@ -514,7 +514,7 @@ struct Misshapen {
     hessian_dim: usize,
     /// Output length 3 instead of 2 when x₀ > this.
     grow_above: f64,
-    /// `difference` returns this many entries instead of the output length.
+    /// `difference_into` returns this many entries instead of the output length.
     difference_len: Option<usize>,
 }
 
@@ -524,11 +524,16 @@ impl VectorFunction<f64, Dyn, Dyn> for Misshapen {
         OVector::<f64, Dyn>::from_fn(m, |i, _| x[0] * (i + 1) as f64)
     }
 
-    fn difference(&self, a: &OVector<f64, Dyn>, b: &OVector<f64, Dyn>) -> OVector<f64, Dyn> {
-        match self.difference_len {
+    fn difference_into(
+        &self,
+        a: &OVector<f64, Dyn>,
+        b: &OVector<f64, Dyn>,
+        out: &mut OVector<f64, Dyn>,
+    ) {
+        *out = match self.difference_len {
             Some(len) => OVector::<f64, Dyn>::zeros(len),
             None => a - b,
-        }
+        };
     }
 }
 

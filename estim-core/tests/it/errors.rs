@@ -193,7 +193,7 @@ fn non_finite_results_are_errors() {
 }
 
 /// ℝⁿ → ℝ² (dynamic) with configurable mistakes: Jacobian rows/columns, Hessian size, an
-/// output that grows to length 3 when x₀ > `grow_above`, and a `difference` of wrong length.
+/// output that grows to length 3 when x₀ > `grow_above`, and a `difference_into` of wrong length.
 #[derive(Clone, Copy)]
 struct Misshapen {
     jacobian_shape: (usize, usize),
@@ -219,11 +219,11 @@ impl VectorFunction<f64, Dyn, Dyn> for Misshapen {
         DVector::from_fn(m, |i, _| x[0] * (i + 1) as f64 + x[0] * x[0])
     }
 
-    fn difference(&self, a: &DVector<f64>, b: &DVector<f64>) -> DVector<f64> {
-        match self.difference_len {
+    fn difference_into(&self, a: &DVector<f64>, b: &DVector<f64>, out: &mut DVector<f64>) {
+        *out = match self.difference_len {
             Some(len) => DVector::zeros(len),
             None => a - b,
-        }
+        };
     }
 }
 
@@ -341,7 +341,7 @@ fn dynamic_shape_mismatches_are_errors_not_panics() {
         Err(mismatch(Quantity::Jacobian, (3, 3), (2, 3)))
     );
 
-    // A `difference` that returns the wrong length.
+    // A `difference_into` that returns the wrong length.
     let g = Misshapen {
         difference_len: Some(1),
         ..good

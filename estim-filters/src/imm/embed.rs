@@ -362,8 +362,8 @@ where
         self.model.measurement_noise(&self.map.lift_mean(x))
     }
 
-    fn residual(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
-        self.model.residual(a, b)
+    fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        self.model.residual_into(a, b, out);
     }
 }
 

@@ -72,8 +72,8 @@ use estim_core::linalg::symmetric_map;
 use estim_core::nalgebra::{DMatrix, DefaultAllocator, Dim, OMatrix, OVector};
 use estim_core::scalar::real;
 use estim_core::{
-    Alloc, Error, InPlace, LinearMeasurementModel, MeasurementHessian, MeasurementJacobian,
-    MeasurementModel, Quantity, Real, Stage, in_place,
+    Alloc, Error, LinearMeasurementModel, MeasurementHessian, MeasurementJacobian,
+    MeasurementModel, Quantity, Real, Stage,
 };
 
 use super::{NoiseIdError, Setting};
@@ -327,7 +327,10 @@ where
 
 /// A measurement model with its noise replaced by a given matrix (the adaptive estimate):
 /// [`MeasurementNoiseMatching::model`]. Every other method forwards to the inner model, so
-/// it has every capability the inner model has.
+/// it has the inner model's values, derivatives and linearity. Not its allocation-free
+/// [`InPlace`](estim_core::InPlace) route: on runtime sizes an update with it allocates its
+/// value, noise and Jacobian, as [`MeasurementNoiseMatching::observe`] allocates at every
+/// update anyway (R̂'s eigendecomposition).
 #[derive(Clone, Copy, Debug)]
 pub struct WithNoise<'a, H, T: Real, M: Dim>
 where
@@ -350,52 +353,8 @@ where
         self.noise.clone()
     }
 
-    fn residual(&self, a: &OVector<T, M>, b: &OVector<T, M>) -> OVector<T, M> {
-        self.inner.residual(a, b)
-    }
-
-    fn in_place(&self) -> Option<&dyn InPlace<T, N, M>> {
-        self.inner.in_place().map(|_| self as &dyn InPlace<T, N, M>)
-    }
-}
-
-/// The inner model's [`InPlace`] with the given noise (reached only when it has one).
-impl<T: Real, N: Dim, M: Dim, H: MeasurementModel<T, N, M>> InPlace<T, N, M>
-    for WithNoise<'_, H, T, M>
-where
-    DefaultAllocator: Alloc<N, M>,
-{
-    fn value_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OVector<T, M>) {
-        in_place::measure_into(self.inner, x, out);
-    }
-
-    fn noise_into(&self, _: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, M, M>) {
-        if out.shape() == self.noise.shape() {
-            out.copy_from(self.noise);
-        } else {
-            *out = self.noise.clone();
-        }
-    }
-
     fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
-        in_place::residual_into(self.inner, a, b, out);
-    }
-
-    fn jacobian_into(&self, x: &OVector<T, N>, u: &(), dt: T, out: &mut OMatrix<T, M, N>) {
-        if let Some(m) = self.inner.in_place() {
-            m.jacobian_into(x, u, dt, out);
-        }
-    }
-
-    fn hessian_into<'o>(
-        &self,
-        x: &OVector<T, N>,
-        u: &(),
-        dt: T,
-        k: usize,
-        out: &'o mut OMatrix<T, N, N>,
-    ) -> Option<&'o mut OMatrix<T, N, N>> {
-        self.inner.in_place()?.hessian_into(x, u, dt, k, out)
+        self.inner.residual_into(a, b, out);
     }
 }
 

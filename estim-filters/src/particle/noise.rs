@@ -68,7 +68,7 @@ where
 
 /// Opt-in: a sensor whose noise is not Gaussian. Evaluates log p(z | x).
 ///
-/// [`measure`](MeasurementModel::measure), [`residual`](MeasurementModel::residual) and
+/// [`measure`](MeasurementModel::measure), [`residual_into`](MeasurementModel::residual_into) and
 /// [`measurement_noise`](MeasurementModel::measurement_noise) (the noise's covariance) still
 /// give the update report's innovation moments and the Kalman filters' approximation. Use it
 /// in a particle filter as [`NonGaussian(model)`](NonGaussian).

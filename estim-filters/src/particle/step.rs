@@ -642,7 +642,7 @@ where
         Stage::Update,
         Quantity::FunctionValue,
     )?;
-    estim_core::in_place::residual_into(model, z, &ms.x_h, &mut ms.r);
+    model.residual_into(z, &ms.x_h, &mut ms.r);
     estim_core::in_place::measurement_noise_into(model, x, &mut ms.noise);
     let log_g = match sensor.log_likelihood(z, x) {
         Some(log_g) => log_g,

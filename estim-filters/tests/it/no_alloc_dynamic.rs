@@ -59,10 +59,6 @@ impl InPlace<f64, Dyn, Dyn, ()> for Chain {
         out.fill_with_identity();
         *out *= 0.01 * dt;
     }
-    fn residual_into(&self, a: &DVector<f64>, b: &DVector<f64>, out: &mut DVector<f64>) {
-        out.copy_from(a);
-        *out -= b;
-    }
     fn jacobian_into(&self, x: &DVector<f64>, _: &(), dt: f64, out: &mut DMatrix<f64>) {
         let n = x.nrows();
         out.fill(0.0);
@@ -138,10 +134,6 @@ impl InPlace<f64, Dyn, Dyn> for EveryOther {
     fn noise_into(&self, _: &DVector<f64>, _: &(), _: f64, out: &mut DMatrix<f64>) {
         out.fill_with_identity();
         *out *= 0.05;
-    }
-    fn residual_into(&self, a: &DVector<f64>, b: &DVector<f64>, out: &mut DVector<f64>) {
-        out.copy_from(a);
-        *out -= b;
     }
     fn jacobian_into(&self, x: &DVector<f64>, _: &(), _: f64, out: &mut DMatrix<f64>) {
         out.fill(0.0);

@@ -193,7 +193,7 @@ fn semi_definite_and_asymmetric_noise_are_accepted() {
     assert!(LinearMeasurement::try_new(Matrix2::identity(), asym).is_err());
 }
 
-/// A checked model runs through a filter exactly as the unchecked one (bit for bit).
+/// A model built by `try_new` runs through a filter exactly as the struct literal (bit for bit).
 #[test]
 fn checked_models_filter_bit_for_bit() {
     let (f, b) = (Matrix2::new(1.0, 0.1, 0.0, 1.0), Matrix2x1::new(0.005, 0.1));

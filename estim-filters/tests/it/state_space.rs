@@ -351,8 +351,8 @@ impl MeasurementModel<f64, U1, U1> for Compass {
         Matrix1::new(self.r)
     }
 
-    fn residual(&self, a: &Vector1<f64>, b: &Vector1<f64>) -> Vector1<f64> {
-        Vector1::new(wrap_angle(a[0] - b[0]))
+    fn residual_into(&self, a: &Vector1<f64>, b: &Vector1<f64>, out: &mut Vector1<f64>) {
+        *out = Vector1::new(wrap_angle(a[0] - b[0]));
     }
 }
 

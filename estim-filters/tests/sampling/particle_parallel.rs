@@ -63,12 +63,12 @@ impl MeasurementModel<f64, U4, U2> for RangeBearing {
     fn measurement_noise(&self, _: &Vector4<f64>) -> Matrix2<f64> {
         Matrix2::new(0.25, 0.0, 0.0, 0.0025)
     }
-    fn residual(&self, a: &Vector2<f64>, b: &Vector2<f64>) -> Vector2<f64> {
+    fn residual_into(&self, a: &Vector2<f64>, b: &Vector2<f64>, out: &mut Vector2<f64>) {
         let d = a - b;
-        Vector2::new(
+        *out = Vector2::new(
             d[0],
             (d[1] + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI,
-        )
+        );
     }
 }
 

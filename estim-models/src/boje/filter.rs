@@ -399,10 +399,9 @@ impl MeasurementModel<f64, U6, U3> for PositionHeadingMeasurement {
         Matrix3::from_diagonal(&Vector3::new(a, a, b))
     }
 
-    fn residual(&self, a: &Vector3<f64>, b: &Vector3<f64>) -> Vector3<f64> {
-        let mut r = a - b;
-        wrap_components(&mut r, &[2]); // z = (x, y, θ): the heading
-        r
+    fn residual_into(&self, a: &Vector3<f64>, b: &Vector3<f64>, out: &mut Vector3<f64>) {
+        *out = a - b;
+        wrap_components(out, &[2]); // z = (x, y, θ): the heading
     }
 }
 

@@ -148,8 +148,8 @@ impl MeasurementModel<f64, N, Const<1>> for Heading {
         Matrix1::new(self.variance)
     }
     /// Wrapped to (−π, π].
-    fn residual(&self, a: &Vector1<f64>, b: &Vector1<f64>) -> Vector1<f64> {
-        Vector1::new(wrap_angle(a[0] - b[0]))
+    fn residual_into(&self, a: &Vector1<f64>, b: &Vector1<f64>, out: &mut Vector1<f64>) {
+        *out = Vector1::new(wrap_angle(a[0] - b[0]));
     }
 }
 

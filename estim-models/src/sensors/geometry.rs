@@ -205,7 +205,8 @@ impl<T: Real, const D: usize, const N: usize> MeasurementHessian<T, Const<N>, U1
 /// assert_eq!(sensor.measure(&Vector3::new(0.0, 2.0, 0.0)), Vector1::new(std::f64::consts::FRAC_PI_2));
 /// // 179° and −179° are 2° apart. (Called directly, the residual names the state size: the
 /// // sensor serves any.)
-/// let r = MeasurementModel::<f64, U3, U1>::residual(&sensor, &Vector1::new(179f64.to_radians()), &Vector1::new(-179f64.to_radians()));
+/// let mut r = Vector1::zeros();
+/// MeasurementModel::<f64, U3, U1>::residual_into(&sensor, &Vector1::new(179f64.to_radians()), &Vector1::new(-179f64.to_radians()), &mut r);
 /// assert!((r[0] + 2f64.to_radians()).abs() < 1e-12);
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -225,8 +226,8 @@ impl<T: Real, const N: usize> MeasurementModel<T, Const<N>, U1> for Bearing<T> {
         SMatrix::<T, 1, 1>::new(self.variance)
     }
 
-    fn residual(&self, a: &Vector1<T>, b: &Vector1<T>) -> Vector1<T> {
-        Vector1::new(wrap_angle(a[0] - b[0]))
+    fn residual_into(&self, a: &Vector1<T>, b: &Vector1<T>, out: &mut Vector1<T>) {
+        *out = Vector1::new(wrap_angle(a[0] - b[0]));
     }
 }
 
@@ -279,8 +280,8 @@ impl<T: Real, const N: usize> MeasurementModel<T, Const<N>, U2> for RangeBearing
         )
     }
 
-    fn residual(&self, a: &Vector2<T>, b: &Vector2<T>) -> Vector2<T> {
-        Vector2::new(a[0] - b[0], wrap_angle(a[1] - b[1]))
+    fn residual_into(&self, a: &Vector2<T>, b: &Vector2<T>, out: &mut Vector2<T>) {
+        *out = Vector2::new(a[0] - b[0], wrap_angle(a[1] - b[1]));
     }
 }
 

@@ -75,13 +75,15 @@ fn heading_residual_wraps() {
         sigma_xy: 1.0,
         sigma_theta: 0.1,
     };
-    let r = m.residual(
+    let mut r = Vector3::zeros();
+    m.residual_into(
         &Vector3::new(0.0, 0.0, std::f64::consts::PI - 0.01),
         &Vector3::new(
             0.0,
             0.0,
             4.0 * std::f64::consts::PI - std::f64::consts::PI + 0.01,
         ),
+        &mut r,
     );
     assert!((r[2] + 0.02).abs() < 1e-12, "{}", r[2]);
     assert_eq!(wrap_angle(-std::f64::consts::PI), std::f64::consts::PI);

@@ -392,7 +392,8 @@ fn sensors_at_their_origin_and_across_pi() {
     assert_eq!(r.measurement_jacobian(&x), SMatrix::<f64, 1, 4>::zeros());
     let a = Vector2::new(3.0, 3.1);
     let b = Vector2::new(3.0, -3.1);
-    let d = MeasurementModel::<f64, U4, U2>::residual(&rb, &a, &b);
+    let mut d = Vector2::zeros();
+    MeasurementModel::<f64, U4, U2>::residual_into(&rb, &a, &b, &mut d);
     assert!((d[1] - (6.2 - 2.0 * std::f64::consts::PI)).abs() < 1e-15);
     assert_eq!(d[0], 0.0);
 }

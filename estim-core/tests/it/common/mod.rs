@@ -1201,7 +1201,7 @@ where
 /// divided by N, is the variance of the corresponding sample-covariance entry to leading
 /// order in 1/N, for any distribution with finite fourth moments. With `pilot` = 2·10⁴
 /// the estimated standard errors are themselves accurate to a few percent, which the
-/// z-factor absorbs. Deviations use g's `difference`, like the propagators.
+/// z-factor absorbs. Deviations use g's `difference_into`, like the propagators.
 pub fn sampling_error<N: Dim, M: Dim, G: VectorFunction<f64, N, M>>(
     g: &G,
     mu: &OVector<f64, N>,
@@ -1224,7 +1224,9 @@ where
             OVector::<f64, N>::from_fn_generic(n_dim, U1, |_, _| StandardNormal.sample(&mut rng));
         let dx = &lower * z;
         let y = g.eval(&(mu + &dx));
-        ds.push(g.difference(&y, &y0));
+        let mut d = y.clone();
+        g.difference_into(&y, &y0, &mut d);
+        ds.push(d);
         dxs.push(dx);
     }
     let count = pilot as f64;
