@@ -190,7 +190,7 @@ where
     }
 }
 
-/// H x, R, x − y, H and no Hessians, written into the caller's buffers.
+/// H x, R, H and no Hessians, written into the caller's buffers.
 impl<T: Real, N: Dim, M: Dim> InPlace<T, N, M> for LinearMeasurement<T, N, M>
 where
     DefaultAllocator: Alloc<N, M>,

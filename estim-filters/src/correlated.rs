@@ -126,12 +126,22 @@ where
     H: MeasurementModel<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
+    /// f(x) + D (z ⊖ h(x)); NaN where h(x) or its residual has not z's length (runtime sizes:
+    /// [`new`](Self::new) checked them at x̂ only), so that the propagation's finiteness check
+    /// reports it as an error instead of a panic in the product.
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, N> {
         let mut fx = self.process.transition(x, self.input, self.dt);
         let hx = self.measurement.measure(x);
+        let m = (self.z.nrows(), 1);
         let mut residual = hx.clone();
-        self.measurement.residual_into(self.z, &hx, &mut residual);
-        fx.gemv(T::one(), &self.gain, &residual, T::one());
+        if hx.shape() == m {
+            self.measurement.residual_into(self.z, &hx, &mut residual);
+        }
+        if hx.shape() == m && residual.shape() == m {
+            fx.gemv(T::one(), &self.gain, &residual, T::one());
+        } else {
+            fx.fill(T::zero() / T::zero());
+        }
         fx
     }
 }

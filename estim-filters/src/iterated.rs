@@ -513,6 +513,9 @@ where
         }
         let mut r = predicted.clone();
         model.residual_into(z, &predicted, &mut r);
+        if r.shape() != z.shape() {
+            return T::zero() / T::zero();
+        }
         kernel::solve_lower_in_place(&self.noise_factor, &mut r);
         let mut d = x - prior;
         kernel::solve_lower_in_place(&self.prior_factor, &mut d);

@@ -276,7 +276,7 @@ where
     report.iterations = None;
     let m = predicted.mean.nrows();
     ensure_shape(noise, m, m, stage, Quantity::MeasurementNoise)?;
-    ensure_shape(&report.innovation, m, 1, stage, Quantity::Measurement)?;
+    ensure_shape(&report.innovation, m, 1, stage, Quantity::Innovation)?;
     // An indefinite R (even with a positive diagonal) can leave S positive definite and give
     // a posterior with negative variances: R must be semi-definite. O(m²) when R is
     // diagonally dominant, else one factorisation in `factor` (free until S is formed).

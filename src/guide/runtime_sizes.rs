@@ -34,6 +34,6 @@
 //!
 //! A static-size prior moves to runtime sizes with
 //! [`Gaussian::into_dyn`](crate::core::Gaussian::into_dyn). A model of your own runs
-//! allocation-free when it implements [`InPlace`](crate::core::InPlace) (its value, noise,
-//! residual and derivatives written into the filter's buffers) and returns `Some(self)` from
-//! its `in_place` method, as the linear models do.
+//! allocation-free when it implements [`InPlace`](crate::core::InPlace) (its value, noise and
+//! derivatives written into the filter's buffers) and returns `Some(self)` from its `in_place`
+//! method, as the linear models do (its residual is written in place by every model).

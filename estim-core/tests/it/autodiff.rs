@@ -21,8 +21,8 @@ use estim_core::nalgebra::{
     DefaultAllocator, Dim, Dyn, Matrix2, OMatrix, OVector, U1, U2, U3, Vector1, Vector2,
 };
 use estim_core::{
-    Alloc, Differentiable, Error, MeasurementHessian, MeasurementJacobian, MomentPropagator,
-    ProcessHessian, ProcessJacobian, ProcessModel, Quantity, SecondOrderGaussian,
+    Alloc, Differentiable, Error, MeasurementHessian, MeasurementJacobian, MeasurementModel,
+    MomentPropagator, ProcessHessian, ProcessJacobian, ProcessModel, Quantity, SecondOrderGaussian,
     TwiceDifferentiable, VectorFunction,
 };
 use proptest::prelude::*;
@@ -229,6 +229,31 @@ impl AutoDiffMeasurement<f64, U2, U1> for Scaled {
     fn measurement_noise(&self, _: &Vector2<f64>) -> OMatrix<f64, U1, U1> {
         OMatrix::<f64, U1, U1>::identity()
     }
+}
+
+/// h(x) = x₀, a heading: its residual wraps into (−π, π].
+struct Heading;
+
+impl AutoDiffMeasurement<f64, U2, U1> for Heading {
+    fn measure<D: AdScalar<f64>>(&self, x: &Vector2<D>) -> Vector1<D> {
+        Vector1::new(x[0])
+    }
+    fn measurement_noise(&self, _: &Vector2<f64>) -> OMatrix<f64, U1, U1> {
+        OMatrix::<f64, U1, U1>::identity()
+    }
+    fn residual_into(&self, a: &Vector1<f64>, b: &Vector1<f64>, out: &mut Vector1<f64>) {
+        *out = Vector1::new(estim_core::wrap_angle(a[0] - b[0]));
+    }
+}
+
+/// The adapter forwards the written-once model's residual, so angles wrap through it.
+#[test]
+fn the_residual_is_the_models() {
+    let (a, b) = (Vector1::new(-3.1), Vector1::new(3.1));
+    let mut r = Vector1::zeros();
+    MeasurementModel::residual_into(&AutoDiff::new(Heading), &a, &b, &mut r);
+    assert_eq!(r[0], estim_core::wrap_angle(-6.2));
+    assert!((r[0] - (2.0 * std::f64::consts::PI - 6.2)).abs() < 1e-15);
 }
 
 #[test]

@@ -37,9 +37,10 @@
 //!   by definition not from the model.
 //!
 //! Use: wrap the measurement model with [`model`](MeasurementNoiseMatching::model) (it
-//! returns R̂ as its noise and forwards everything else, so it works with every filter and
-//! every capability: Jacobians, Hessians, sigma points), update the filter with it, and feed the
-//! report back with [`observe`](MeasurementNoiseMatching::observe):
+//! returns R̂ as its noise and forwards its value, residual and derivatives, so it works with
+//! every filter the model does: Jacobians, Hessians, sigma points; not its allocation-free
+//! route, see [`WithNoise`]), update the filter with it, and feed the report back with
+//! [`observe`](MeasurementNoiseMatching::observe):
 //!
 //! ```
 //! use estim_core::{Gaussian, LinearMeasurement, LinearProcess};
@@ -181,7 +182,8 @@ where
         self.clipped
     }
 
-    /// `inner` with R̂ as its measurement noise, everything else forwarded.
+    /// `inner` with R̂ as its measurement noise, its value, residual and derivatives forwarded
+    /// ([`WithNoise`]).
     pub fn model<'a, H>(&'a self, inner: &'a H) -> WithNoise<'a, H, T, M> {
         WithNoise {
             inner,

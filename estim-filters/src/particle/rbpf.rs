@@ -124,8 +124,8 @@ where
 /// [`InPlace`](estim_core::in_place::InPlace) opt-in of the Gaussian filters cannot carry it:
 /// [`ConditionallyLinearProcess`] and [`ConditionallyLinearMeasurement`] return their pieces
 /// ([`ConditionalTransition`]: fn, An, Qn, fl, Al, Ql; [`ConditionalMeasurement`]: h, C, R) by
-/// value, and `InPlace` has slots only for a whole-state model's f, Q, Jacobian and residual,
-/// not for these six; and each particle's Kalman steps run on a `LinearMeasurement` (An, Qn)
+/// value, and `InPlace` has slots only for a whole-state model's f, Q and derivatives, not for
+/// these six; and each particle's Kalman steps run on a `LinearMeasurement` (An, Qn)
 /// and a `LinearProcess` (Al, I, Ql) built from those pieces, with the products An x̂l and
 /// An Pl Anᵀ and the factor of An Pl Anᵀ + Qn formed as new matrices. Making that
 /// allocation-free would take an in-place form of both traits (a method writing the pieces

@@ -614,7 +614,7 @@ struct Sums<'a, T: Real> {
 }
 
 /// log p(z | x) for the particle `x`, adding its residual and R with weight `v` (if positive)
-/// to `sums`. Errors: h(x) of the wrong length, a NaN or +∞ log-density (a bug in the model,
+/// to `sums`. Errors: h(x) or its residual of the wrong length, a NaN or +∞ log-density (a bug in the model,
 /// e.g. h(x) NaN: [`Quantity::FunctionValue`], told apart from the [`Quantity::Weights`] of a
 /// measurement no particle explains), a non-finite or (Gaussian path) not positive definite R.
 #[cfg_attr(not(debug_assertions), inline(always))]
@@ -643,6 +643,7 @@ where
         Quantity::FunctionValue,
     )?;
     model.residual_into(z, &ms.x_h, &mut ms.r);
+    ensure_shape(&ms.r, z.nrows(), 1, Stage::Update, Quantity::Innovation)?;
     estim_core::in_place::measurement_noise_into(model, x, &mut ms.noise);
     let log_g = match sensor.log_likelihood(z, x) {
         Some(log_g) => log_g,

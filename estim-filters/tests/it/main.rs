@@ -44,6 +44,7 @@ mod noise_id_em;
 #[cfg(feature = "likelihood")]
 mod noise_id_likelihood;
 mod noise_policy;
+mod residual_wrapping;
 mod rls;
 mod robust;
 mod second_order;
