@@ -165,6 +165,12 @@ where
 {
     /// g(x), for any scalar `D`.
     fn eval<D: AdScalar<T>>(&self, x: &OVector<D, N>) -> OVector<D, M>;
+
+    /// The difference a ⊖ b of two outputs into `out` (defaults to a − b; override for
+    /// outputs that wrap), as in [`VectorFunction::difference_into`].
+    fn difference_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        crate::manifold::subtract_into(a, b, out);
+    }
 }
 
 /// The adapter: implements the value, Jacobian and Hessian capabilities of a model written
@@ -482,6 +488,11 @@ where
     #[cfg_attr(not(debug_assertions), inline(always))]
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, M> {
         self.model.eval(x)
+    }
+
+    #[cfg_attr(not(debug_assertions), inline(always))]
+    fn difference_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
+        self.model.difference_into(a, b, out);
     }
 }
 

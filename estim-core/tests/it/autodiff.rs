@@ -246,14 +246,31 @@ impl AutoDiffMeasurement<f64, U2, U1> for Heading {
     }
 }
 
-/// The adapter forwards the written-once model's residual, so angles wrap through it.
+/// g(x) = x₀ as a function whose outputs are angles.
+struct Angle;
+
+impl AutoDiffFunction<f64, U2, U1> for Angle {
+    fn eval<D: AdScalar<f64>>(&self, x: &Vector2<D>) -> Vector1<D> {
+        Vector1::new(x[0])
+    }
+    fn difference_into(&self, a: &Vector1<f64>, b: &Vector1<f64>, out: &mut Vector1<f64>) {
+        *out = Vector1::new(estim_core::wrap_angle(a[0] - b[0]));
+    }
+}
+
+/// The adapter forwards the written-once model's residual and the function's ⊖, so angles
+/// wrap through it.
 #[test]
-fn the_residual_is_the_models() {
+fn the_residual_and_the_difference_are_the_models() {
     let (a, b) = (Vector1::new(-3.1), Vector1::new(3.1));
+    let wrapped = 2.0 * std::f64::consts::PI - 6.2;
     let mut r = Vector1::zeros();
     MeasurementModel::residual_into(&AutoDiff::new(Heading), &a, &b, &mut r);
     assert_eq!(r[0], estim_core::wrap_angle(-6.2));
-    assert!((r[0] - (2.0 * std::f64::consts::PI - 6.2)).abs() < 1e-15);
+    assert!((r[0] - wrapped).abs() < 1e-15);
+    let mut d = Vector1::zeros();
+    VectorFunction::difference_into(&AutoDiff::new(Angle), &a, &b, &mut d);
+    assert_eq!(d, r);
 }
 
 #[test]
