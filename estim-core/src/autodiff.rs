@@ -151,7 +151,8 @@ where
     fn measurement_noise(&self, x: &OVector<T, N>) -> OMatrix<T, M, M>;
 
     /// The residual a ⊖ b into `out` (defaults to a − b; override for wrapping components),
-    /// as in [`MeasurementModel::residual_into`].
+    /// as in [`MeasurementModel::residual_into`] (whose default panics, as this one does, on
+    /// `a` and `b` of different lengths).
     fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
         crate::manifold::subtract_into(a, b, out);
     }
@@ -167,7 +168,8 @@ where
     fn eval<D: AdScalar<T>>(&self, x: &OVector<D, N>) -> OVector<D, M>;
 
     /// The difference a ⊖ b of two outputs into `out` (defaults to a − b; override for
-    /// outputs that wrap), as in [`VectorFunction::difference_into`].
+    /// outputs that wrap), as in [`VectorFunction::difference_into`] (whose default panics, as
+    /// this one does, on `a` and `b` of different lengths).
     fn difference_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
         crate::manifold::subtract_into(a, b, out);
     }

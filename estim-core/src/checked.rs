@@ -6,8 +6,9 @@
 //! [`LinearProcess::try_new`] and [`LinearMeasurement::try_new`] verify that Q (resp. R) is
 //! finite, symmetric (within √ε of its largest entry) and positive **semi**-definite, by one
 //! factorisation, and return the model. Its fields stay public: a model changed after it was
-//! built is checked per step like any other (those checks run for every model anyway, so no
-//! step relies on the construction check).
+//! built gets the per-step checks of any model (the table below; those run for every model
+//! anyway, so no step relies on the construction check), which do not refuse an asymmetric Q
+//! or R but use its symmetric part: check a changed model again with [`check_noise`].
 //!
 //! **Why semi-definite.** The factorisation is [`psd_factor`] (a Cholesky
 //! factorisation that accepts zero pivots within 16 n ε max Qᵢᵢ, with diagonal pivoting as a

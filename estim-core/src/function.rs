@@ -53,6 +53,10 @@ where
     /// (deviations from a mean, innovations). Defaults to a − b; override it for outputs that
     /// wrap, such as angles (see [`wrap_angle`](crate::wrap_angle)). Like ⊞, in place for
     /// every function: `out` arrives with the outputs' shape.
+    ///
+    /// # Panics
+    ///
+    /// The default, if `a` and `b` differ in length (the propagators check before they call).
     #[cfg_attr(not(debug_assertions), inline(always))]
     fn difference_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
         subtract_into(a, b, out);

@@ -132,8 +132,14 @@ where
     fn measurement_noise(&self, x: &OVector<T, N>) -> OMatrix<T, M, M>;
 
     /// The residual a ⊖ b between two measurements (innovations, deviations) into `out`.
-    /// Defaults to a − b; override for components that wrap, such as headings. Like ⊞, in
-    /// place for every model: `out` arrives with the measurements' shape.
+    /// Defaults to a − b; override for components that wrap, such as headings. In place for
+    /// every model, like the state space's ⊟: `out` arrives with the measurements' shape
+    /// (on runtime sizes, `out.copy_from(a); *out -= b;` then wrapping keeps a step
+    /// allocation-free, where `*out = a - b` allocates).
+    ///
+    /// # Panics
+    ///
+    /// The default, if `a` and `b` differ in length (the filters check before they call).
     #[cfg_attr(not(debug_assertions), inline(always))]
     fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
         subtract_into(a, b, out);

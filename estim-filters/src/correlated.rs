@@ -17,7 +17,9 @@ use estim_core::{
 /// component k is ∂²fₖ − Σⱼ Dₖⱼ ∂²hⱼ, so it has every capability its two models have.
 ///
 /// On runtime sizes [`new`](Self::new) checks the lengths of f(x), h(x) and z ⊖ h(x) at the
-/// estimate (typed errors). The Jacobian and Hessians are not evaluated there: a process
+/// estimate (typed errors); at the other points the propagator evaluates, a wrong f(x) is a
+/// [`Quantity::FunctionValue`] mismatch and a wrong h(x) or residual an
+/// [`Error::NonFinite`] mean ([`eval`](VectorFunction::eval)). The Jacobian and Hessians are not evaluated there: a process
 /// Jacobian or Hessian of the wrong shape reaches the propagator, which reports it as
 /// [`Error::DimensionMismatch`]. So does a misshapen measurement derivative (never a silent
 /// product over the agreeing part): a measurement Hessian that is not n × n is handed on as
@@ -126,11 +128,16 @@ where
     H: MeasurementModel<T, N, M>,
     DefaultAllocator: Alloc<N, M>,
 {
-    /// f(x) + D (z ⊖ h(x)); NaN where h(x) or its residual has not z's length (runtime sizes:
-    /// [`new`](Self::new) checked them at x̂ only), so that the propagation's finiteness check
-    /// reports it as an error instead of a panic in the product.
+    /// f(x) + D (z ⊖ h(x)). Runtime sizes, where [`new`](Self::new) checked the lengths at x̂
+    /// only: an f(x) of the wrong length is returned as it is (the propagator reports the
+    /// [`Quantity::FunctionValue`] mismatch), and NaN where h(x) or its residual has not z's
+    /// length (reported by the propagation's finiteness check): errors, not a panic in the
+    /// product.
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, N> {
         let mut fx = self.process.transition(x, self.input, self.dt);
+        if fx.nrows() != self.gain.nrows() {
+            return fx;
+        }
         let hx = self.measurement.measure(x);
         let m = (self.z.nrows(), 1);
         let mut residual = hx.clone();

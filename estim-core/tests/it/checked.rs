@@ -3,10 +3,8 @@
 //! positive semi-definite singular ones, and build exactly the model the struct literal builds.
 
 use estim_core::checked::check_noise;
-use estim_core::nalgebra::{DMatrix, Matrix2, Matrix2x1, Matrix3, Vector1, Vector2};
-use estim_core::{
-    Error, LinearMeasurement, LinearProcess, MeasurementModel, ProcessModel, Quantity, Stage,
-};
+use estim_core::nalgebra::{DMatrix, Matrix2, Matrix2x1, Matrix3};
+use estim_core::{Error, LinearMeasurement, LinearProcess, Quantity, Stage};
 
 const STAGE: Stage = Stage::Construction;
 
@@ -126,7 +124,7 @@ fn accepts_singular_positive_semi_definite_noise() {
     assert_eq!(check_noise(&q3, Quantity::ProcessNoise), Ok(()));
 }
 
-/// `try_new` builds the model the struct literal builds, and it computes the same values.
+/// `try_new` builds the model the struct literal builds, its matrices unchanged.
 #[test]
 fn checked_models_are_the_plain_models() {
     let (f, b) = (Matrix2::new(1.0, 0.1, 0.0, 1.0), Matrix2x1::new(0.005, 0.1));
@@ -138,18 +136,8 @@ fn checked_models_are_the_plain_models() {
         noise: q,
     };
     assert_eq!(checked, plain);
-    let (x, u) = (Vector2::new(0.3, -1.0), Vector1::new(2.0));
-    assert_eq!(
-        checked.transition(&x, &u, 0.1),
-        plain.transition(&x, &u, 0.1)
-    );
-    assert_eq!(
-        checked.process_noise(&x, &u, 0.1),
-        plain.process_noise(&x, &u, 0.1)
-    );
     let h = Matrix2::new(1.0, 0.0, 0.5, 1.0);
     let sensor = LinearMeasurement::try_new(h, Matrix2::identity() * 0.01).unwrap();
-    assert_eq!(sensor.measure(&x), h * x);
     assert_eq!(
         sensor,
         LinearMeasurement {

@@ -784,7 +784,8 @@ where
     /// is always [`Applied`](crate::UpdateOutcome::Applied) (no gate). Runtime-size
     /// measurements size their per-chunk buffers at the first update with that length (and
     /// when R changes), then allocate nothing. On error (non-finite z, h(x) of the
-    /// wrong length, R not finite or, on the Gaussian path, not positive definite, a NaN or
+    /// wrong length, a residual z ⊖ h(x) of the wrong length ([`Quantity::Innovation`]), R not
+    /// finite or, on the Gaussian path, not positive definite, a NaN or
     /// +∞ log-density — h(x) NaN included — with [`Quantity::FunctionValue`], every weight
     /// zero — a reading no particle explains — with [`Quantity::Weights`]) the filter is
     /// unchanged.

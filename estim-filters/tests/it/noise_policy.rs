@@ -7,7 +7,7 @@
 
 use crate::common::assert_bitwise_eq;
 
-use estim_core::nalgebra::{DMatrix, DVector, Dyn, Matrix2, Matrix2x1, U2, Vector1, Vector2};
+use estim_core::nalgebra::{DMatrix, DVector, Dyn, Matrix2, Matrix2x1, U2, Vector2};
 use estim_core::{
     Error, Gaussian, LinearMeasurement, LinearProcess, MeasurementModel, ProcessModel, Quantity,
     Stage,
@@ -191,40 +191,6 @@ fn semi_definite_and_asymmetric_noise_are_accepted() {
     assert!((a.state() - b.state()).abs().max() < 1e-15);
     assert!((a.covariance() - b.covariance()).abs().max() < 1e-15);
     assert!(LinearMeasurement::try_new(Matrix2::identity(), asym).is_err());
-}
-
-/// A model built by `try_new` runs through a filter exactly as the struct literal (bit for bit).
-#[test]
-fn checked_models_filter_bit_for_bit() {
-    let (f, b) = (Matrix2::new(1.0, 0.1, 0.0, 1.0), Matrix2x1::new(0.005, 0.1));
-    let q = Matrix2::new(2e-3, 1e-3, 1e-3, 1e-3);
-    let (h, r) = (Matrix2::new(1.0, 0.0, 0.3, 1.0), Matrix2::identity() * 0.01);
-    let checked = (
-        LinearProcess::try_new(f, b, q).unwrap(),
-        LinearMeasurement::try_new(h, r).unwrap(),
-    );
-    let plain = (
-        LinearProcess {
-            transition: f,
-            input: b,
-            noise: q,
-        },
-        LinearMeasurement {
-            observation: h,
-            noise: r,
-        },
-    );
-    let (mut x, mut y) = (filter(), filter());
-    for k in 0..5 {
-        let u = Vector1::new(k as f64 * 0.1);
-        let z = Vector2::new(0.1 * k as f64, -0.05);
-        x.predict(&checked.0, &u, 0.1).unwrap();
-        y.predict(&plain.0, &u, 0.1).unwrap();
-        x.update(&checked.1, &z).unwrap();
-        y.update(&plain.1, &z).unwrap();
-    }
-    assert_bitwise_eq(x.state(), y.state(), "state");
-    assert_bitwise_eq(x.covariance(), y.covariance(), "covariance");
 }
 
 /// x⁺ = x on runtime sizes, with Q(x) = the matrix it carries.
