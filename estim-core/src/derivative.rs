@@ -296,8 +296,8 @@ impl<T: Real> DerivativeCheck<T> {
     /// [`AttitudeError`](crate::manifold::AttitudeError)), the differences are taken on the
     /// manifold, as the filters use the Jacobian: column j against
     /// ((g(x ⊞ hⱼeⱼ) ⊟ g(x)) − (g(x ⊞ (−hⱼeⱼ)) ⊟ g(x))) / (2hⱼ), ⊟ the function's
-    /// [`difference_into`](crate::VectorFunction::difference_into). A Jacobian that is correct on the manifold
-    /// is then not flagged for differing from the derivative of the coordinates.
+    /// [`difference_into`](crate::VectorFunction::difference_into). A Jacobian that is correct
+    /// on the manifold is then not flagged for differing from the derivative of the coordinates.
     ///
     /// Errors: non-finite values or a runtime shape mismatch.
     pub fn jacobian<N, M, G>(&self, g: &G, x: &OVector<T, N>) -> Result<DerivativeReport<T>>

@@ -18,16 +18,15 @@ use estim_core::{
 ///
 /// On runtime sizes [`new`](Self::new) checks the lengths of f(x), h(x) and z ⊖ h(x) at the
 /// estimate (typed errors); at the other points the propagator evaluates, a wrong f(x) is a
-/// [`Quantity::FunctionValue`] mismatch and a wrong h(x) or residual an
-/// [`Error::NonFinite`] mean ([`eval`](VectorFunction::eval)). The Jacobian and Hessians are not evaluated there: a process
+/// [`Quantity::FunctionValue`] mismatch and a wrong h(x) or residual an [`Error::NonFinite`] mean
+/// ([`eval`](VectorFunction::eval)). The Jacobian and Hessians are not evaluated there: a process
 /// Jacobian or Hessian of the wrong shape reaches the propagator, which reports it as
-/// [`Error::DimensionMismatch`]. So does a misshapen measurement derivative (never a silent
-/// product over the agreeing part): a measurement Hessian that is not n × n is handed on as
-/// the map's Hessian, and a measurement Jacobian that is not m × n makes the map's Jacobian a
-/// matrix of that shape (n × 0 if it happens to be n × n) on a runtime-sized state, which the
-/// propagator reports as a [`Quantity::Jacobian`] mismatch. On a static state only the rows
-/// of a runtime-sized m can be wrong; the map's Jacobian is then NaN, reported as
-/// [`Error::NonFinite`] by the propagation.
+/// [`Error::DimensionMismatch`]. So does a misshapen measurement derivative (never a silent product
+/// over the agreeing part): a measurement Hessian that is not n × n is handed on as the map's
+/// Hessian, and a measurement Jacobian that is not m × n makes the map's Jacobian a matrix of that
+/// shape (n × 0 if it happens to be n × n) on a runtime-sized state, which the propagator reports
+/// as a [`Quantity::Jacobian`] mismatch. On a static state only the rows of a runtime-sized m can
+/// be wrong; the map's Jacobian is then NaN, reported as [`Error::NonFinite`] by the propagation.
 #[derive(Debug)]
 pub struct Decorrelated<'a, P, U, H, T: Real, N: Dim, M: Dim>
 where
@@ -140,11 +139,12 @@ where
         }
         let hx = self.measurement.measure(x);
         let m = (self.z.nrows(), 1);
+        // A misshapen h(x) stays in `residual` (its copy) and fails the length check below.
         let mut residual = hx.clone();
         if hx.shape() == m {
             self.measurement.residual_into(self.z, &hx, &mut residual);
         }
-        if hx.shape() == m && residual.shape() == m {
+        if residual.shape() == m {
             fx.gemv(T::one(), &self.gain, &residual, T::one());
         } else {
             fx.fill(T::zero() / T::zero());

@@ -18,10 +18,10 @@ use crate::scalar::{Real, real};
 /// cross-covariance.
 ///
 /// Deviations are accumulated relative to g(μ) through the function's
-/// [`difference_into`](VectorFunction::difference_into), which avoids cancellation and handles wrapped
-/// outputs. The same seed gives the same result. The standard error of each mean component is
-/// √(cov(y)ₖₖ / N); use it to set test tolerances. Requirements on g: [`VectorFunction`].
-/// Vector states only: the draws are μ + L zᵢ, not μ ⊞ L zᵢ (the input's ⊞ is not used).
+/// [`difference_into`](VectorFunction::difference_into), which avoids cancellation and handles
+/// wrapped outputs. The same seed gives the same result. The standard error of each mean component
+/// is √(cov(y)ₖₖ / N); use it to set test tolerances. Requirements on g: [`VectorFunction`]. Vector
+/// states only: the draws are μ + L zᵢ, not μ ⊞ L zᵢ (the input's ⊞ is not used).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Sampled {
     samples: usize,

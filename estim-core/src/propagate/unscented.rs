@@ -25,10 +25,10 @@ use crate::scalar::{Real, real};
 /// cov(x,y) = w Σᵢ (χᵢ ⊟ μ) dᵢᵀ,   χ±ⱼ ⊟ μ = ±√c Lⱼ
 /// ```
 ///
-/// ⊞ in the input is the function's [`input_plus_into`](VectorFunction::input_plus_into), in
-/// the output its [`output_plus_into`](VectorFunction::output_plus_into), ⊖ its
-/// [`difference_into`](VectorFunction::difference_into) (Hertzberg et al. 2013); by default +, + and −,
-/// and then this is the plain transform to the bit.
+/// ⊞ in the input is the function's [`input_plus_into`](VectorFunction::input_plus_into), in the
+/// output its [`output_plus_into`](VectorFunction::output_plus_into), ⊖ its
+/// [`difference_into`](VectorFunction::difference_into) (Hertzberg et al. 2013); by default +, +
+/// and −, and then this is the plain transform to the bit.
 ///
 /// This is algebraically the textbook form with W₀ᵐ = 1 − n/c and W₀ᶜ = W₀ᵐ + 1 − α² + β, but it
 /// never multiplies by the centre weight (≈ −10⁶ for α = 10⁻³), so the covariance keeps full
@@ -308,11 +308,12 @@ impl<T: Real, N: Dim, M: Dim> SigmaDeviations<T, N, M>
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    /// g(μ) into `value`, D₊ = [g(μ ⊞ Lⱼ) ⊖ g(μ)]ⱼ into `plus` and D₋ = [g(μ ⊞ −Lⱼ) ⊖ g(μ)]ⱼ
-    /// into `minus` (m × n each), L = `offsets`; ⊞ is g's
+    /// g(μ) into `value`, D₊ = [g(μ ⊞ Lⱼ) ⊖ g(μ)]ⱼ into `plus` and D₋ = [g(μ ⊞ −Lⱼ) ⊖ g(μ)]ⱼ into
+    /// `minus` (m × n each), L = `offsets`; ⊞ is g's
     /// [`input_plus_into`](VectorFunction::input_plus_into), ⊖ its
-    /// [`difference_into`](VectorFunction::difference_into). The 2n points go through g one at a time. A value or deviation of the wrong length is a
-    /// dimension error (quantity `FunctionValue`, at `stage`).
+    /// [`difference_into`](VectorFunction::difference_into). The 2n points go through g one at a
+    /// time. A value or deviation of the wrong length is a dimension error (quantity
+    /// `FunctionValue`, at `stage`).
     #[cfg_attr(not(debug_assertions), inline(always))]
     #[allow(clippy::too_many_arguments)]
     pub fn deviations_into<G>(

@@ -613,10 +613,10 @@ struct Sums<'a, T: Real> {
     total_v: &'a mut T,
 }
 
-/// log p(z | x) for the particle `x`, adding its residual and R with weight `v` (if positive)
-/// to `sums`. Errors: h(x) or its residual of the wrong length, a NaN or +∞ log-density (a bug in the model,
-/// e.g. h(x) NaN: [`Quantity::FunctionValue`], told apart from the [`Quantity::Weights`] of a
-/// measurement no particle explains), a non-finite or (Gaussian path) not positive definite R.
+/// log p(z | x) for the particle `x`, adding its residual and R with weight `v` (if positive) to
+/// `sums`. Errors: h(x) or its residual of the wrong length, a NaN or +∞ log-density (a bug in the
+/// model, e.g. h(x) NaN: [`Quantity::FunctionValue`], told apart from the [`Quantity::Weights`] of
+/// a measurement no particle explains), a non-finite or (Gaussian path) not positive definite R.
 #[cfg_attr(not(debug_assertions), inline(always))]
 fn log_density<T, N, M, H>(
     ms: &mut SensorScratch<T, M>,
