@@ -400,12 +400,10 @@ where
 {
     type Input = P::Input;
 
-    #[cfg_attr(not(debug_assertions), inline(always))]
     fn transition(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OVector<T, N> {
         self.model.transition(x, u, dt)
     }
 
-    #[cfg_attr(not(debug_assertions), inline(always))]
     fn process_noise(&self, x: &OVector<T, N>, u: &P::Input, dt: T) -> OMatrix<T, N, N> {
         self.model.process_noise(x, u, dt)
     }
@@ -445,17 +443,14 @@ impl<T: AdReal, N: Dim, M: Dim, H: AutoDiffMeasurement<T, N, M>> MeasurementMode
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    #[cfg_attr(not(debug_assertions), inline(always))]
     fn measure(&self, x: &OVector<T, N>) -> OVector<T, M> {
         self.model.measure(x)
     }
 
-    #[cfg_attr(not(debug_assertions), inline(always))]
     fn measurement_noise(&self, x: &OVector<T, N>) -> OMatrix<T, M, M> {
         self.model.measurement_noise(x)
     }
 
-    #[cfg_attr(not(debug_assertions), inline(always))]
     fn residual_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
         self.model.residual_into(a, b, out);
     }
@@ -487,12 +482,10 @@ impl<T: AdReal, N: Dim, M: Dim, G: AutoDiffFunction<T, N, M>> VectorFunction<T, 
 where
     DefaultAllocator: Alloc<N, M>,
 {
-    #[cfg_attr(not(debug_assertions), inline(always))]
     fn eval(&self, x: &OVector<T, N>) -> OVector<T, M> {
         self.model.eval(x)
     }
 
-    #[cfg_attr(not(debug_assertions), inline(always))]
     fn difference_into(&self, a: &OVector<T, M>, b: &OVector<T, M>, out: &mut OVector<T, M>) {
         self.model.difference_into(a, b, out);
     }
