@@ -280,10 +280,10 @@ impl<'a, H: ?Sized, S> Observation<'a, H, S> {
     }
 }
 
-// `inline(always)` in release builds only where it was measured to matter: the `in_place`
-// hooks (inlined, the filters' calls through `dyn InPlace` are devirtualised; without it a
-// static KF 3/2 step runs 3.9 % more instructions) and the Hessians (second-order EKF 6/4:
-// 6.3 %).
+// Both bridges are force-inlined (without debug assertions) only where callgrind showed it
+// pays: the `in_place()` hooks (the `dyn InPlace` they return is then devirtualised; without:
+// KF 3/2 +3.9 %, UKF 3/2 +5.2 % instructions per step) and `TwiceDifferentiable::hessian`
+// (second-order EKF 6/4 +6.3 %). The rest, the `InPlace` impl included, is the compiler's.
 impl<T: Real, N: Dim, P: ProcessModel<T, N, Input = U>, U, S: StateSpace<T, N>>
     VectorFunction<T, N, N> for Transition<'_, P, U, T, S>
 where
