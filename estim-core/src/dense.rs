@@ -1,7 +1,8 @@
 //! The dense backend of the kernels ([`crate::kernel`]) on runtime sizes: faer's products,
 //! Cholesky factor and triangular solves, and our matrix × vector kernel ([`Matvec`]), for
 //! one scalar type each through the sealed trait [`Dense`], the supertrait of
-//! [`Real`](crate::Real).
+//! [`Real`](crate::Real); and the faer views (`view`, `view_mut`) of nalgebra's storage
+//! they run on.
 //!
 //! [`Dense`] is implemented once for `f32` and once for `f64` here: faer's generic code is
 //! compiled in this crate only, not again in every crate that calls a kernel. faer runs
@@ -24,6 +25,29 @@ use faer::linalg::triangular_solve::{
 };
 #[cfg(feature = "dense")]
 use faer::{MatMut, MatRef, Par};
+#[cfg(feature = "dense")]
+use nalgebra::{DefaultAllocator, Dim, OMatrix, Scalar, allocator::Allocator};
+
+/// A faer view of the column-major storage of `m`.
+#[cfg(feature = "dense")]
+#[cfg_attr(not(debug_assertions), inline(always))]
+pub(crate) fn view<T: Scalar, R: Dim, C: Dim>(m: &OMatrix<T, R, C>) -> MatRef<'_, T>
+where
+    DefaultAllocator: Allocator<R, C>,
+{
+    MatRef::from_column_major_slice(m.as_slice(), m.nrows(), m.ncols())
+}
+
+/// A mutable faer view of the column-major storage of `m`.
+#[cfg(feature = "dense")]
+#[cfg_attr(not(debug_assertions), inline(always))]
+pub(crate) fn view_mut<T: Scalar, R: Dim, C: Dim>(m: &mut OMatrix<T, R, C>) -> MatMut<'_, T>
+where
+    DefaultAllocator: Allocator<R, C>,
+{
+    let (r, c) = m.shape();
+    MatMut::from_column_major_slice_mut(m.as_mut_slice(), r, c)
+}
 
 /// Whether a product overwrites its destination or adds to it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -7,11 +7,9 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use nalgebra::{DefaultAllocator, Dim, OMatrix, allocator::Allocator};
 
 #[cfg(feature = "dense")]
-use super::{
-    SMALL_RUNTIME_CHOLESKY, dense_route, fixed_route, is_static, lean_routes, view, view_mut,
-};
+use super::{SMALL_RUNTIME_CHOLESKY, dense_route, fixed_route, is_static, lean_routes};
 #[cfg(feature = "dense")]
-use crate::dense::Operand;
+use crate::dense::{Operand, view, view_mut};
 use crate::scalar::Real;
 
 /// Scratch memory for [`cholesky_in_place`]'s faer route (runtime sizes), grown on first use
@@ -109,14 +107,13 @@ where
     Some(ok && (0..n).all(|i| a[(i, i)].is_finite()))
 }
 
-/// [`cholesky_in_place`] for static and small runtime sizes: column j of L from the finished columns, lᵢⱼ = (aᵢⱼ − Σₖ₍ⱼ lᵢₖ lⱼₖ) /
-/// lⱼⱼ, each sum in a register, in place (column j reads only the original column j and the
-/// finished columns before it). The operations and order of [`crate::linalg::psd_factor`]'s
-/// loop, so a positive definite matrix gets the same bits from both, without its tolerance,
-/// pivoting and closures. Inlined, it replaced nalgebra's out-of-line `Cholesky::new` (with
-/// its copies in and out): the KF 3/2 step 933 → 908 instructions, the UKF 6/4 step 14,671 →
-/// 14,600 (commit `b1972b9`). `false` at a pivot that is not finite and
-/// > 0.
+/// [`cholesky_in_place`] for static and small runtime sizes: column j of L from the finished
+/// columns, lᵢⱼ = (aᵢⱼ − Σ_{k<j} lᵢₖ lⱼₖ) / lⱼⱼ, each sum in a register, in place (column j
+/// reads only the original column j and the finished columns before it). The operations and
+/// order of [`crate::linalg::psd_factor`]'s loop, so a positive definite matrix gets the same
+/// bits from both, without its tolerance, pivoting and closures. Inlined, it replaced
+/// nalgebra's out-of-line `Cholesky::new` and its copies (KF 3/2 step 933 → 908 instructions,
+/// UKF 6/4 14,671 → 14,600: `b1972b9`). `false` at a pivot that is not finite and positive.
 #[cfg_attr(not(debug_assertions), inline(always))]
 pub(super) fn left_looking_cholesky<T: Real, D: Dim>(a: &mut OMatrix<T, D, D>) -> bool
 where

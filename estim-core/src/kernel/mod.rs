@@ -33,8 +33,6 @@
 //! All shapes must agree (the callers check model outputs first); a mismatch here is a
 //! programmer error and panics.
 
-#[cfg(feature = "dense")]
-use faer::{MatMut, MatRef};
 use nalgebra::{DefaultAllocator, Dim, OMatrix, allocator::Allocator};
 
 use crate::scalar::Real;
@@ -120,25 +118,4 @@ fn lean_routes() -> bool {
 #[cfg_attr(not(debug_assertions), inline(always))]
 pub fn is_static<D: Dim>() -> bool {
     D::try_to_usize().is_some()
-}
-
-/// A faer view of the column-major storage of `m`.
-#[cfg(feature = "dense")]
-#[cfg_attr(not(debug_assertions), inline(always))]
-fn view<T: Real, R: Dim, C: Dim>(m: &OMatrix<T, R, C>) -> MatRef<'_, T>
-where
-    DefaultAllocator: Allocator<R, C>,
-{
-    MatRef::from_column_major_slice(m.as_slice(), m.nrows(), m.ncols())
-}
-
-/// A mutable faer view of the column-major storage of `m`.
-#[cfg(feature = "dense")]
-#[cfg_attr(not(debug_assertions), inline(always))]
-fn view_mut<T: Real, R: Dim, C: Dim>(m: &mut OMatrix<T, R, C>) -> MatMut<'_, T>
-where
-    DefaultAllocator: Allocator<R, C>,
-{
-    let (r, c) = m.shape();
-    MatMut::from_column_major_slice_mut(m.as_mut_slice(), r, c)
 }

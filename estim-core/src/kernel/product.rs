@@ -6,9 +6,11 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, allocator::Allocator};
 
 #[cfg(feature = "dense")]
-use super::{dense_route, view, view_mut};
+use super::dense_route;
 use super::{fixed_route, is_static, loops};
 use crate::dense::{Accum, Operand, Part};
+#[cfg(feature = "dense")]
+use crate::dense::{view, view_mut};
 use crate::scalar::Real;
 
 /// The form of a runtime-size product dst (+)= α a op(b): whether b enters transposed, and
@@ -52,7 +54,7 @@ impl Form {
 /// and [`mul_tr_lower`] on the runtime route.
 #[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
-fn product<T, R, C, RA, CA, RB, CB>(
+fn product<T: Real, R: Dim, C: Dim, RA: Dim, CA: Dim, RB: Dim, CB: Dim>(
     dst: &mut OMatrix<T, R, C>,
     accum: Accum,
     alpha: T,
@@ -60,84 +62,39 @@ fn product<T, R, C, RA, CA, RB, CB>(
     b: &OMatrix<T, RB, CB>,
     form: Form,
 ) where
-    T: Real,
-    R: Dim,
-    C: Dim,
-    RA: Dim,
-    CA: Dim,
-    RB: Dim,
-    CB: Dim,
     DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RB, CB>,
 {
     let (rows, cols) = dst.shape();
     let inner = a.ncols();
-    let b_shape = match form.b {
-        Operand::AsIs => (inner, cols),
-        Operand::Transposed => (cols, inner),
+    let (b_shape, b_as) = match form.b {
+        Operand::AsIs => ((inner, cols), ""),
+        Operand::Transposed => ((cols, inner), "ᵀ"),
+    };
+    let what = if cols == 1 {
+        "matrix × vector"
+    } else {
+        "matrix product"
     };
     assert!(
         a.nrows() == rows && b.shape() == b_shape,
-        "{}: {:?} ← {:?} × {:?}{}",
-        if cols == 1 {
-            "matrix × vector"
-        } else {
-            "matrix product"
-        },
+        "{what}: {:?} ← {:?} × {:?}{b_as}",
         dst.shape(),
         a.shape(),
         b.shape(),
-        if form.b == Operand::Transposed {
-            "ᵀ"
-        } else {
-            ""
-        }
     );
     #[cfg(feature = "dense")]
     if dense_route(rows.saturating_mul(inner).saturating_mul(cols)) {
-        return dense_product(dst, accum, alpha, a, b, form);
+        if cols == 1 && form == Form::PLAIN {
+            return T::matvec(dst.as_mut_slice(), accum, alpha, a.as_slice(), b.as_slice());
+        }
+        let b = match form.b {
+            Operand::AsIs => view(b),
+            Operand::Transposed => view(b).transpose(),
+        };
+        return T::matmul(view_mut(dst), accum, alpha, view(a), b, form.part);
     }
-    loops::product(
-        dst.as_mut_slice(),
-        (rows, cols),
-        accum,
-        alpha,
-        a.as_slice(),
-        inner,
-        b.as_slice(),
-        form.b,
-    );
-}
-
-/// [`product`] on faer (shapes checked by the caller).
-#[cfg(feature = "dense")]
-#[cfg_attr(not(debug_assertions), inline(always))]
-#[track_caller]
-fn dense_product<T, R, C, RA, CA, RB, CB>(
-    dst: &mut OMatrix<T, R, C>,
-    accum: Accum,
-    alpha: T,
-    a: &OMatrix<T, RA, CA>,
-    b: &OMatrix<T, RB, CB>,
-    form: Form,
-) where
-    T: Real,
-    R: Dim,
-    C: Dim,
-    RA: Dim,
-    CA: Dim,
-    RB: Dim,
-    CB: Dim,
-    DefaultAllocator: Allocator<R, C> + Allocator<RA, CA> + Allocator<RB, CB>,
-{
-    if dst.ncols() == 1 && form == Form::PLAIN {
-        return T::matvec(dst.as_mut_slice(), accum, alpha, a.as_slice(), b.as_slice());
-    }
-    let (a, b) = (view(a), view(b));
-    let b = match form.b {
-        Operand::AsIs => b,
-        Operand::Transposed => b.transpose(),
-    };
-    T::matmul(view_mut(dst), accum, alpha, a, b, form.part);
+    let (dst, a, b) = (dst.as_mut_slice(), a.as_slice(), b.as_slice());
+    loops::product(dst, (rows, cols), accum, alpha, a, inner, b, form.b);
 }
 
 /// Writes or adds α · `value` into `dst` (static sizes), skipping the scaling when α = 1.
@@ -164,17 +121,13 @@ fn store<T: Real, R: Dim, C: Dim>(
 /// dst (+)= α a b.
 #[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
-pub fn mul<T, R, K, C>(
+pub fn mul<T: Real, R: Dim, K: Dim, C: Dim>(
     dst: &mut OMatrix<T, R, C>,
     accum: Accum,
     alpha: T,
     a: &OMatrix<T, R, K>,
     b: &OMatrix<T, K, C>,
 ) where
-    T: Real,
-    R: Dim,
-    K: Dim,
-    C: Dim,
     DefaultAllocator: Allocator<R, C> + Allocator<R, K> + Allocator<K, C>,
 {
     let fixed = is_static::<R>() && is_static::<K>() && is_static::<C>();
@@ -188,17 +141,13 @@ pub fn mul<T, R, K, C>(
 /// dst (+)= α a bᵀ.
 #[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
-pub fn mul_tr<T, R, K, C>(
+pub fn mul_tr<T: Real, R: Dim, K: Dim, C: Dim>(
     dst: &mut OMatrix<T, R, C>,
     accum: Accum,
     alpha: T,
     a: &OMatrix<T, R, K>,
     b: &OMatrix<T, C, K>,
 ) where
-    T: Real,
-    R: Dim,
-    K: Dim,
-    C: Dim,
     DefaultAllocator: Allocator<R, C> + Allocator<R, K> + Allocator<C, K> + Allocator<K, C>,
 {
     let fixed = is_static::<R>() && is_static::<K>() && is_static::<C>();
@@ -218,16 +167,13 @@ pub fn mul_tr<T, R, K, C>(
 /// triangle ([`crate::linalg::mirror_lower_checked`]) before using it.
 #[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
-pub fn mul_lower<T, D, K>(
+pub fn mul_lower<T: Real, D: Dim, K: Dim>(
     dst: &mut OMatrix<T, D, D>,
     accum: Accum,
     alpha: T,
     a: &OMatrix<T, D, K>,
     b: &OMatrix<T, K, D>,
 ) where
-    T: Real,
-    D: Dim,
-    K: Dim,
     DefaultAllocator: Allocator<D, D> + Allocator<D, K> + Allocator<K, D>,
 {
     let fixed = is_static::<D>() && is_static::<K>();
@@ -241,16 +187,13 @@ pub fn mul_lower<T, D, K>(
 /// The lower triangle of dst (+)= α a bᵀ (see [`mul_lower`]; e.g. w D Dᵀ or (K S) Kᵀ).
 #[cfg_attr(not(debug_assertions), inline(always))]
 #[track_caller]
-pub fn mul_tr_lower<T, D, K>(
+pub fn mul_tr_lower<T: Real, D: Dim, K: Dim>(
     dst: &mut OMatrix<T, D, D>,
     accum: Accum,
     alpha: T,
     a: &OMatrix<T, D, K>,
     b: &OMatrix<T, D, K>,
 ) where
-    T: Real,
-    D: Dim,
-    K: Dim,
     DefaultAllocator: Allocator<D, D> + Allocator<D, K> + Allocator<K, D>,
 {
     let fixed = is_static::<D>() && is_static::<K>();
