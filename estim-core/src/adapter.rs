@@ -69,11 +69,11 @@ where
     DefaultAllocator: Alloc<N>,
 {
     fn value_into(&self, x: &OVector<T, N>, _: &(), dt: T, out: &mut OVector<T, N>) {
-        crate::in_place::transition_into(&self.0, x, &none(), dt, out);
+        crate::model::transition_into(&self.0, x, &none(), dt, out);
     }
 
     fn noise_into(&self, x: &OVector<T, N>, _: &(), dt: T, out: &mut OMatrix<T, N, N>) {
-        crate::in_place::process_noise_into(&self.0, x, &none(), dt, out);
+        crate::model::process_noise_into(&self.0, x, &none(), dt, out);
     }
 
     fn jacobian_into(&self, x: &OVector<T, N>, _: &(), dt: T, out: &mut OMatrix<T, N, N>) {
@@ -221,12 +221,12 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     fn value_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OVector<T, M>) {
-        crate::in_place::measure_into(&self.model, x, out);
+        crate::model::measure_into(&self.model, x, out);
         *out += &self.offset;
     }
 
     fn noise_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, M, M>) {
-        crate::in_place::measurement_noise_into(&self.model, x, out);
+        crate::model::measurement_noise_into(&self.model, x, out);
     }
 
     fn jacobian_into(&self, x: &OVector<T, N>, u: &(), dt: T, out: &mut OMatrix<T, M, N>) {

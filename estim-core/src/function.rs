@@ -155,3 +155,59 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
 }
+
+/// g(x) into `out`: in place for an [`InPlace`] function, else the owned value.
+#[cfg_attr(not(debug_assertions), inline(always))]
+pub fn eval_into<T, N, M, G>(g: &G, x: &OVector<T, N>, out: &mut OVector<T, M>)
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    G: VectorFunction<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    match g.in_place() {
+        Some(g) => g.value_into(x, &(), T::zero(), out),
+        None => *out = g.eval(x),
+    }
+}
+
+/// J(x) into `out`.
+#[cfg_attr(not(debug_assertions), inline(always))]
+pub fn jacobian_into<T, N, M, G>(g: &G, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>)
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    G: Differentiable<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    match g.in_place() {
+        Some(g) => g.jacobian_into(x, &(), T::zero(), out),
+        None => *out = g.jacobian(x),
+    }
+}
+
+/// Hₖ(x) into `out`, returned; `None` when gₖ is affine.
+#[cfg_attr(not(debug_assertions), inline(always))]
+pub fn hessian_into<'o, T, N, M, G>(
+    g: &G,
+    x: &OVector<T, N>,
+    k: usize,
+    out: &'o mut OMatrix<T, N, N>,
+) -> Option<&'o mut OMatrix<T, N, N>>
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    G: TwiceDifferentiable<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    match g.in_place() {
+        Some(g) => g.hessian_into(x, &(), T::zero(), k, out),
+        None => {
+            *out = g.hessian(x, k)?;
+            Some(out)
+        }
+    }
+}

@@ -1,28 +1,38 @@
-//! Allocation-free runtime sizes: the one opt-in trait [`InPlace`], and the calls the filters
-//! and propagators make through it.
+//! Allocation-free runtime sizes: the one opt-in trait [`InPlace`]. The calls the filters and
+//! propagators make through it (in place when the model or function opts in, else its owned
+//! method) stand beside the traits they serve: [`function::eval_into`](crate::function::eval_into),
+//! [`jacobian_into`](crate::function::jacobian_into) and
+//! [`hessian_into`](crate::function::hessian_into);
+//! [`model::transition_into`](crate::model::transition_into),
+//! [`process_noise_into`](crate::model::process_noise_into),
+//! [`measure_into`](crate::model::measure_into) and
+//! [`measurement_noise_into`](crate::model::measurement_noise_into).
 //!
 //! The model traits return owned values. With static sizes (`SVector`, `SMatrix`) that costs
 //! nothing; with runtime sizes (`DVector`, `DMatrix`) every value, noise matrix and Jacobian a
 //! step asks for is a heap allocation. A model meant for large runtime-sized states implements
 //! [`InPlace`] (its outputs written into the filter's buffers, which already have the right
-//! shape) and returns `Some(self)` from [`ProcessModel::in_place`] or
-//! [`MeasurementModel::in_place`]; after the filter's workspace is sized (its
-//! `prepare_predict` / `prepare_update`, or the first step) a step then allocates nothing.
-//! [`LinearProcess`](crate::LinearProcess) and [`LinearMeasurement`](crate::LinearMeasurement)
-//! do this already, and so do the adapters of the library ([`NoInput`](crate::NoInput),
-//! [`Offset`](crate::Offset)) when the model they wrap does.
+//! shape) and returns `Some(self)` from
+//! [`ProcessModel::in_place`](crate::ProcessModel::in_place) or
+//! [`MeasurementModel::in_place`](crate::MeasurementModel::in_place); after the filter's
+//! workspace is sized (its `prepare_predict` / `prepare_update`, or the first step) a step then
+//! allocates nothing. [`LinearProcess`](crate::LinearProcess) and
+//! [`LinearMeasurement`](crate::LinearMeasurement) do this already, and so do the adapters of
+//! the library ([`NoInput`](crate::NoInput), [`Offset`](crate::Offset)) when the model they
+//! wrap does.
 //!
 //! What a model writes is shape-checked by the caller: a wrong size is a
 //! [`DimensionMismatch`](crate::Error::DimensionMismatch), never a wrong answer. A model that
 //! does not opt in runs exactly as before, through its owned methods.
 //!
 //! Differences of outputs are not part of it: like ⊞, the residual
-//! ([`MeasurementModel::residual_into`]) and a function's ⊖
-//! ([`VectorFunction::difference_into`]) are written in place by every model, through the one
-//! method.
+//! ([`MeasurementModel::residual_into`](crate::MeasurementModel::residual_into)) and a
+//! function's ⊖ ([`VectorFunction::difference_into`](crate::VectorFunction::difference_into))
+//! are written in place by every model, through the one method.
 //!
 //! ```
-//! use estim_core::in_place::{InPlace, transition_into};
+//! use estim_core::in_place::InPlace;
+//! use estim_core::model::transition_into;
 //! use estim_core::nalgebra::{DMatrix, DVector, Dyn};
 //! use estim_core::ProcessModel;
 //!
@@ -67,8 +77,6 @@
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
-use crate::function::{Differentiable, TwiceDifferentiable, VectorFunction};
-use crate::model::{MeasurementModel, Observation, ProcessModel};
 use crate::scalar::Real;
 
 /// Opt-in: a model (or function) whose outputs are written into buffers the caller owns, so
@@ -104,129 +112,4 @@ where
         k: usize,
         out: &'o mut OMatrix<T, N, N>,
     ) -> Option<&'o mut OMatrix<T, N, N>>;
-}
-
-/// g(x) into `out`: in place for an [`InPlace`] function, else the owned value.
-#[cfg_attr(not(debug_assertions), inline(always))]
-pub fn eval_into<T, N, M, G>(g: &G, x: &OVector<T, N>, out: &mut OVector<T, M>)
-where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    G: VectorFunction<T, N, M> + ?Sized,
-    DefaultAllocator: Alloc<N, M>,
-{
-    match g.in_place() {
-        Some(g) => g.value_into(x, &(), T::zero(), out),
-        None => *out = g.eval(x),
-    }
-}
-
-/// J(x) into `out`.
-#[cfg_attr(not(debug_assertions), inline(always))]
-pub fn jacobian_into<T, N, M, G>(g: &G, x: &OVector<T, N>, out: &mut OMatrix<T, M, N>)
-where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    G: Differentiable<T, N, M> + ?Sized,
-    DefaultAllocator: Alloc<N, M>,
-{
-    match g.in_place() {
-        Some(g) => g.jacobian_into(x, &(), T::zero(), out),
-        None => *out = g.jacobian(x),
-    }
-}
-
-/// Hₖ(x) into `out`, returned; `None` when gₖ is affine.
-#[cfg_attr(not(debug_assertions), inline(always))]
-pub fn hessian_into<'o, T, N, M, G>(
-    g: &G,
-    x: &OVector<T, N>,
-    k: usize,
-    out: &'o mut OMatrix<T, N, N>,
-) -> Option<&'o mut OMatrix<T, N, N>>
-where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    G: TwiceDifferentiable<T, N, M> + ?Sized,
-    DefaultAllocator: Alloc<N, M>,
-{
-    match g.in_place() {
-        Some(g) => g.hessian_into(x, &(), T::zero(), k, out),
-        None => {
-            *out = g.hessian(x, k)?;
-            Some(out)
-        }
-    }
-}
-
-/// f(x, u, Δt) into `out`.
-#[cfg_attr(not(debug_assertions), inline(always))]
-pub fn transition_into<T, N, P>(
-    model: &P,
-    x: &OVector<T, N>,
-    u: &P::Input,
-    dt: T,
-    out: &mut OVector<T, N>,
-) where
-    T: Real,
-    N: Dim,
-    P: ProcessModel<T, N> + ?Sized,
-    DefaultAllocator: Alloc<N>,
-{
-    match model.in_place() {
-        Some(m) => m.value_into(x, u, dt, out),
-        None => *out = model.transition(x, u, dt),
-    }
-}
-
-/// Q(x, u, Δt) into `out`.
-#[cfg_attr(not(debug_assertions), inline(always))]
-pub fn process_noise_into<T, N, P>(
-    model: &P,
-    x: &OVector<T, N>,
-    u: &P::Input,
-    dt: T,
-    out: &mut OMatrix<T, N, N>,
-) where
-    T: Real,
-    N: Dim,
-    P: ProcessModel<T, N> + ?Sized,
-    DefaultAllocator: Alloc<N>,
-{
-    match model.in_place() {
-        Some(m) => m.noise_into(x, u, dt, out),
-        None => *out = model.process_noise(x, u, dt),
-    }
-}
-
-/// h(x) into `out`: [`eval_into`] of the model's [`Observation`].
-#[cfg_attr(not(debug_assertions), inline(always))]
-pub fn measure_into<T, N, M, H>(model: &H, x: &OVector<T, N>, out: &mut OVector<T, M>)
-where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    H: MeasurementModel<T, N, M> + ?Sized,
-    DefaultAllocator: Alloc<N, M>,
-{
-    eval_into(&Observation::new(model), x, out);
-}
-
-/// R(x) into `out`.
-#[cfg_attr(not(debug_assertions), inline(always))]
-pub fn measurement_noise_into<T, N, M, H>(model: &H, x: &OVector<T, N>, out: &mut OMatrix<T, M, M>)
-where
-    T: Real,
-    N: Dim,
-    M: Dim,
-    H: MeasurementModel<T, N, M> + ?Sized,
-    DefaultAllocator: Alloc<N, M>,
-{
-    match model.in_place() {
-        Some(m) => m.noise_into(x, &(), T::zero(), out),
-        None => *out = model.measurement_noise(x),
-    }
 }

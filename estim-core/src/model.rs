@@ -29,7 +29,7 @@ use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
 use crate::alloc::Alloc;
 use crate::function::{
-    AffineFunction, Differentiable, TwiceDifferentiable, VectorFunction, VectorSpaces,
+    AffineFunction, Differentiable, TwiceDifferentiable, VectorFunction, VectorSpaces, eval_into,
 };
 use crate::in_place::InPlace;
 use crate::manifold::{Euclidean, StateSpace, subtract_into};
@@ -320,11 +320,11 @@ where
     DefaultAllocator: Alloc<N>,
 {
     fn value_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OVector<T, N>) {
-        crate::in_place::transition_into(self.model, x, self.input, self.dt, out);
+        transition_into(self.model, x, self.input, self.dt, out);
     }
 
     fn noise_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, N, N>) {
-        crate::in_place::process_noise_into(self.model, x, self.input, self.dt, out);
+        process_noise_into(self.model, x, self.input, self.dt, out);
     }
 
     fn jacobian_into(&self, x: &OVector<T, N>, _: &(), _: T, out: &mut OMatrix<T, N, N>) {
@@ -428,4 +428,73 @@ impl<T: Real, N: Dim, M: Dim, H: LinearMeasurementModel<T, N, M>, S: StateSpace<
 where
     DefaultAllocator: Alloc<N, M>,
 {
+}
+
+/// f(x, u, Δt) into `out`.
+#[cfg_attr(not(debug_assertions), inline(always))]
+pub fn transition_into<T, N, P>(
+    model: &P,
+    x: &OVector<T, N>,
+    u: &P::Input,
+    dt: T,
+    out: &mut OVector<T, N>,
+) where
+    T: Real,
+    N: Dim,
+    P: ProcessModel<T, N> + ?Sized,
+    DefaultAllocator: Alloc<N>,
+{
+    match model.in_place() {
+        Some(m) => m.value_into(x, u, dt, out),
+        None => *out = model.transition(x, u, dt),
+    }
+}
+
+/// Q(x, u, Δt) into `out`.
+#[cfg_attr(not(debug_assertions), inline(always))]
+pub fn process_noise_into<T, N, P>(
+    model: &P,
+    x: &OVector<T, N>,
+    u: &P::Input,
+    dt: T,
+    out: &mut OMatrix<T, N, N>,
+) where
+    T: Real,
+    N: Dim,
+    P: ProcessModel<T, N> + ?Sized,
+    DefaultAllocator: Alloc<N>,
+{
+    match model.in_place() {
+        Some(m) => m.noise_into(x, u, dt, out),
+        None => *out = model.process_noise(x, u, dt),
+    }
+}
+
+/// h(x) into `out`: [`eval_into`] of the model's [`Observation`].
+#[cfg_attr(not(debug_assertions), inline(always))]
+pub fn measure_into<T, N, M, H>(model: &H, x: &OVector<T, N>, out: &mut OVector<T, M>)
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: MeasurementModel<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    eval_into(&Observation::new(model), x, out);
+}
+
+/// R(x) into `out`.
+#[cfg_attr(not(debug_assertions), inline(always))]
+pub fn measurement_noise_into<T, N, M, H>(model: &H, x: &OVector<T, N>, out: &mut OMatrix<T, M, M>)
+where
+    T: Real,
+    N: Dim,
+    M: Dim,
+    H: MeasurementModel<T, N, M> + ?Sized,
+    DefaultAllocator: Alloc<N, M>,
+{
+    match model.in_place() {
+        Some(m) => m.noise_into(x, &(), T::zero(), out),
+        None => *out = model.measurement_noise(x),
+    }
 }

@@ -564,7 +564,7 @@ where
         } = self;
         let map = Transition::on(&*space, model, input, dt);
         let noise = |x: &OVector<T, N>, q: &mut OMatrix<T, N, N>| {
-            estim_core::in_place::process_noise_into(model, x, input, dt, q)
+            estim_core::model::process_noise_into(model, x, input, dt, q)
         };
         predict_step(
             propagator,
@@ -715,7 +715,7 @@ where
         .map_err(|e| measurement_length_error(e, m))?;
     report.fit(z.shape_generic().0);
     model.residual_into(z, &scratch.predicted.mean, &mut report.innovation);
-    estim_core::in_place::measurement_noise_into(model, state, &mut scratch.noise);
+    estim_core::model::measurement_noise_into(model, state, &mut scratch.noise);
     update::apply(space, state, covariance, scratch, report, settings)
 }
 

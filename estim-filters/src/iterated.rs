@@ -486,7 +486,7 @@ where
     ) -> Option<Self> {
         let m = z.shape_generic().0;
         let mut noise_factor = OMatrix::zeros_generic(m, m);
-        estim_core::in_place::measurement_noise_into(model, prior, &mut noise_factor);
+        estim_core::model::measurement_noise_into(model, prior, &mut noise_factor);
         let mut prior_factor = prior_covariance.clone();
         let mut scratch = CholeskyScratch::default();
         let ok = noise_factor.shape() == (m.value(), m.value())
@@ -548,9 +548,9 @@ where
     fn at(model: &'a H, point: &OVector<T, N>, m: M) -> Self {
         let n = point.shape_generic().0;
         let mut value = OVector::zeros_generic(m, U1);
-        estim_core::in_place::measure_into(model, point, &mut value);
+        estim_core::model::measure_into(model, point, &mut value);
         let mut jacobian = OMatrix::zeros_generic(m, n);
-        estim_core::in_place::jacobian_into(
+        estim_core::function::jacobian_into(
             &estim_core::Observation::new(model),
             point,
             &mut jacobian,

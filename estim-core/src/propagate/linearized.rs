@@ -8,7 +8,7 @@ use crate::alloc::Alloc;
 use crate::checks::ensure_shape;
 use crate::error::{Quantity, Result, Stage};
 use crate::function::Differentiable;
-use crate::in_place::{eval_into, jacobian_into};
+use crate::function::{eval_into, jacobian_into};
 use crate::kernel::{Accum, mul, mul_lower, mul_tr, mul_tr_lower};
 use crate::scalar::Real;
 

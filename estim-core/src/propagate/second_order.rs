@@ -64,7 +64,7 @@ where
     DefaultAllocator: Alloc<N, M>,
 {
     let n = mean.nrows();
-    match crate::in_place::hessian_into(g, mean, k, h) {
+    match crate::function::hessian_into(g, mean, k, h) {
         Some(h) => {
             ensure_shape(h, n, n, Stage::Propagation, Quantity::Hessian)?;
             Ok(true)

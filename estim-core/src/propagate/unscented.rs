@@ -8,7 +8,7 @@ use crate::alloc::Alloc;
 use crate::checks::ensure_shape;
 use crate::error::{Error, Parameter, Quantity, Result, Stage};
 use crate::function::VectorFunction;
-use crate::in_place::eval_into;
+use crate::function::eval_into;
 use crate::kernel::{self, Accum, CholeskyScratch, mul_tr, mul_tr_lower};
 use crate::linalg::psd_factor_into;
 use crate::scalar::{Real, real};

@@ -11,7 +11,7 @@
 use crate::common;
 
 use common::*;
-use estim_core::in_place::{self, InPlace};
+use estim_core::in_place::InPlace;
 use estim_core::nalgebra::{
     DMatrix, DVector, DefaultAllocator, Dim, Dyn, OMatrix, OVector, U1, U2, U3,
 };
@@ -20,6 +20,7 @@ use estim_core::{
     MomentPropagator, Moments, Observation, ProcessModel, Quantity, Stage, Transition, Unscented,
     VectorFunction,
 };
+use estim_core::{function, model};
 
 /// g(x) = A x + ε sin x (componentwise on the first m components), returned by `eval` and,
 /// when `in_place` is set, also written in place by the same code.
@@ -185,31 +186,31 @@ fn linear_models_write_their_values_in_place() {
     // F x + B u: two sums (n and p products, the second added to the first), each side;
     // |F| |x| + |B| |u| is the magnitude every element's sums run over.
     let mut y = DVector::zeros(n);
-    in_place::transition_into(&process, &x, &u, 0.1, &mut y);
+    model::transition_into(&process, &x, &u, 0.1, &mut y);
     let bound = (abs(&f) * abs(&x) + abs(&b) * abs(&u)) * (2.0 * gamma(n + p + 1));
     assert_within(&y, &process.transition(&x, &u, 0.1), &bound);
     // Through the bridge the propagators use: the same bits.
     let mut y2 = DVector::zeros(n);
-    in_place::eval_into(&Transition::new(&process, &u, 0.1), &x, &mut y2);
+    function::eval_into(&Transition::new(&process, &u, 0.1), &x, &mut y2);
     assert_eq!(y2, y);
     // Q and F are copied.
     let mut q = DMatrix::zeros(n, n);
-    in_place::process_noise_into(&process, &x, &u, 0.1, &mut q);
+    model::process_noise_into(&process, &x, &u, 0.1, &mut q);
     assert_eq!(q, process.noise);
     let mut j = DMatrix::zeros(n, n);
-    in_place::jacobian_into(&Transition::new(&process, &u, 0.1), &x, &mut j);
+    function::jacobian_into(&Transition::new(&process, &u, 0.1), &x, &mut j);
     assert_eq!(j, f);
 
     // H x: n products, each side.
     let mut z = DVector::zeros(m);
-    in_place::measure_into(&sensor, &x, &mut z);
+    model::measure_into(&sensor, &x, &mut z);
     let bound = abs(&h) * abs(&x) * (2.0 * gamma(n));
     assert_within(&z, &sensor.measure(&x), &bound);
     let mut z2 = DVector::zeros(m);
-    in_place::eval_into(&Observation::new(&sensor), &x, &mut z2);
+    function::eval_into(&Observation::new(&sensor), &x, &mut z2);
     assert_eq!(z2, z);
     let mut r = DMatrix::zeros(m, m);
-    in_place::measurement_noise_into(&sensor, &x, &mut r);
+    model::measurement_noise_into(&sensor, &x, &mut r);
     assert_eq!(r, sensor.noise);
     let (mut d, half) = (DVector::zeros(m), z2.map(|v| v * 0.5));
     sensor.residual_into(&z, &half, &mut d);
@@ -217,7 +218,7 @@ fn linear_models_write_their_values_in_place() {
     // The offset adapter passes the route on.
     let offset = sensor.clone().with_offset(DVector::from_element(m, 0.5));
     let mut zo = DVector::zeros(m);
-    in_place::measure_into(&offset, &x, &mut zo);
+    model::measure_into(&offset, &x, &mut zo);
     assert_eq!(zo, z.add_scalar(0.5));
 }
 

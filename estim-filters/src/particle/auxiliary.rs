@@ -126,7 +126,7 @@ where
                     for (k, column) in out.chunks_exact_mut(n.value().max(1)).enumerate() {
                         let i = c * CHUNK + k;
                         s.x.copy_from_slice(&particles[i * nn..(i + 1) * nn]);
-                        estim_core::in_place::transition_into(
+                        estim_core::model::transition_into(
                             process.model(),
                             &s.x,
                             input,

@@ -21,7 +21,9 @@ use estim_core::nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, Dyn, OMatrix
 use estim_core::{Alloc, Error, Real};
 
 use super::resample::to_f64;
-use super::step::Factored;
+
+/// A noise matrix remembered with its factor (and, for R, log det(2πR)/2).
+pub(crate) type Factored<T, D, Extra> = Option<(OMatrix<T, D, D>, OMatrix<T, D, D>, Extra)>;
 
 /// Particles per chunk. The bits of a step depend on it (the order of the partial sums), so
 /// it is a constant, not a tuning knob.

@@ -13,7 +13,7 @@ use estim_core::{
 };
 
 use super::chunks::{
-    CHUNK, ChunkWork, StateScratch, chunk_count, columns, dmatrix, dvector, first_error,
+    CHUNK, ChunkWork, Factored, StateScratch, chunk_count, columns, dmatrix, dvector, first_error,
     for_chunks, for_chunks1, for_states, lse_combine, lse_partial, parallel, range, with_state,
 };
 use super::noise::{AdditiveGaussian, ParticleMeasurement, ParticleProcess};
@@ -23,9 +23,6 @@ use super::{ParticleFilter, fill_normals};
 use crate::gaussian_filter::ensure_time_step;
 use crate::report::{UpdateOutcome, UpdateReport};
 use crate::traits::{Predict, Update};
-
-/// A noise matrix remembered with its factor (and, for R, log det(2πR)/2).
-pub(crate) type Factored<T, D, Extra> = Option<(OMatrix<T, D, D>, OMatrix<T, D, D>, Extra)>;
 
 /// Buffers of the steps (no state: a step overwrites what it reads). Everything kept per
 /// chunk is of runtime size (see [`ChunkWork`]), so the chunks can run on rayon's threads.
@@ -493,8 +490,8 @@ where
     } = s;
     if !process.sample_into(x, input, dt, &mut rng, y) {
         let model = process.model();
-        estim_core::in_place::transition_into(model, x, input, dt, y);
-        estim_core::in_place::process_noise_into(model, x, input, dt, q);
+        estim_core::model::transition_into(model, x, input, dt, y);
+        estim_core::model::process_noise_into(model, x, input, dt, q);
         let factor = match q_cache {
             Some((cached, factor, ())) if cached == q => factor,
             _ => {
@@ -634,7 +631,7 @@ where
 {
     let model = sensor.model();
     let z = &ms.z;
-    estim_core::in_place::measure_into(model, x, &mut ms.x_h);
+    estim_core::model::measure_into(model, x, &mut ms.x_h);
     ensure_shape(
         &ms.x_h,
         z.nrows(),
@@ -644,7 +641,7 @@ where
     )?;
     model.residual_into(z, &ms.x_h, &mut ms.r);
     ensure_shape(&ms.r, z.nrows(), 1, Stage::Update, Quantity::Innovation)?;
-    estim_core::in_place::measurement_noise_into(model, x, &mut ms.noise);
+    estim_core::model::measurement_noise_into(model, x, &mut ms.noise);
     let log_g = match sensor.log_likelihood(z, x) {
         Some(log_g) => log_g,
         None => {

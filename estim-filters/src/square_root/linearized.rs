@@ -40,10 +40,10 @@ where
         ..
     } = scratch;
     noise_factor(q, sq, n, stage, Quantity::ProcessNoise)?;
-    estim_core::in_place::eval_into(f, state, mean);
+    estim_core::function::eval_into(f, state, mean);
     ensure_shape(mean, n, 1, stage, Quantity::FunctionValue)?;
     finite(mean, stage, Quantity::Mean)?;
-    estim_core::in_place::jacobian_into(f, state, jacobian);
+    estim_core::function::jacobian_into(f, state, jacobian);
     ensure_shape(jacobian, n, n, stage, Quantity::Jacobian)?;
     finite(jacobian, stage, Quantity::Jacobian)?;
     kernel::mul(fs, Accum::Replace, T::one(), jacobian, factor);
@@ -98,13 +98,13 @@ where
         gain: kbar,
         ..
     } = &mut *scratch;
-    estim_core::in_place::eval_into(&h, state, predicted);
+    estim_core::function::eval_into(&h, state, predicted);
     ensure_shape(predicted, m, 1, stage, Quantity::Measurement)?;
-    estim_core::in_place::measurement_noise_into(model, state, r);
+    estim_core::model::measurement_noise_into(model, state, r);
     noise_factor(r, l, m, stage, Quantity::MeasurementNoise)?;
     report.fit(m_dim);
     innovation_into(model, z, predicted, report)?;
-    estim_core::in_place::jacobian_into(&h, state, jacobian);
+    estim_core::function::jacobian_into(&h, state, jacobian);
     ensure_shape(jacobian, m, n, stage, Quantity::Jacobian)?;
     finite(jacobian, stage, Quantity::Jacobian)?;
     kernel::mul(hs, Accum::Replace, T::one(), jacobian, factor);

@@ -42,7 +42,7 @@ where
                 (&mut local, false)
             }
         };
-        estim_core::in_place::process_noise_into(model, state, input, dt, &mut work.noise);
+        estim_core::model::process_noise_into(model, state, input, dt, &mut work.noise);
         let result = propagator
             .predict_factor(space, state, factor, model, input, dt, work, cross)
             .and_then(|()| match step {

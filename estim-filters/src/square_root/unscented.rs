@@ -198,7 +198,7 @@ where
     let m_dim = z.shape_generic().0;
     let (n, m) = (state.nrows(), m_dim.value());
     let h = Observation::on(space, model);
-    estim_core::in_place::measurement_noise_into(model, state, &mut scratch.noise);
+    estim_core::model::measurement_noise_into(model, state, &mut scratch.noise);
     noise_factor(
         &scratch.noise,
         &mut scratch.root,
