@@ -13,8 +13,9 @@
 //! **Allocation-free runtime sizes.** The methods return owned values, which for `Dyn` sizes
 //! allocate. A function that should not allocate implements the one opt-in trait
 //! [`InPlace`] and returns `Some(self)` from [`VectorFunction::in_place`]; the propagators
-//! then write its values and derivatives into their own buffers (differences are written in
-//! place by every function: [`VectorFunction::difference_into`]). Whatever is
+//! then write its values and derivatives into their own buffers through [`eval_into`],
+//! [`jacobian_into`] and [`hessian_into`] (differences are written in place by every function:
+//! [`VectorFunction::difference_into`]). Whatever is
 //! written is shape-checked by the caller, so a wrong size is a typed error, not a wrong answer.
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};

@@ -23,7 +23,9 @@
 //! [`InPlace`] and returns `Some(self)` from its [`ProcessModel::in_place`] /
 //! [`MeasurementModel::in_place`] (as [`LinearProcess`](crate::LinearProcess) and
 //! [`LinearMeasurement`](crate::LinearMeasurement) do); then a filter step allocates nothing
-//! ([`crate::in_place`]).
+//! ([`crate::in_place`]). The filters reach a model through [`transition_into`],
+//! [`process_noise_into`], [`measure_into`] and [`measurement_noise_into`]: in place when it
+//! opts in, else its owned methods.
 
 use nalgebra::{DefaultAllocator, Dim, OMatrix, OVector};
 
